@@ -1,0 +1,16 @@
+//! rigtwin: hardware-in-the-loop controller and digital twin for vibro-impact test rigs.
+//!
+//! The model side builds a reduced-order model (ROM) of a two-beam rig from a rig description:
+//! [`config`] (TOML rig description) -> [`fe`] (structured hex mesh, element matrices, interface
+//! layers, sparse assembly, CalculiX exchange) -> [`rom`] (sparse eigen solver, MacNeal reduction
+//! with a massless contact boundary, the ROM file) -> [`contact`] and [`sim`] (implicit frictional
+//! contact inside a leapfrog integrator). [`signal`] holds the per-period metrics shared by
+//! simulation and measurement. [`cli`] wires the commands of the `rigtwin` binary.
+//!
+//! Numerical modules are synchronous, deterministic and never read the clock.
+
+pub mod cli;
+pub mod config;
+pub mod contact;
+pub mod fe;
+pub mod rom;

@@ -46,7 +46,11 @@ impl BoxGrid {
                 }
             }
         }
-        BoxGrid { nodes, dims: [nx1, ny1, nz1], cells }
+        BoxGrid {
+            nodes,
+            dims: [nx1, ny1, nz1],
+            cells,
+        }
     }
 
     /// Local index of node (i, j, k).
@@ -60,7 +64,11 @@ impl BoxGrid {
 /// end points.
 pub fn graded(a: f64, b: f64, n: usize, ratio: f64) -> Vec<f64> {
     assert!(n >= 1, "graded: at least one interval");
-    let q = if n > 1 { ratio.powf(1.0 / (n - 1) as f64) } else { 1.0 };
+    let q = if n > 1 {
+        ratio.powf(1.0 / (n - 1) as f64)
+    } else {
+        1.0
+    };
     let weights: Vec<f64> = (0..n).map(|i| q.powi(i as i32)).collect();
     let total: f64 = weights.iter().sum();
     let mut pts = Vec::with_capacity(n + 1);
@@ -79,7 +87,10 @@ pub fn join(segments: &[Vec<f64>]) -> Vec<f64> {
     let mut out: Vec<f64> = Vec::new();
     for seg in segments {
         for &p in seg {
-            if out.last().is_none_or(|&l| (p - l).abs() > 1e-12 * (1.0 + p.abs())) {
+            if out
+                .last()
+                .is_none_or(|&l| (p - l).abs() > 1e-12 * (1.0 + p.abs()))
+            {
                 out.push(p);
             }
         }

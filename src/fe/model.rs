@@ -75,13 +75,19 @@ pub struct FeModel {
     pub clearance: f64,
     /// Sensor outputs.
     pub outputs: Vec<OutputDofs>,
-    /// Number of mesh nodes (for reports).
-    pub n_nodes: usize,
+    /// Coordinates of the mesh nodes, m (indexed by [`DofInfo::node`]; internal DOFs have
+    /// no entry here).
+    pub node_coords: Vec<[f64; 3]>,
     /// Number of solid elements (for reports).
     pub n_elements: usize,
 }
 
 impl FeModel {
+    /// Number of mesh nodes.
+    pub fn n_nodes(&self) -> usize {
+        self.node_coords.len()
+    }
+
     /// Number of free DOFs.
     pub fn n_dof(&self) -> usize {
         self.dofs.len()

@@ -147,7 +147,10 @@ impl Rom {
 
     /// Natural frequencies, Hz.
     pub fn frequencies_hz(&self) -> Vec<f64> {
-        self.omega.iter().map(|w| w / (2.0 * std::f64::consts::PI)).collect()
+        self.omega
+            .iter()
+            .map(|w| w / (2.0 * std::f64::consts::PI))
+            .collect()
     }
 
     /// The reference circular frequency omega_2 (the 1FU mode), rad/s.

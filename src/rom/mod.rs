@@ -10,6 +10,7 @@
 
 pub mod eigen;
 pub mod file;
+pub mod info;
 pub mod labels;
 pub mod macneal;
 pub mod stability;

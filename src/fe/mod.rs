@@ -12,6 +12,7 @@ pub mod mesh;
 pub mod model;
 pub mod rig;
 
+pub use assembly::{assemble, FeError};
 pub use mesh::{
     ContactPair, ElementBlock, ElementKind, HexElement, Material, Mesh, PointMass, SensorPoint,
     Spring,

@@ -15,7 +15,9 @@ use crate::fe::model::{DofGroup, DofInfo, FeModel, OutputDofs, PairDofs};
 #[derive(Debug, thiserror::Error)]
 pub enum FeError {
     /// No nodes or no elements.
-    #[error("empty mesh ({n_nodes} nodes, {n_elements} elements): expected at least one hex element")]
+    #[error(
+        "empty mesh ({n_nodes} nodes, {n_elements} elements): expected at least one hex element"
+    )]
     EmptyMesh {
         /// Number of nodes.
         n_nodes: usize,
@@ -98,7 +100,9 @@ pub enum FeError {
         stiffness: [f64; 3],
     },
     /// A point mass is negative or not finite.
-    #[error("point mass '{name}' on node {node}: mass {mass} kg; expected a finite non-negative value")]
+    #[error(
+        "point mass '{name}' on node {node}: mass {mass} kg; expected a finite non-negative value"
+    )]
     InvalidPointMass {
         /// Item name.
         name: String,
@@ -198,8 +202,8 @@ pub fn assemble(mesh: &Mesh, clearance: f64) -> Result<FeModel, FeError> {
             block: block.name.clone(),
             source,
         };
-        let ke = hex8::stiffness(block.kind, &x, &material).map_err(wrap)?;
-        let me = hex8::scalar_mass(&x, material.density).map_err(wrap)?;
+        let em = hex8::element_matrices(block.kind, &x, &material).map_err(wrap)?;
+        let (ke, me) = (&em.stiffness, &em.mass);
         let fe = el.nodes.map(|n| free[n]);
         for b in 0..8 {
             if fe[b] == FIXED {
@@ -224,8 +228,8 @@ pub fn assemble(mesh: &Mesh, clearance: f64) -> Result<FeModel, FeError> {
                     let base = col + 3 * slots[a][b];
                     for i in 0..3 {
                         kv[base + i] += ke[3 * a + i][3 * b + j];
+                        mv[base + i] += me[3 * a + i][3 * b + j];
                     }
-                    mv[base + j] += me[a][b];
                 }
             }
         }
@@ -637,8 +641,8 @@ mod tests {
                 density: 7850.0,
             };
             let x = el.nodes.map(|i| mesh.nodes[i]);
-            let ke = hex8::stiffness(blk.kind, &x, &mat).unwrap();
-            let me = hex8::consistent_mass(&x, 7850.0).unwrap();
+            let em = hex8::element_matrices(blk.kind, &x, &mat).unwrap();
+            let (ke, me) = (em.stiffness, em.mass);
             for a in 0..24 {
                 for b in 0..24 {
                     let (r, c) = (3 * el.nodes[a / 3] + a % 3, 3 * el.nodes[b / 3] + b % 3);
@@ -664,8 +668,11 @@ mod tests {
         let kscale = kd.iter().flatten().fold(0.0f64, |a, v| a.max(v.abs()));
         for (r, &gr) in keep.iter().enumerate() {
             for (c, &gc) in keep.iter().enumerate() {
-                assert!((ka[r][c] - kd[gr][gc]).abs() <= 1e-12 * kscale, "K[{r}][{c}]");
-                assert!((ma[r][c] - md[gr][gc]).abs() <= 1e-15, "M[{r}][{c}]");
+                assert!(
+                    (ka[r][c] - kd[gr][gc]).abs() <= 1e-12 * kscale,
+                    "K[{r}][{c}]"
+                );
+                assert!((ma[r][c] - md[gr][gc]).abs() <= 1e-16, "M[{r}][{c}]");
             }
         }
         // DOF table: node-major, fixed nodes skipped, groups from the node sets.
@@ -699,14 +706,24 @@ mod tests {
         let k = dense(&model.k);
         let m = dense(&model.m);
         for dir in 0..3 {
-            let t: Vec<f64> = (0..n).map(|d| if d % 3 == dir { 1.0 } else { 0.0 }).collect();
-            let kt = k.iter().map(|row| row.iter().zip(&t).map(|(a, b)| a * b).sum::<f64>());
-            assert!(kt.map(f64::abs).fold(0.0, f64::max) < 1e-6, "translation {dir}");
+            let t: Vec<f64> = (0..n)
+                .map(|d| if d % 3 == dir { 1.0 } else { 0.0 })
+                .collect();
+            let kt = k
+                .iter()
+                .map(|row| row.iter().zip(&t).map(|(a, b)| a * b).sum::<f64>());
+            assert!(
+                kt.map(f64::abs).fold(0.0, f64::max) < 1e-6,
+                "translation {dir}"
+            );
             let mass: f64 = (0..n)
                 .map(|r| t[r] * m[r].iter().zip(&t).map(|(a, b)| a * b).sum::<f64>())
                 .sum();
             let expected = mesh.total_mass();
-            assert!((mass - expected).abs() < 1e-12 * expected, "{mass} vs {expected}");
+            assert!(
+                (mass - expected).abs() < 1e-12 * expected,
+                "{mass} vs {expected}"
+            );
         }
         // Symmetric, both triangles stored.
         for r in 0..n {
@@ -745,7 +762,14 @@ mod tests {
 
         mesh.contact_pairs[0].upper = 0;
         let err = assemble(&mesh, 2e-4).unwrap_err();
-        assert!(matches!(err, FeError::FixedPairNode { pair: 0, side: "upper", node: 0 }));
+        assert!(matches!(
+            err,
+            FeError::FixedPairNode {
+                pair: 0,
+                side: "upper",
+                node: 0
+            }
+        ));
         assert!(err.to_string().contains("contact pair 0"));
     }
 
@@ -772,7 +796,10 @@ mod tests {
         let mut m = two_blocks();
         m.elements[1].nodes[3] = 99;
         let s = msg(&m);
-        assert!(s.contains("element 1 (block 'a')") && s.contains("node 99"), "{s}");
+        assert!(
+            s.contains("element 1 (block 'a')") && s.contains("node 99"),
+            "{s}"
+        );
 
         let mut m = two_blocks();
         m.nodes[5][1] = f64::NAN;
@@ -800,7 +827,10 @@ mod tests {
         let mut m = two_blocks();
         m.nodes[4][2] = 5e-3; // pushes a top node through the element: inverted
         let s = msg(&m);
-        assert!(s.contains("block 'a'") && s.contains("non-positive Jacobian"), "{s}");
+        assert!(
+            s.contains("block 'a'") && s.contains("non-positive Jacobian"),
+            "{s}"
+        );
 
         let mut m = two_blocks();
         m.nodes.push([1.0, 1.0, 1.0]);

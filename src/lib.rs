@@ -14,3 +14,4 @@ pub mod config;
 pub mod contact;
 pub mod fe;
 pub mod rom;
+pub mod signal;

@@ -1,0 +1,31 @@
+//! Per-step signal processing shared by the virtual stepped sine and recorded measurements:
+//! whole-period bookkeeping and quadrature ([`periods`]), the step metrics of the reference's
+//! frequency-response figures ([`metrics`]), synchronous demodulation of the fundamental in
+//! batch and streaming form ([`demod`]), contact intervals, impacts per period and impact
+//! clusters ([`mod@contact_activity`]), the analytic Morlet wavelet transform ([`wavelet`]) and
+//! the relative RMS error of the convergence studies ([`relative_error`]).
+//!
+//! Everything here is pure and deterministic: slices in, values out, no I/O, no clock; the
+//! streaming demodulator does not allocate. Records are uniformly sampled, `t_k = t_0 + k dt`,
+//! and need not hold an integer number of samples per excitation period (a DAQ samples at a
+//! fixed rate): see [`periods`] for how fractional period boundaries are handled.
+
+pub mod contact_activity;
+pub mod demod;
+mod error;
+mod fft;
+pub mod metrics;
+pub mod periods;
+pub mod relative_error;
+pub mod wavelet;
+
+pub use contact_activity::{
+    contact_activity, contact_intervals, count_impacts, ActivityParams, ContactActivity,
+    ContactInterval, ImpactCluster,
+};
+pub use demod::{demodulate, Demodulator, Harmonic, PeriodHarmonic};
+pub use error::SignalError;
+pub use metrics::{step_metrics, MetricsParams, StepMetrics, StepRecord};
+pub use periods::PeriodGrid;
+pub use relative_error::relative_rms_error;
+pub use wavelet::{log_spaced, morlet_scalogram, MorletParams, Scalogram, WaveletNorm};

@@ -175,7 +175,7 @@ impl Demodulator {
         let bad = !x.is_finite();
         let x = if bad { 0.0 } else { x };
         let f = [x, x * c, x * s];
-        self.invalid += u32::from(bad);
+        self.invalid = self.invalid.saturating_add(u32::from(bad));
 
         let mut out = None;
         if self.next <= k + 1.0 {

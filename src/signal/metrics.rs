@@ -82,43 +82,53 @@ pub struct AmplitudeStats {
 }
 
 /// Zero-to-peak amplitude of `x` in period `p` of `grid`: half the peak-to-peak,
-/// `(max - min) / 2` over the period's samples.
+/// `(max - min) / 2` over the period's samples. `None` when `p` is not a whole period of the
+/// grid or `x` is shorter than the grid's record.
 ///
 /// NOTE: half the peak-to-peak, not `max |x|`, so that a mean offset (sensor bias, a drifting
 /// integrated velocity) does not enter the amplitude; for a sine both agree. The extremes are
 /// the sampled ones (no interpolation between samples: impacts make the velocity kink and a
 /// parabolic refinement would overshoot there); for a sine this underestimates by at most
 /// `1 - cos(pi / S)`, 5e-6 at S = 1000 samples per period.
-///
-/// `x` must hold at least `grid.samples()` samples.
-pub fn period_amplitude(x: &[f64], grid: &PeriodGrid, p: usize) -> f64 {
-    let (lo, hi) = x[grid.members(p)]
+pub fn period_amplitude(x: &[f64], grid: &PeriodGrid, p: usize) -> Option<f64> {
+    if p >= grid.periods() {
+        return None;
+    }
+    let (lo, hi) = x
+        .get(grid.members(p))?
         .iter()
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| {
             (lo.min(v), hi.max(v))
         });
-    0.5 * (hi - lo)
+    Some(0.5 * (hi - lo))
 }
 
 /// Min, mean and max over the whole periods of `grid` of [`period_amplitude`]; no allocation.
-pub fn amplitude_stats(x: &[f64], grid: &PeriodGrid) -> AmplitudeStats {
+/// A non-finite sample makes the result non-finite.
+///
+/// Errors: `x` does not have `grid.samples()` samples.
+pub fn amplitude_stats(x: &[f64], grid: &PeriodGrid) -> Result<AmplitudeStats, SignalError> {
+    require_len("x", x.len(), "the period grid", grid.samples())?;
     let (mut min, mut max, mut sum) = (f64::INFINITY, f64::NEG_INFINITY, 0.0);
     for p in 0..grid.periods() {
-        let a = period_amplitude(x, grid, p);
+        let a = period_amplitude(x, grid, p).unwrap_or(f64::NAN);
         min = min.min(a);
         max = max.max(a);
         sum += a;
     }
-    AmplitudeStats {
+    Ok(AmplitudeStats {
         min,
         mean: sum / grid.periods() as f64,
         max,
-    }
+    })
 }
 
 /// RMS of `x` over the whole periods of `grid` (period quadrature of [`PeriodGrid`]).
-pub fn rms(x: &[f64], grid: &PeriodGrid) -> f64 {
-    grid.mean_over_window(|k| x[k] * x[k]).max(0.0).sqrt()
+///
+/// Errors: `x` does not have `grid.samples()` samples.
+pub fn rms(x: &[f64], grid: &PeriodGrid) -> Result<f64, SignalError> {
+    require_len("x", x.len(), "the period grid", grid.samples())?;
+    Ok(grid.mean_over_window(|k| x[k] * x[k]).max(0.0).sqrt())
 }
 
 impl StepRecord<'_> {
@@ -166,8 +176,8 @@ pub fn step_metrics(
     let scale = 1.0 / (record.omega * record.base_level);
     let upper = record.tip_velocity_upper;
     let lower = record.tip_velocity_lower;
-    let au = amplitude_stats(upper, &grid);
-    let al = amplitude_stats(lower, &grid);
+    let au = amplitude_stats(upper, &grid)?;
+    let al = amplitude_stats(lower, &grid)?;
 
     // Contact time: sample k stands for [k, k+1); the sample cut by the window end counts with
     // the fraction inside. Flags are not smooth, so no boundary correction here.
@@ -186,8 +196,8 @@ pub fn step_metrics(
         .fold(f64::NEG_INFINITY, f64::max);
 
     Ok(StepMetrics {
-        rms_upper: rms(upper, &grid) * scale,
-        rms_lower: rms(lower, &grid) * scale,
+        rms_upper: rms(upper, &grid)? * scale,
+        rms_lower: rms(lower, &grid)? * scale,
         amp_min_upper: au.min * scale,
         amp_mean_upper: au.mean * scale,
         amp_max_upper: au.max * scale,
@@ -464,6 +474,26 @@ mod tests {
         ));
         assert!(e.to_string().contains("tip_velocity_lower"));
         assert!(e.to_string().contains("137"));
+    }
+
+    #[test]
+    fn helpers_check_lengths_and_period_indices() {
+        let grid = PeriodGrid::new(300, 0.01, TAU).unwrap();
+        let x = vec![1.0; 300];
+        assert_eq!(period_amplitude(&x, &grid, 2), Some(0.0));
+        assert_eq!(period_amplitude(&x, &grid, 3), None);
+        assert_eq!(period_amplitude(&x[..250], &grid, 2), None);
+        assert!(matches!(
+            amplitude_stats(&x[..250], &grid),
+            Err(SignalError::LengthMismatch {
+                channel: "x",
+                len: 250,
+                expected: 300,
+                ..
+            })
+        ));
+        assert!(rms(&x[..10], &grid).is_err());
+        assert_eq!(rms(&x, &grid).unwrap(), 1.0);
     }
 
     #[test]

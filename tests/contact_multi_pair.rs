@@ -22,10 +22,12 @@ fn tight(method: SweepMethod, step_rule: StepRule) -> ContactParameters {
     }
 }
 
-const METHODS: [(SweepMethod, StepRule); 4] = [
+const METHODS: [(SweepMethod, StepRule); 6] = [
     (SweepMethod::Jacobi, StepRule::Auto),
     (SweepMethod::Jacobi, StepRule::RowSum),
     (SweepMethod::Jacobi, StepRule::Spectral),
+    (SweepMethod::AcceleratedJacobi, StepRule::Auto),
+    (SweepMethod::AcceleratedJacobi, StepRule::Spectral),
     (SweepMethod::GaussSeidel, StepRule::Auto),
 ];
 

@@ -1,11 +1,17 @@
 //! Guards the contact solver on single pairs with answers known in closed form: separation,
 //! sticking (the tangential force balances the load exactly, gamma = 0) and sliding
-//! (|lambda_t| = mu lambda_n, gamma_t antiparallel to lambda_t), for both sweep methods.
+//! (|lambda_t| = mu lambda_n, gamma_t antiparallel to lambda_t), for every sweep method.
 
 mod contact_support;
 
 use contact_support::{dense_solve, law_violation};
 use rigtwin::contact::{solve_problem, ContactParameters, ContactProblem, SweepMethod};
+
+const ALL_METHODS: [SweepMethod; 3] = [
+    SweepMethod::Jacobi,
+    SweepMethod::AcceleratedJacobi,
+    SweepMethod::GaussSeidel,
+];
 
 fn params(method: SweepMethod) -> ContactParameters {
     ContactParameters {
@@ -34,7 +40,7 @@ fn assert_close(a: f64, b: f64, rel: f64, what: &str) {
 
 #[test]
 fn separating_pair_carries_no_force() {
-    for method in [SweepMethod::Jacobi, SweepMethod::GaussSeidel] {
+    for method in ALL_METHODS {
         let problem = ContactProblem {
             w: coupled_w(),
             c: vec![0.05, -0.3, 0.2],
@@ -54,7 +60,7 @@ fn separating_pair_carries_no_force() {
 
 #[test]
 fn sticking_pair_balances_the_load_exactly() {
-    for method in [SweepMethod::Jacobi, SweepMethod::GaussSeidel] {
+    for method in ALL_METHODS {
         let w = coupled_w();
         let c = vec![-0.1, -0.01, 0.005];
         // Sticking: gamma = 0, so lambda = -W^-1 c, which must lie inside the friction disk.
@@ -69,10 +75,14 @@ fn sticking_pair_balances_the_load_exactly() {
         };
         let (sol, stats) = solve_problem(&problem, &params(method), None).unwrap();
         assert!(stats.converged, "{stats:?}");
-        for a in 0..3 {
-            assert_close(sol.lambda[a], exact[a], 1e-12, "lambda");
-            assert!(sol.gamma[a].abs() < 1e-14, "gamma {:?}", sol.gamma);
+        for (l, e) in sol.lambda.iter().zip(&exact) {
+            assert_close(*l, *e, 1e-12, "lambda");
         }
+        assert!(
+            sol.gamma.iter().all(|g| g.abs() < 1e-14),
+            "gamma {:?}",
+            sol.gamma
+        );
         assert_eq!((stats.open, stats.stick, stats.slip), (0, 1, 0));
     }
 }
@@ -93,11 +103,11 @@ fn sliding_pair_with_decoupled_block_matches_closed_form() {
         mu: vec![mu],
         label: String::new(),
     };
-    for method in [SweepMethod::Jacobi, SweepMethod::GaussSeidel] {
+    for method in ALL_METHODS {
         let (sol, stats) = solve_problem(&problem, &params(method), None).unwrap();
         assert!(stats.converged, "{stats:?}");
-        for i in 0..3 {
-            assert_close(sol.lambda[i], exact[i], 1e-12, "lambda");
+        for (l, e) in sol.lambda.iter().zip(&exact) {
+            assert_close(*l, *e, 1e-12, "lambda");
         }
         assert!(sol.gamma[0].abs() < 1e-15);
         let gt = [c[1] + b * exact[1], c[2] + b * exact[2]];
@@ -115,7 +125,7 @@ fn sliding_pair_with_coupled_block_obeys_coulomb() {
         mu: vec![0.4],
         label: String::new(),
     };
-    for method in [SweepMethod::Jacobi, SweepMethod::GaussSeidel] {
+    for method in ALL_METHODS {
         let (sol, stats) = solve_problem(&problem, &params(method), None).unwrap();
         assert!(stats.converged, "{stats:?}");
         let l = &sol.lambda;

@@ -13,6 +13,7 @@
 //! This is the same problem as Siconos' `FrictionContactProblem` (dimension 3):
 //! `u = M r + q`, `r in K = {||r_t|| <= mu r_n}`, with `M = W`, `q = c`, `r = lambda`, `u = gamma`.
 
+mod kernels;
 pub mod problem_io;
 pub mod projection;
 pub mod solver;

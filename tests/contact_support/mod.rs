@@ -113,8 +113,16 @@ pub fn impact_velocity(rng: &mut ChaCha8Rng, positions: &[[f64; 2]], h: f64) -> 
     let v0 = rng.gen_range(0.02..0.2); // approach speed, m/s
     let tilt = [rng.gen_range(-1.5..1.5), rng.gen_range(-1.5..1.5)];
     let curvature = rng.gen_range(0.0..0.05);
-    let slide = [v0 * rng.gen_range(-0.6..0.6), v0 * rng.gen_range(-0.6..0.6)];
-    let spin = v0 * rng.gen_range(-0.3..0.3) / (8.0 * h);
+    // Tangential speed relative to the approach: below about mu the patch mostly sticks,
+    // above it slides; draw both regimes.
+    let ratio = if rng.gen_bool(0.5) {
+        rng.gen_range(0.0..0.25)
+    } else {
+        rng.gen_range(0.25..0.8)
+    };
+    let angle = rng.gen_range(0.0..std::f64::consts::TAU);
+    let slide = [v0 * ratio * angle.cos(), v0 * ratio * angle.sin()];
+    let spin = v0 * rng.gen_range(-0.1..0.1) / (8.0 * h);
     let mut c = Vec::with_capacity(3 * n);
     for p in positions {
         let x = (p[0] - cx) / (8.0 * h);
@@ -159,7 +167,7 @@ pub fn physical_problem(seed: u64, n_pairs: usize) -> ContactProblem {
 }
 
 /// A generic dense SPD problem: `W = B B^T / (3n) + delta I` with B uniform in [-1, 1],
-/// `c` uniform in [-1, 1] with a negative bias on normals, friction `mu`.
+/// normal `c` uniform in [-1.3, 0.7], tangential in [-0.3, 0.3], friction `mu`.
 pub fn random_spd_problem(seed: u64, n_pairs: usize, mu: f64, delta: f64) -> ContactProblem {
     let mut r = rng(seed);
     let d = 3 * n_pairs;
@@ -174,7 +182,13 @@ pub fn random_spd_problem(seed: u64, n_pairs: usize, mu: f64, delta: f64) -> Con
         }
     }
     let c = (0..d)
-        .map(|i| r.gen_range(-1.0..1.0) - if i % 3 == 0 { 0.3 } else { 0.0 })
+        .map(|i| {
+            if i % 3 == 0 {
+                r.gen_range(-1.0..1.0) - 0.3
+            } else {
+                0.3 * r.gen_range(-1.0..1.0)
+            }
+        })
         .collect();
     ContactProblem {
         w,

@@ -1,7 +1,9 @@
 //! Implicit frictional contact: the admissible set and its projection ([`projection`]), the
-//! augmented-Lagrangian solver with projected Jacobi (or Gauss-Seidel) sweeps ([`solver`]) and
-//! the exchange file for contact problems ([`problem_io`]) used by the Siconos cross-check and
-//! to capture problems from simulations.
+//! augmented-Lagrangian solver with projected Jacobi (accelerated Jacobi, Gauss-Seidel) sweeps
+//! ([`solver`]) on dense kernels with a fixed evaluation order (`kernels`), and the exchange
+//! file for contact problems ([`problem_io`]) used by the Siconos cross-check
+//! (`tests/siconos/solve_fc3d.py`) and to capture problems from simulations
+//! ([`ContactSolver::last_active_problem`] + [`write_problem`]).
 //!
 //! The problem (DESIGN.md "The model" step 4, reference section 3.3.2): for the contact pairs
 //! of one time step find the forces `lambda` (3 per pair: normal, t1, t2; N) with

@@ -24,6 +24,8 @@ pub struct ExportedFiles {
 
 /// CalculiX reads names up to this length.
 const MAX_NAME: usize = 80;
+/// Characters ccx reads of a numeric field.
+const FIELD_WIDTH: usize = 20;
 /// Ids per `*NSET` data line.
 const IDS_PER_LINE: usize = 16;
 
@@ -42,9 +44,18 @@ pub(crate) fn ccx_name(name: &str) -> String {
         .collect()
 }
 
-/// A real in at most 20 characters (ccx reads numeric fields as 20 characters).
+/// A real in at most 20 characters (ccx reads numeric fields as 20 characters): the
+/// shortest exact form when it fits, else the most digits that fit (at least 13).
 fn real(x: f64) -> String {
-    format!("{x:.12e}")
+    let exact = format!("{x:e}");
+    if exact.len() <= FIELD_WIDTH {
+        return exact;
+    }
+    (12..16)
+        .rev()
+        .map(|p| format!("{x:.p$e}"))
+        .find(|s| s.len() <= FIELD_WIDTH)
+        .unwrap_or_else(|| format!("{x:.12e}"))
 }
 
 fn invalid(what: impl Into<String>) -> CalculixError {
@@ -484,4 +495,23 @@ fn model_text(mesh: &Mesh, job: &str) -> Result<String, CalculixError> {
         let _ = writeln!(out, "*BOUNDARY\n{set},1,3");
     }
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn reals_fit_ccx_fields_and_keep_their_digits() {
+        for x in [0.006, 0.09138459521993812, -1.2345678901234567e-2, 2.1e11, -9.87654321e-300] {
+            let s = real(x);
+            assert!(s.len() <= FIELD_WIDTH, "{s}");
+            let back: f64 = s.parse().unwrap();
+            // at least 13 significant digits
+            assert!((back - x).abs() <= 5e-13 * x.abs(), "{x} -> {s}");
+        }
+        assert_eq!(real(0.006), "6e-3");
+        assert_eq!(real(0.09138459521993812), "9.138459521993812e-2");
+        assert_eq!(real(-1.2345678901234567e-2), "-1.23456789012346e-2");
+    }
 }

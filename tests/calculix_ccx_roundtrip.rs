@@ -54,7 +54,10 @@ fn imported_matrices_reproduce_ccx_frequencies() {
     // .dat prints 7 significant digits
     assert!(diff < 2e-6, "imported K, M do not reproduce ccx: {diff:e}");
     // the two beams' first bending modes are in the range of a 0.1 m steel cantilever
-    assert!(ccx_freqs[0] > 300.0 && ccx_freqs[0] < 700.0, "{ccx_freqs:?}");
+    assert!(
+        ccx_freqs[0] > 300.0 && ccx_freqs[0] < 700.0,
+        "{ccx_freqs:?}"
+    );
 
     // DOF table: every non-fixed mesh node has 3 DOFs, each C3D8I adds 3 internal nodes.
     let n_hex8i = mesh
@@ -90,7 +93,11 @@ fn imported_matrices_reproduce_ccx_frequencies() {
             DofGroup::Clamp
         };
         assert_eq!(d.group, expected, "{d:?}");
-        assert!(!mesh.fixed_nodes.contains(&d.node), "fixed node {} has DOFs", d.node);
+        assert!(
+            !mesh.fixed_nodes.contains(&d.node),
+            "fixed node {} has DOFs",
+            d.node
+        );
     }
     // Base vector: 1 on z of real nodes; the mass it moves is the total free mass.
     let mb: f64 = {
@@ -100,7 +107,10 @@ fn imported_matrices_reproduce_ccx_frequencies() {
     };
     let total = mesh.total_mass();
     eprintln!("b^T M b = {mb:.6e} kg, mesh total mass {total:.6e} kg");
-    assert!(mb < total && mb > 0.9 * total, "b^T M b {mb} vs total {total}");
+    assert!(
+        mb < total && mb > 0.9 * total,
+        "b^T M b {mb} vs total {total}"
+    );
 
     // Pairs, clearance and sensors come back as exported.
     assert_eq!(model.pairs.len(), mesh.contact_pairs.len());
@@ -115,7 +125,11 @@ fn imported_matrices_reproduce_ccx_frequencies() {
         let x = mesh.nodes[q.lower];
         assert!((0..3).all(|c| (p.position[c] - x[c]).abs() <= 1e-15 * LENGTH));
     }
-    assert!((model.clearance - CLEARANCE).abs() < 1e-15, "{}", model.clearance);
+    assert!(
+        (model.clearance - CLEARANCE).abs() < 1e-15,
+        "{}",
+        model.clearance
+    );
     let names: Vec<&str> = model.outputs.iter().map(|o| o.name.as_str()).collect();
     assert_eq!(names, ["lower_tip", "upper_tip", "upper_mid"]);
     let mid = &model.outputs[2];
@@ -146,7 +160,13 @@ fn import_without_metadata_and_with_resorted_contact_set_rebuilds_the_same_pairs
         if l == "*NSET,NSET=CONTACT_UPPER" {
             let mut ids = Vec::new();
             while lines.peek().is_some_and(|n| !n.starts_with('*')) {
-                ids.extend(lines.next().unwrap().split(',').map(|s| s.trim().to_string()));
+                ids.extend(
+                    lines
+                        .next()
+                        .unwrap()
+                        .split(',')
+                        .map(|s| s.trim().to_string()),
+                );
             }
             ids.reverse();
             out.push_str("*nset, nset=contact_upper\n");
@@ -173,9 +193,17 @@ fn import_without_metadata_and_with_resorted_contact_set_rebuilds_the_same_pairs
     assert_eq!(bare.pairs.len(), with_meta.pairs.len());
     for (a, b) in bare.pairs.iter().zip(&with_meta.pairs) {
         assert_eq!(a.lower, b.lower);
-        assert_eq!(a.upper, b.upper, "re-sorted CONTACT_UPPER must pair by position");
+        assert_eq!(
+            a.upper, b.upper,
+            "re-sorted CONTACT_UPPER must pair by position"
+        );
         assert_eq!(a.frame, b.frame);
-        assert!((a.area - b.area).abs() <= 1e-12 * b.area, "{} vs {}", a.area, b.area);
+        assert!(
+            (a.area - b.area).abs() <= 1e-12 * b.area,
+            "{} vs {}",
+            a.area,
+            b.area
+        );
     }
     assert!((bare.clearance - with_meta.clearance).abs() < 1e-15);
     // Without comments: names from the set suffix, direction z.

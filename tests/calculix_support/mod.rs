@@ -28,7 +28,11 @@ fn tributary(lines: &[f64]) -> Vec<f64> {
     (0..lines.len())
         .map(|i| {
             let l = if i > 0 { lines[i] - lines[i - 1] } else { 0.0 };
-            let r = if i + 1 < lines.len() { lines[i + 1] - lines[i] } else { 0.0 };
+            let r = if i + 1 < lines.len() {
+                lines[i + 1] - lines[i]
+            } else {
+                0.0
+            };
             0.5 * (l + r)
         })
         .collect()
@@ -68,7 +72,11 @@ pub fn two_cantilevers() -> Mesh {
     let mut sets: BTreeMap<String, Vec<usize>> = BTreeMap::new();
     let mut tips = Vec::new();
     for (b, name) in ["LOWER", "UPPER"].iter().enumerate() {
-        let z0 = if b == 0 { 0.0 } else { THICKNESS[0] + CLEARANCE };
+        let z0 = if b == 0 {
+            0.0
+        } else {
+            THICKNESS[0] + CLEARANCE
+        };
         let zs = [z0, z0 + THICKNESS[b]];
         let wz = tributary(&zs);
         let beam = BoxGrid::new(&xs, &ys, &zs, |p| p);
@@ -96,9 +104,9 @@ pub fn two_cantilevers() -> Mesh {
         sets.entry("CLAMP".into())
             .or_default()
             .extend(coff..coff + clamp.nodes.len());
-        for k in 0..2 {
-            for j in 0..3 {
-                let area = wy[j] * wz[k];
+        for (k, wz_k) in wz.iter().enumerate() {
+            for (j, wy_j) in wy.iter().enumerate() {
+                let area = wy_j * wz_k;
                 mesh.springs.push(Spring {
                     a: coff + clamp.node(1, j, k),
                     b: off + beam.node(0, j, k),
@@ -137,13 +145,13 @@ pub fn two_cantilevers() -> Mesh {
     let (uo, ug) = &tips[1];
     let px = [xs[nx1 - 2], xs[nx1 - 1]];
     let wx = tributary(&px);
-    for j in 0..3 {
+    for (j, wy_j) in wy.iter().enumerate() {
         for (i, &w) in wx.iter().enumerate() {
             mesh.contact_pairs.push(ContactPair {
                 lower: lo + lg.node(nx1 - 2 + i, j, 1),
                 upper: uo + ug.node(nx1 - 2 + i, j, 0),
                 frame: [[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
-                area: w * wy[j],
+                area: w * wy_j,
             });
         }
     }

@@ -180,7 +180,9 @@ impl Reader {
             return Err(CalculixError::parse(
                 &at.path,
                 at.line,
-                format!("*INCLUDE nesting of at most {MAX_INCLUDE_DEPTH} files (is there a cycle?)"),
+                format!(
+                    "*INCLUDE nesting of at most {MAX_INCLUDE_DEPTH} files (is there a cycle?)"
+                ),
                 input,
             ));
         }
@@ -317,13 +319,27 @@ fn int(field: &str, loc: &Loc, expected: &str) -> Result<usize, CalculixError> {
 fn generate(f: &[&str], loc: &Loc) -> Result<Vec<usize>, CalculixError> {
     let expected = "`start, end[, step]` with 1 <= start <= end and step >= 1";
     if !(2..=3).contains(&f.len()) {
-        return Err(CalculixError::parse(&loc.path, loc.line, expected, f.join(",")));
+        return Err(CalculixError::parse(
+            &loc.path,
+            loc.line,
+            expected,
+            f.join(","),
+        ));
     }
     let a = int(f[0], loc, expected)?;
     let b = int(f[1], loc, expected)?;
-    let step = if f.len() == 3 { int(f[2], loc, expected)? } else { 1 };
+    let step = if f.len() == 3 {
+        int(f[2], loc, expected)?
+    } else {
+        1
+    };
     if a > b {
-        return Err(CalculixError::parse(&loc.path, loc.line, expected, f.join(",")));
+        return Err(CalculixError::parse(
+            &loc.path,
+            loc.line,
+            expected,
+            f.join(","),
+        ));
     }
     Ok((a..=b).step_by(step).collect())
 }
@@ -425,7 +441,7 @@ impl Block {
                     return Err(CalculixError::parse(
                         &loc.path,
                         loc.line,
-                        format!("`number, ` and {n_nodes} node numbers for a {kind}"),
+                        format!("an element number and {n_nodes} node numbers for a {kind}"),
                         line,
                     ));
                 }
@@ -559,9 +575,13 @@ impl Block {
                     &start.path,
                     start.line,
                     format!(
-                        "`number, ` and {n_nodes} node numbers for a {kind} (continued on the next lines)"
+                        "an element number and {n_nodes} node numbers for a {kind} (data lines \
+                         may continue on the next lines)"
                     ),
-                    format!("{} number(s) before the next keyword or the end", pending.len()),
+                    format!(
+                        "{} number(s) before the next keyword or the end of the input",
+                        pending.len()
+                    ),
                 ));
             }
         }
@@ -597,7 +617,11 @@ fn parse_meta(comment: &str, loc: &Loc, meta: &mut Meta) -> Result<(), CalculixE
     };
     let real = |s: &str, expected: &str| parse_real(s).ok_or_else(|| bad(expected));
     let vec3 = |t: &[&str], expected: &str| -> Result<[f64; 3], CalculixError> {
-        Ok([real(t[0], expected)?, real(t[1], expected)?, real(t[2], expected)?])
+        Ok([
+            real(t[0], expected)?,
+            real(t[1], expected)?,
+            real(t[2], expected)?,
+        ])
     };
     match tokens.get(1).map(|s| s.to_lowercase()).as_deref() {
         Some("clearance") => {

@@ -44,10 +44,16 @@ pub(crate) fn ccx_name(name: &str) -> String {
         .collect()
 }
 
-/// A real in at most 20 characters (ccx reads numeric fields as 20 characters): the
-/// shortest exact form when it fits, else the most digits that fit (at least 13).
+/// A real in at most 20 characters (ccx reads numeric fields as 20 characters) with a
+/// decimal point (ccx takes `1e6` on a `*SPRING` line for the DOF line): the shortest exact
+/// form when it fits, else the most digits that fit (at least 13).
 fn real(x: f64) -> String {
-    let exact = format!("{x:e}");
+    let mut exact = format!("{x:e}");
+    if !exact.contains('.') {
+        if let Some(e) = exact.find('e') {
+            exact.insert_str(e, ".0");
+        }
+    }
     if exact.len() <= FIELD_WIDTH {
         return exact;
     }
@@ -127,7 +133,9 @@ fn validate(mesh: &Mesh) -> Result<(), CalculixError> {
     };
     for (i, x) in mesh.nodes.iter().enumerate() {
         if !x.iter().all(|v| v.is_finite()) {
-            return Err(invalid(format!("node {i} has a non-finite coordinate {x:?}")));
+            return Err(invalid(format!(
+                "node {i} has a non-finite coordinate {x:?}"
+            )));
         }
     }
     for (e, el) in mesh.elements.iter().enumerate() {
@@ -171,7 +179,10 @@ fn validate(mesh: &Mesh) -> Result<(), CalculixError> {
         node(sp.a, format!("spring {s}"))?;
         node(sp.b, format!("spring {s}"))?;
         if sp.a == sp.b {
-            return Err(invalid(format!("spring {s} connects node {} to itself", sp.a)));
+            return Err(invalid(format!(
+                "spring {s} connects node {} to itself",
+                sp.a
+            )));
         }
         if !sp.stiffness.iter().all(|k| *k >= 0.0 && k.is_finite()) {
             return Err(invalid(format!(
@@ -203,7 +214,10 @@ fn validate(mesh: &Mesh) -> Result<(), CalculixError> {
         node(p.lower, format!("contact pair {k}"))?;
         node(p.upper, format!("contact pair {k}"))?;
         if p.lower == p.upper {
-            return Err(invalid(format!("contact pair {k} pairs node {} with itself", p.lower)));
+            return Err(invalid(format!(
+                "contact pair {k} pairs node {} with itself",
+                p.lower
+            )));
         }
         let f = &p.frame;
         let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
@@ -352,7 +366,14 @@ fn model_text(mesh: &Mesh, job: &str) -> Result<String, CalculixError> {
     // Nodes.
     out.push_str("*NODE\n");
     for (i, x) in mesh.nodes.iter().enumerate() {
-        let _ = writeln!(out, "{}, {}, {}, {}", id(i), real(x[0]), real(x[1]), real(x[2]));
+        let _ = writeln!(
+            out,
+            "{}, {}, {}, {}",
+            id(i),
+            real(x[0]),
+            real(x[1]),
+            real(x[2])
+        );
     }
 
     // Solids, one element set per non-empty block.
@@ -433,10 +454,7 @@ fn model_text(mesh: &Mesh, job: &str) -> Result<String, CalculixError> {
         write_ids(&mut out, members.iter().map(|&n| id(n)));
     }
     if !mesh.contact_pairs.is_empty() {
-        for (name, pick) in [
-            ("CONTACT_LOWER", 0usize),
-            ("CONTACT_UPPER", 1usize),
-        ] {
+        for (name, pick) in [("CONTACT_LOWER", 0usize), ("CONTACT_UPPER", 1usize)] {
             let name = nsets.add(name.to_string(), "the contact pairs")?;
             let _ = writeln!(out, "*NSET,NSET={name}");
             write_ids(
@@ -503,14 +521,21 @@ mod tests {
 
     #[test]
     fn reals_fit_ccx_fields_and_keep_their_digits() {
-        for x in [0.006, 0.09138459521993812, -1.2345678901234567e-2, 2.1e11, -9.87654321e-300] {
+        for x in [
+            0.006,
+            0.09138459521993812,
+            -1.2345678901234567e-2,
+            2.1e11,
+            -9.87654321e-300,
+        ] {
             let s = real(x);
-            assert!(s.len() <= FIELD_WIDTH, "{s}");
+            assert!(s.len() <= FIELD_WIDTH && s.contains('.'), "{s}");
             let back: f64 = s.parse().unwrap();
             // at least 13 significant digits
             assert!((back - x).abs() <= 5e-13 * x.abs(), "{x} -> {s}");
         }
-        assert_eq!(real(0.006), "6e-3");
+        assert_eq!(real(0.006), "6.0e-3");
+        assert_eq!(real(0.0), "0.0e0");
         assert_eq!(real(0.09138459521993812), "9.138459521993812e-2");
         assert_eq!(real(-1.2345678901234567e-2), "-1.23456789012346e-2");
     }

@@ -31,7 +31,19 @@ pub fn import(job_path: &Path) -> Result<FeModel, CalculixError> {
     let sti = read_sym_matrix(&sti_path)?;
     let mas = read_sym_matrix(&mas_path)?;
     let dof_lines = read_dof(&dof_path)?;
-    if sti.dim != mas.dim {
+    let n = dof_lines.len();
+    // Which file is wrong: both matrices agree and the .dof does not -> the .dof; one
+    // matrix reaches beyond the .dof that the other matches -> that matrix's stray index;
+    // otherwise the matrices disagree.
+    if sti.dim == mas.dim && sti.dim != n {
+        return Err(CalculixError::DofCount {
+            path: dof_path,
+            lines: n,
+            matrix: sti_path,
+            dim: sti.dim,
+        });
+    }
+    if sti.dim != mas.dim && !(sti.dim > n && mas.dim == n) && !(mas.dim > n && sti.dim == n) {
         return Err(CalculixError::SizeMismatch {
             sti: sti_path,
             n_sti: sti.dim,
@@ -39,15 +51,6 @@ pub fn import(job_path: &Path) -> Result<FeModel, CalculixError> {
             n_mas: mas.dim,
         });
     }
-    if dof_lines.len() != sti.dim {
-        return Err(CalculixError::DofCount {
-            path: dof_path,
-            lines: dof_lines.len(),
-            matrix: sti_path,
-            dim: sti.dim,
-        });
-    }
-    let n = dof_lines.len();
     let k = to_sparse(&sti, &dof_path, n)?;
     let m = to_sparse(&mas, &dof_path, n)?;
     build(&inp, &deck, &dof_lines, k, m)
@@ -98,8 +101,12 @@ fn build(
     };
 
     // Node groups.
-    let lower = group_nodes(deck, "LOWER")
-        .ok_or_else(|| missing("LOWER", "expected a node set of the lower beam and its probe"))?;
+    let lower = group_nodes(deck, "LOWER").ok_or_else(|| {
+        missing(
+            "LOWER",
+            "expected a node set of the lower beam and its probe",
+        )
+    })?;
     let upper = group_nodes(deck, "UPPER").ok_or_else(|| {
         missing(
             "UPPER",
@@ -207,7 +214,7 @@ fn build(
                 if ortho.abs() > 1e-9 {
                     return Err(bad("t1 orthogonal to n"));
                 }
-                if !(meta.area > 0.0) {
+                if meta.area.is_nan() || meta.area <= 0.0 {
                     return Err(CalculixError::Parse {
                         path: meta.at.path.clone(),
                         line: meta.at.line,
@@ -226,8 +233,7 @@ fn build(
                 })?;
                 if computed_areas.is_none() {
                     let pn = patch_normal.unwrap_or(n);
-                    computed_areas =
-                        Some(structured_areas(&lower_x, pn).map_err(model_err)?);
+                    computed_areas = Some(structured_areas(&lower_x, pn).map_err(model_err)?);
                 }
                 let area = computed_areas.as_ref().map_or(0.0, |a| a[kp]);
                 (frame_from_normal(n), area)

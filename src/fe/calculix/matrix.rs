@@ -159,7 +159,7 @@ pub(crate) fn read_dof(path: &Path) -> Result<Vec<DofLine>, CalculixError> {
     Ok(dofs)
 }
 
-/// Checks an entry list against the DOF count and builds the full (both triangles) sparse
+/// Checks an entry list against the DOF count (indices in range, every diagonal present) and builds the full (both triangles) sparse
 /// matrix, 0-based.
 pub(crate) fn to_sparse(
     m: &SymEntries,
@@ -167,6 +167,7 @@ pub(crate) fn to_sparse(
     n: usize,
 ) -> Result<SparseColMat<usize, f64>, CalculixError> {
     let mut triplets = Vec::with_capacity(2 * m.entries.len());
+    let mut has_diagonal = vec![false; n + 1];
     for e in &m.entries {
         if e.col > n {
             return Err(CalculixError::IndexOutOfRange {
@@ -177,10 +178,21 @@ pub(crate) fn to_sparse(
                 dim: n,
             });
         }
+        if e.row == e.col {
+            has_diagonal[e.col] = true;
+        }
         triplets.push(Triplet::new(e.row - 1, e.col - 1, e.value));
         if e.row != e.col {
             triplets.push(Triplet::new(e.col - 1, e.row - 1, e.value));
         }
+    }
+    // NOTE: ccx writes every column's diagonal (last in the column), zero or not: a missing
+    // one means a file cut inside a column.
+    if let Some(j) = (1..=n).find(|&j| !has_diagonal[j]) {
+        return Err(CalculixError::MissingDiagonal {
+            path: m.path.clone(),
+            dof: j,
+        });
     }
     SparseColMat::try_new_from_triplets(n, n, &triplets).map_err(|err| CalculixError::Model {
         path: m.path.clone(),
@@ -207,6 +219,12 @@ mod tests {
             "a.sti",
             "1 1 2.0\n2 1 -1.0\n2 2 3.0\n1 2 -1.0\n\n",
         );
+        let truncated = write(dir.path(), "b.sti", "1 1 2.0\n2 1 -1.0\n");
+        let b = read_sym_matrix(&truncated).unwrap();
+        let err = to_sparse(&b, Path::new("b.dof"), 2)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("b.sti") && err.contains("DOF 2"), "{err}");
         let m = read_sym_matrix(&p).unwrap();
         assert_eq!(m.dim, 2);
         assert_eq!(m.entries.len(), 3);
@@ -220,7 +238,11 @@ mod tests {
     #[test]
     fn conflicting_mirror_is_an_error_naming_both_lines() {
         let dir = tempfile::tempdir().unwrap();
-        let p = write(dir.path(), "a.sti", "1 1 2.0\n1 2 -1.0\n2 2 3.0\n2 1 -1.5\n");
+        let p = write(
+            dir.path(),
+            "a.sti",
+            "1 1 2.0\n1 2 -1.0\n2 2 3.0\n2 1 -1.5\n",
+        );
         let err = read_sym_matrix(&p).unwrap_err().to_string();
         assert!(err.contains("a.sti:4"), "{err}");
         assert!(err.contains("line 2"), "{err}");
@@ -231,13 +253,19 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let p = write(dir.path(), "a.dof", "2.1\n2.2\n\n13.3\n");
         let d = read_dof(&p).unwrap();
-        assert_eq!(d, vec![
-            DofLine { node: 2, dir: 1 },
-            DofLine { node: 2, dir: 2 },
-            DofLine { node: 13, dir: 3 },
-        ]);
+        assert_eq!(
+            d,
+            vec![
+                DofLine { node: 2, dir: 1 },
+                DofLine { node: 2, dir: 2 },
+                DofLine { node: 13, dir: 3 },
+            ]
+        );
         let p = write(dir.path(), "b.dof", "2.1\n2.4\n");
         let err = read_dof(&p).unwrap_err().to_string();
-        assert!(err.contains("b.dof:2") && err.contains("direction 1, 2 or 3"), "{err}");
+        assert!(
+            err.contains("b.dof:2") && err.contains("direction 1, 2 or 3"),
+            "{err}"
+        );
     }
 }

@@ -60,7 +60,10 @@
 //!   about a fifth of the equations are requested as modes (27 equations: 5 modes work, 6
 //!   fail; 45 equations: 9 work, 10 fail).
 //! - Numeric fields are read as 20 characters: longer numbers are silently truncated
-//!   (`1.00000000000000000000e-2` became `1.0`). The export writes `{:.12e}`, at most 20.
+//!   (`1.00000000000000000000e-2` became `1.0`). A real without a decimal point on a
+//!   `*SPRING` data line (`1e6`, `1000000`) is taken for the DOF line ("*SPRING card without
+//!   data"). The export writes every real with a decimal point in at most 20 characters
+//!   (shortest exact form, else at least 13 significant digits).
 //! - `*INCLUDE` paths are resolved against ccx's working directory, not the including file;
 //!   the exported decks are therefore self-contained.
 //! - A keyword line continued on the next line (`*NSET,` + `NSET=FIX`) breaks ccx's set
@@ -173,6 +176,14 @@ pub enum CalculixError {
         matrix: PathBuf,
         /// The matrix dimension.
         dim: usize,
+    },
+    /// A matrix file lacks the diagonal entry of a DOF (ccx writes all of them).
+    #[error("{path}: no diagonal entry for DOF {dof}: expected one per DOF, as ccx writes them (is the file truncated?)")]
+    MissingDiagonal {
+        /// The matrix file.
+        path: PathBuf,
+        /// 1-based DOF index.
+        dof: usize,
     },
     /// A matrix entry is given twice with different values (as `i j` and `j i`, or repeated).
     #[error("{path}:{line}: entry ({row}, {col}) = {value:e} contradicts line {first_line} ({first_value:e}): a symmetric matrix lists each entry once")]

@@ -140,7 +140,10 @@ pub(crate) fn pair_up(lower: &[[f64; 3]], upper: &[[f64; 3]]) -> Result<Vec<usiz
             .iter()
             .enumerate()
             .map(|(j, u)| (j, in_plane(sub(*u, *l))))
-            .fold((usize::MAX, f64::INFINITY), |a, b| if b.1 < a.1 { b } else { a });
+            .fold(
+                (usize::MAX, f64::INFINITY),
+                |a, b| if b.1 < a.1 { b } else { a },
+            );
         if best == usize::MAX || dist > tol || taken[best] {
             return Err(format!(
                 "lower contact node #{} (position {:?}) has no unpaired upper contact node \
@@ -179,7 +182,11 @@ fn tributary(lines: &[f64]) -> Vec<f64> {
     (0..n)
         .map(|i| {
             let left = if i > 0 { lines[i] - lines[i - 1] } else { 0.0 };
-            let right = if i + 1 < n { lines[i + 1] - lines[i] } else { 0.0 };
+            let right = if i + 1 < n {
+                lines[i + 1] - lines[i]
+            } else {
+                0.0
+            };
             0.5 * (left + right)
         })
         .collect()

@@ -169,6 +169,9 @@ mod tests {
         let p = dir.path().join("b.dat");
         std::fs::write(&p, "\n S T R E S S E S\n").unwrap();
         let err = read_dat_frequencies(&p).unwrap_err().to_string();
-        assert!(err.contains("b.dat") && err.contains("E I G E N V A L U E"), "{err}");
+        assert!(
+            err.contains("b.dat") && err.contains("E I G E N V A L U E"),
+            "{err}"
+        );
     }
 }

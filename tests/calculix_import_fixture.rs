@@ -9,7 +9,7 @@ mod calculix_support;
 use std::path::{Path, PathBuf};
 
 use calculix_support::max_rel_diff;
-use rigtwin::fe::calculix::{import, read_dat_frequencies};
+use rigtwin::fe::calculix::{condense_internal_dofs, import, read_dat_frequencies};
 use rigtwin::fe::{DofGroup, FeModel};
 
 fn fixture_dir() -> PathBuf {
@@ -33,6 +33,19 @@ fn fixture_import_reproduces_ccx_and_rebuilds_the_index_data() {
     let diff = max_rel_diff(&ours, &ccx);
     eprintln!("ccx {ccx:.2?}\nours {ours:.2?}\nmax rel diff {diff:.2e}");
     assert!(diff < 2e-6, "{diff:e}");
+
+    // Condensing the 18 bubble DOFs leaves the 72 node DOFs with a positive definite M.
+    let condensed = condense_internal_dofs(&model).unwrap();
+    assert_eq!(condensed.n_dof(), 72);
+    assert!(condensed.m.to_dense().llt(faer::Side::Lower).is_ok());
+    let cf = calculix_support::dense_frequencies(&condensed.k, &condensed.m, ccx.len());
+    let cdiff = max_rel_diff(&cf, &ccx);
+    eprintln!("condensed {cf:.2?}: max rel diff {cdiff:.2e}");
+    assert!(cdiff < 2e-3, "{cdiff:e}");
+    assert!(
+        cf.iter().zip(&ccx).all(|(c, f)| c >= &(f * (1.0 - 1e-9))),
+        "condensing stiffens"
+    );
 
     // 12 lower (4 fixed), 12 upper, 8 clamp (4 fixed) nodes; 2 C3D8I with 3 extra nodes each.
     assert_eq!(model.n_dof(), 3 * (8 + 12 + 4) + 18);

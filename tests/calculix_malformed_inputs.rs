@@ -431,6 +431,26 @@ fn inp_bad_generate_range() {
 }
 
 #[test]
+fn inp_generate_beyond_the_defined_nodes() {
+    let (err, msg) = import_err(&broken("cantilever_model.inc", |t| {
+        t.replace("GENERATE\n1, 12\n", "GENERATE\n1, 4000000000\n")
+    }));
+    assert!(
+        matches!(err, CalculixError::UnknownNode { id: 4000000000, .. }),
+        "{msg}"
+    );
+    assert!(msg.contains("node set LOWER"), "{msg}");
+}
+
+#[test]
+fn inp_sparse_node_numbering_is_refused() {
+    let (_, msg) = import_err(&broken("cantilever_nodes.inc", |t| {
+        t + "900000000, 1.0, 1.0, 1.0\n"
+    }));
+    assert!(msg.contains("compact numbering"), "{msg}");
+}
+
+#[test]
 fn inp_malformed_metadata_comment() {
     let (err, msg) = import_err(&broken("cantilever_model.inc", |t| {
         t.replace("dir 0 0.6 0.8", "dir 0 0.6")

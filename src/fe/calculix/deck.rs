@@ -316,7 +316,15 @@ fn int(field: &str, loc: &Loc, expected: &str) -> Result<usize, CalculixError> {
 }
 
 /// `start, end[, step]` of a GENERATE line.
-fn generate(f: &[&str], loc: &Loc) -> Result<Vec<usize>, CalculixError> {
+/// `start, end[, step]` of a GENERATE line; `largest` is the largest defined number, so an
+/// absurd range fails before it is expanded.
+fn generate(
+    f: &[&str],
+    loc: &Loc,
+    largest: usize,
+    context: String,
+    what: &'static str,
+) -> Result<Vec<usize>, CalculixError> {
     let expected = "`start, end[, step]` with 1 <= start <= end and step >= 1";
     if !(2..=3).contains(&f.len()) {
         return Err(CalculixError::parse(
@@ -333,6 +341,15 @@ fn generate(f: &[&str], loc: &Loc) -> Result<Vec<usize>, CalculixError> {
     } else {
         1
     };
+    if b > largest {
+        return Err(CalculixError::UnknownNode {
+            path: loc.path.clone(),
+            line: loc.line,
+            context,
+            what,
+            id: b,
+        });
+    }
     if a > b {
         return Err(CalculixError::parse(
             &loc.path,
@@ -481,7 +498,8 @@ impl Block {
             Block::Nset { name, generate: g } => {
                 let f = fields(line);
                 let ids = if *g {
-                    generate(&f, loc)?
+                    let largest = deck.nodes.keys().next_back().copied().unwrap_or(0);
+                    generate(&f, loc, largest, format!("node set {name}"), "node")?
                 } else {
                     let mut ids = Vec::new();
                     for s in f.into_iter().filter(|s| !s.is_empty()) {
@@ -520,7 +538,8 @@ impl Block {
             Block::Elset { name, generate: g } => {
                 let f = fields(line);
                 let ids = if *g {
-                    generate(&f, loc)?
+                    let largest = deck.elements.keys().next_back().copied().unwrap_or(0);
+                    generate(&f, loc, largest, format!("element set {name}"), "element")?
                 } else {
                     let mut ids = Vec::new();
                     for s in f.into_iter().filter(|s| !s.is_empty()) {

@@ -150,6 +150,14 @@ fn build(
     }
 
     let n_coords = deck.nodes.keys().next_back().copied().unwrap_or(0);
+    // node_coords is indexed by node number: refuse numberings that would make it absurd.
+    if n_coords > 16 * deck.nodes.len() + 1024 {
+        return Err(model_err(format!(
+            "node numbers reach {n_coords} for {} nodes: expected a compact numbering \
+             (renumber the deck's nodes)",
+            deck.nodes.len()
+        )));
+    }
     let mut node_coords = vec![[f64::NAN; 3]; n_coords];
     for (&id, &x) in &deck.nodes {
         node_coords[id - 1] = x;

@@ -28,19 +28,19 @@
 //! **C3D8I** is not condensed: ccx expands every C3D8I element with 3 extra nodes, numbered
 //! after the largest node number of the deck, 3 per C3D8I element in element order. Their 9
 //! DOFs (the incompatible-mode amplitudes) appear in `.sti`, `.mas` and `.dof` like ordinary
-//! nodes, and they carry mass: ccx integrates the bubble functions into the consistent mass
-//! matrix with 2x2x2 Gauss points (diagonal `4/9 rho V` per bubble DOF, coupled to the
-//! corner DOFs). A two-element C3D8I cantilever has 27 node DOFs and 18 internal ones.
-//! With 2x2x2 Gauss points the three bubbles of one direction take the same values, so 6 of
-//! each element's 9 bubble-DOF combinations carry no mass at all: ccx's M is only positive
-//! semidefinite (168 massless combinations for 28 C3D8I elements, measured), which breaks
-//! any solver that factorises M. [`import`] keeps the bubble DOFs as
-//! [`DofGroup::Internal`](crate::fe::DofGroup) DOFs (node = CalculiX number minus one, no
-//! coordinates, 0 in the base-excitation vector); [`condense_internal_dofs`] condenses them
-//! with the static bubble response, which gives the native Hex8I matrices of
-//! [`assemble`](crate::fe::assemble) entry by entry (2e-14 relative, measured). The
-//! condensed model is stiffer than ccx's in the higher modes of coarse meshes (two 8-cell
-//! cantilevers: 0.05 % up to the 8th mode, 0.17 % at the 10th, 17 f1). C3D8 adds nothing.
+//! nodes (a two-element C3D8I cantilever: 27 node DOFs, 18 internal ones), and they carry
+//! mass: ccx integrates the bubble functions into the consistent mass with 2x2x2 Gauss
+//! points (`4/9 rho V` on each bubble diagonal, coupled to the corner DOFs). At those points
+//! the three bubbles of one direction are equal, so 6 of each element's 9 bubble-DOF
+//! combinations have no mass at all: ccx's M is only positive semidefinite (168 massless
+//! combinations for 28 C3D8I elements, measured), which defeats any solver that factorises
+//! M. [`import`] keeps the bubble DOFs as [`DofGroup::Internal`](crate::fe::DofGroup) DOFs
+//! (node = CalculiX number minus one, no coordinates, 0 in the base-excitation vector);
+//! [`condense_internal_dofs`] condenses them with the static bubble response, which gives
+//! the native Hex8I matrices of [`assemble`](crate::fe::assemble) entry by entry (2e-14
+//! relative, measured) with a positive definite M. The condensed model is slightly stiffer
+//! than ccx's in the higher modes of coarse meshes (two 8-cell cantilevers: within 0.05 % up
+//! to the 8th mode, 0.17 % at the 10th, 17 f1). C3D8 adds no DOFs.
 //!
 //! **Springs and masses are in the matrices.** `*ELEMENT,TYPE=SPRING2` + `*SPRING,ELSET=..`
 //! with the data lines `d1,d2` (DOF at the first and second node) and `k` adds `k` on the
@@ -104,8 +104,14 @@
 //!
 //! [`import`] reads `JOB.inp` (nodes, node and element sets, `*INCLUDE` relative to the
 //! including file, then to the working directory) and `JOB.sti`, `JOB.mas`, `JOB.dof`.
-//! Node groups come from the sets `LOWER`, `UPPER` (required) and `CLAMP` (node sets, or
-//! element sets of that name when no node set exists); other nodes are `Clamp`.
+//! Nodes of the set `LOWER` are [`DofGroup::Lower`](crate::fe::DofGroup), of `UPPER`
+//! `Upper` (both required; a node set, or else the nodes of an element set of that name),
+//! all other deck nodes `Clamp`. The matrices are checked as ccx writes them: three fields
+//! per line, indices from 1, every diagonal present, an entry repeated (in either triangle)
+//! only with the same value, `.sti`, `.mas` and `.dof` of one size. Contact and sensor nodes
+//! must have free DOFs.
+//!
+//! [`run_ccx`] starts `$RIGTWIN_CCX` (default `ccx`) in the deck's directory.
 
 mod condense;
 mod deck;

@@ -22,6 +22,13 @@ pub struct ExportedFiles {
     pub matrix_job: String,
 }
 
+impl ExportedFiles {
+    /// Both decks: the frequency deck, then the matrix deck.
+    pub fn paths(&self) -> [&Path; 2] {
+        [&self.frequency_deck, &self.matrix_deck]
+    }
+}
+
 /// CalculiX reads names up to this length.
 const MAX_NAME: usize = 80;
 /// Characters ccx reads of a numeric field.

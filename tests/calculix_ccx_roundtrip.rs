@@ -212,3 +212,22 @@ fn import_without_metadata_and_with_resorted_contact_set_rebuilds_the_same_pairs
     assert_eq!(bare.dofs[mid.terms[0].0].dir, 2);
     assert_eq!(bare.k.compute_nnz(), with_meta.k.compute_nnz());
 }
+
+#[test]
+fn ccx_failures_are_errors_although_ccx_exits_0() {
+    if !ccx_or_skip() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let err = run_ccx(dir.path(), "absent").unwrap_err();
+    assert!(err.to_string().contains("absent.inp"), "{err}");
+    // ARPACK asked for more modes than a fifth of the 612 equations (see the module docs)
+    export(&two_cantilevers(), dir.path(), "many_modes", 200).unwrap();
+    let err = run_ccx(dir.path(), "many_modes").unwrap_err();
+    let msg = err.to_string();
+    eprintln!("{msg}");
+    assert!(
+        msg.contains("*ERROR") && msg.contains("many_modes"),
+        "{msg}"
+    );
+}

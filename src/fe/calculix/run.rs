@@ -72,12 +72,12 @@ pub fn run_ccx(dir: &Path, job: &str) -> Result<CcxRun, CalculixError> {
     if !output.status.success() || !errors.is_empty() {
         let message = if errors.is_empty() {
             format!(
-                "exit status {}; last output: {}",
+                "{}; last output: {}",
                 output.status,
                 log.lines().rev().take(3).collect::<Vec<_>>().join(" | ")
             )
         } else {
-            format!("exit status {}; {}", output.status, errors.join(" | "))
+            format!("{}; {}", output.status, errors.join(" | "))
         };
         return Err(CalculixError::CcxFailed {
             dir: dir.to_path_buf(),

@@ -27,6 +27,13 @@ pub fn ccx_command() -> String {
 }
 
 /// Whether the CalculiX command can be started (for tests that need it).
+/// Whether the environment demands CalculiX (`RIGTWIN_REQUIRE_CCX` set, as CI does): tests
+/// that would otherwise skip without ccx fail instead.
+pub fn ccx_required() -> bool {
+    std::env::var_os("RIGTWIN_REQUIRE_CCX").is_some()
+}
+
+/// Whether the CalculiX executable can be started.
 pub fn ccx_available() -> bool {
     Command::new(ccx_command()).arg("-v").output().is_ok()
 }

@@ -87,12 +87,25 @@ impl RigConfig {
             let (line, column) = e
                 .span()
                 .map_or((0, 0), |s| error::line_column(text, s.start));
+            let message = e.message().trim().to_string();
+            let mut key = schema_key_path(&table);
+            // An unknown key is reported on its table: name the key itself.
+            if let Some(name) = message
+                .strip_prefix("unknown field `")
+                .and_then(|r| r.split('`').next())
+            {
+                key = if key == DOCUMENT {
+                    name.to_string()
+                } else {
+                    format!("{key}.{name}")
+                };
+            }
             ConfigError::Schema {
                 file: file.clone(),
                 line,
                 column,
-                key: schema_key_path(&table),
-                message: e.message().trim().to_string(),
+                key,
+                message,
             }
         })?;
         cfg.source = file;
@@ -140,11 +153,14 @@ impl RigConfig {
     }
 }
 
+/// Key path reported for errors at the top level of the document.
+const DOCUMENT: &str = "(document)";
+
 /// The key path of a schema error, recovered by deserialising the span-less value tree:
 /// toml then reports the keys it unwound through ("... in `a.b.c`").
 fn schema_key_path(table: &toml::Table) -> String {
     match table.clone().try_into::<RigConfig>() {
-        Ok(_) => String::from("(document)"),
+        Ok(_) => String::from(DOCUMENT),
         Err(e) => e
             .to_string()
             .lines()
@@ -154,6 +170,6 @@ fn schema_key_path(table: &toml::Table) -> String {
                     .and_then(|k| k.strip_suffix('`'))
                     .map(str::to_string)
             })
-            .unwrap_or_else(|| String::from("(document)")),
+            .unwrap_or_else(|| String::from(DOCUMENT)),
     }
 }

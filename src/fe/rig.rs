@@ -145,82 +145,40 @@ pub fn mesh_rig(cfg: &RigConfig) -> Result<Mesh, ConfigError> {
     let all_upper_y = (0, lines.upper_y.len() - 1);
     let (lk_bot, lk_top) = (0, lines.lower_z.len() - 1);
     let (uk_bot, uk_top) = (0, lines.upper_z.len() - 1);
-    let layers = cfg.layers;
-    let faces: [(
-        &Part,
-        usize,
-        (usize, usize),
-        (usize, usize),
-        &Part,
-        usize,
-        LayerSpec,
-    ); 6] = [
+    let region = |part, k, i, j| FaceRegion { part, k, i, j };
+    // In the order of `cfg.layers.named()` (the mesh's layer indices).
+    let faces = [
         (
-            &lower,
-            lk_bot,
-            clamp_i,
-            all_lower_y,
+            region(&lower, lk_bot, clamp_i, all_lower_y),
             &base,
             base.top_k(),
-            layers.lower_base,
         ),
+        (region(&lower, lk_top, clamp_i, all_lower_y), &spacer, 0),
         (
-            &lower,
-            lk_top,
-            clamp_i,
-            all_lower_y,
-            &spacer,
-            0,
-            layers.lower_spacer,
-        ),
-        (
-            &upper,
-            uk_bot,
-            clamp_i,
-            all_upper_y,
+            region(&upper, uk_bot, clamp_i, all_upper_y),
             &spacer,
             spacer.top_k(),
-            layers.upper_spacer,
         ),
+        (region(&upper, uk_top, clamp_i, all_upper_y), &top, 0),
+        (region(&lower, lk_top, seat_x, lower_seat_y), &lprobe, 0),
         (
-            &upper,
-            uk_top,
-            clamp_i,
-            all_upper_y,
-            &top,
-            0,
-            layers.upper_top,
-        ),
-        (
-            &lower,
-            lk_top,
-            seat_x,
-            lower_seat_y,
-            &lprobe,
-            0,
-            layers.lower_probe,
-        ),
-        (
-            &upper,
-            uk_bot,
-            seat_x,
-            upper_seat_y,
+            region(&upper, uk_bot, seat_x, upper_seat_y),
             &uprobe,
             uprobe.top_k(),
-            layers.upper_probe,
         ),
     ];
-    for (layer, (a, ak, ir, jr, other, bk, spec)) in faces.into_iter().enumerate() {
-        b.layer_springs(a, ak, ir, jr, other, bk, spec, layer)?;
+    for (layer, ((face, other, bk), (_, spec))) in
+        faces.into_iter().zip(cfg.layers.named()).enumerate()
+    {
+        b.layer_springs(&face, other, bk, spec, layer)?;
     }
 
     // Contact pairs: protrusion bottom face over the lower probe's top face.
-    let (nx, ny) = (lines.patch_x.len(), lines.patch_y.len());
     let area_x = tributary(&lines.patch_x);
     let area_y = tributary(&lines.patch_y);
     let lp_top = lprobe.top_k();
-    for j in 0..ny {
-        for i in 0..nx {
+    for (j, ay) in area_y.iter().enumerate() {
+        for (i, ax) in area_x.iter().enumerate() {
             let upper_node = prot.global(i, j, 0);
             let q = b.mesh.nodes[upper_node];
             let lower_node = lprobe.node_at(&b, q[0], q[1], lp_top, "contact.nodes")?;
@@ -228,7 +186,7 @@ pub fn mesh_rig(cfg: &RigConfig) -> Result<Mesh, ConfigError> {
                 lower: lower_node,
                 upper: upper_node,
                 frame: [[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
-                area: area_x[i] * area_y[j],
+                area: ax * ay,
             });
         }
     }
@@ -733,6 +691,15 @@ impl Part {
     }
 }
 
+/// A rectangle of a beam face: the part, the face's layer index along z and the line index
+/// ranges (inclusive) along x and y.
+struct FaceRegion<'p> {
+    part: &'p Part,
+    k: usize,
+    i: (usize, usize),
+    j: (usize, usize),
+}
+
 /// Element block indices of the parts.
 struct BlockIds {
     base: usize,
@@ -850,22 +817,18 @@ impl<'a> Builder<'a> {
         }
     }
 
-    /// Springs of one interface layer between the face `ak` of beam `a` (over its line index
-    /// ranges `ir` along x and `jr` along y, a region of constant width) and the coincident
-    /// nodes of the box part `other` on its face `bk`. Tributary areas are the beam face's
-    /// dual cells inside the region.
-    #[allow(clippy::too_many_arguments)]
+    /// Springs of one interface layer between a beam face region (a region of constant
+    /// width) and the coincident nodes of the box part `other` on its face `bk`. Tributary
+    /// areas are the beam face's dual cells inside the region.
     fn layer_springs(
         &mut self,
-        a: &Part,
-        ak: usize,
-        ir: (usize, usize),
-        jr: (usize, usize),
+        face: &FaceRegion,
         other: &Part,
         bk: usize,
         spec: LayerSpec,
         layer: usize,
     ) -> Result<(), ConfigError> {
+        let (a, ak, ir, jr) = (face.part, face.k, face.i, face.j);
         let key = format!("layers.{}", self.mesh.layers[layer]);
         for j in jr.0..=jr.1 {
             for i in ir.0..=ir.1 {

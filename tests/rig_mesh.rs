@@ -386,3 +386,17 @@ fn offset_protrusion_stays_conforming() {
         assert!((b[2] - a[2] - cfg.contact.clearance).abs() < 1e-12);
     }
 }
+
+#[test]
+fn description_edited_in_code_is_validated_not_panicking() {
+    let mut cfg = reference();
+    cfg.contact.nodes = [1, 16];
+    let err = mesh_rig(&cfg).unwrap_err();
+    assert_eq!(err.key(), Some("contact.nodes"), "{err}");
+    let mut cfg = reference();
+    cfg.parts.protrusion.length = 0.1;
+    assert_eq!(
+        mesh_rig(&cfg).unwrap_err().key(),
+        Some("parts.protrusion.length")
+    );
+}

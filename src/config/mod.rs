@@ -109,7 +109,7 @@ impl RigConfig {
             }
         })?;
         cfg.source = file;
-        validate::validate(&cfg)?;
+        cfg.validate()?;
         Ok(cfg)
     }
 
@@ -122,6 +122,13 @@ impl RigConfig {
         let json = serde_json::to_string(self).unwrap_or_default();
         let digest = Sha256::digest(json.as_bytes());
         digest.iter().map(|b| format!("{b:02x}")).collect()
+    }
+
+    /// Checks the description (positive dimensions, known materials, a patch that fits,
+    /// node counts, clearance, friction, damping, mesh sizes, sensors, reduction). Parsing
+    /// runs it; call it after building or editing a description in code.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        validate::validate(self)
     }
 
     /// Material by name (validated to exist for every part).

@@ -657,3 +657,14 @@ fn reference_rig_frequencies() {
     );
     assert!((50.0..=56.0).contains(&f1u), "f(1FU) = {f1u} Hz");
 }
+
+#[test]
+fn reference_mesh_assembles() {
+    let cfg = reference();
+    let mesh = mesh_rig(&cfg).unwrap();
+    let model = rigtwin::fe::assembly::assemble(&mesh, cfg.contact.clearance).unwrap();
+    assert_eq!(model.n_dof(), 3 * (mesh.n_nodes() - mesh.fixed_nodes.len()));
+    assert_eq!(model.pairs.len(), 192);
+    let names: Vec<&str> = model.outputs.iter().map(|o| o.name.as_str()).collect();
+    assert_eq!(names, ["lower_tip", "lower_mid", "upper_tip", "upper_mid"]);
+}

@@ -19,8 +19,8 @@ pub(super) fn invalid(cfg: &RigConfig, key: &str, expected: &str) -> ConfigError
     }
 }
 
-/// One meshed part: its grid, the global index of each local node, its physical plan lines
-/// (for box parts) and its grid dims.
+/// One meshed part: the global index of each local node, its grid dims and its physical
+/// plan lines (meaningful for box parts; the tapered beam keeps its parameter lines).
 pub(super) struct Part {
     pub(super) map: Vec<usize>,
     pub(super) dims: [usize; 3],

@@ -1,0 +1,342 @@
+//! Guards the rig description's error reporting: every bad input (TOML syntax, unknown or
+//! mistyped keys, non-positive dimensions, unknown materials, a contact patch that does not
+//! fit the probe or the beam, bad node counts, clearance, friction, damping, reduction,
+//! sensors, unreadable file) is rejected with a message that names the file, the key (or
+//! line:column) and what was expected. Also guards the canonical hash.
+
+use std::path::{Path, PathBuf};
+
+use rigtwin::config::{ConfigError, RigConfig};
+
+const FILE: &str = "bad-rig.toml";
+
+fn reference_text() -> String {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("rig-config/two-beam.toml");
+    std::fs::read_to_string(path).expect("reference rig description")
+}
+
+/// The reference text with `key` of table `section` set to `value` (the key must exist in
+/// that table; the rest of the line, including its comment, is replaced).
+fn set(section: &str, key: &str, value: &str) -> String {
+    let text = reference_text();
+    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+    let header = format!("[{section}]");
+    let start = lines
+        .iter()
+        .position(|l| l.trim_start().starts_with(&header))
+        .unwrap_or_else(|| panic!("no table {section}"));
+    let at = lines[start + 1..]
+        .iter()
+        .take_while(|l| !l.trim_start().starts_with('['))
+        .position(|l| {
+            l.trim_start()
+                .strip_prefix(key)
+                .is_some_and(|r| r.trim_start().starts_with('='))
+        })
+        .unwrap_or_else(|| panic!("no key {key} in {section}"));
+    lines[start + 1 + at] = format!("{key} = {value}");
+    lines.join("\n")
+}
+
+fn parse(text: &str) -> Result<RigConfig, ConfigError> {
+    RigConfig::from_str(text, FILE)
+}
+
+/// Asserts an invalid-value error naming the file, the key and containing `expect`.
+fn assert_invalid(text: &str, key: &str, expect: &str) {
+    let err = parse(text).expect_err("bad input must be rejected");
+    let msg = err.to_string();
+    assert!(matches!(err, ConfigError::Invalid { .. }), "{msg}");
+    assert_eq!(err.key(), Some(key), "{msg}");
+    assert!(msg.contains(FILE), "file missing: {msg}");
+    assert!(msg.contains(&format!("`{key}`")), "key missing: {msg}");
+    assert!(msg.contains(expect), "expectation missing: {msg}");
+}
+
+#[test]
+fn reference_rig_is_valid() {
+    let cfg = parse(&reference_text()).unwrap();
+    assert_eq!(cfg.source, FILE);
+    assert_eq!(cfg.rig.name, "two-beam");
+    assert_eq!(cfg.contact.nodes, [12, 16]);
+}
+
+#[test]
+fn toml_syntax_error_reports_line_and_column() {
+    let text = reference_text().replacen("beam_length = 0.300", "beam_length 0.300", 1);
+    let line = text
+        .lines()
+        .position(|l| l.starts_with("beam_length 0.300"))
+        .unwrap()
+        + 1;
+    let err = parse(&text).unwrap_err();
+    let msg = err.to_string();
+    match err {
+        ConfigError::Syntax {
+            line: l, column, ..
+        } => {
+            assert_eq!(l, line, "{msg}");
+            assert_eq!(column, 13, "{msg}");
+        }
+        other => panic!("expected a syntax error, got {other}"),
+    }
+    assert!(
+        msg.starts_with(&format!("{FILE}:{line}:13: TOML syntax error")),
+        "{msg}"
+    );
+    assert!(msg.contains("expected"), "{msg}");
+}
+
+#[test]
+fn unknown_key_names_its_path_and_line() {
+    let text = reference_text().replacen("thickness = 0.006", "thicknes = 0.006", 1);
+    let err = parse(&text).unwrap_err();
+    let msg = err.to_string();
+    assert!(matches!(err, ConfigError::Schema { .. }), "{msg}");
+    assert_eq!(err.key(), Some("parts.lower_beam.thicknes"), "{msg}");
+    assert!(
+        msg.contains(FILE) && msg.contains("unknown field `thicknes`"),
+        "{msg}"
+    );
+    assert!(msg.contains("expected one of"), "{msg}");
+    let line = text
+        .lines()
+        .position(|l| l.starts_with("thicknes "))
+        .unwrap()
+        + 1;
+    assert!(msg.starts_with(&format!("{FILE}:{line}:")), "{msg}");
+}
+
+#[test]
+fn wrong_type_names_key_and_expected_type() {
+    let text = set("parts.upper_beam", "width_root", "\"wide\"");
+    let err = parse(&text).unwrap_err();
+    let msg = err.to_string();
+    assert_eq!(err.key(), Some("parts.upper_beam.width_root"), "{msg}");
+    assert!(msg.contains("expected f64"), "{msg}");
+}
+
+#[test]
+fn missing_key_is_reported() {
+    let text = reference_text().replacen("clearance = 0.699e-3", "", 1);
+    let err = parse(&text).unwrap_err();
+    let msg = err.to_string();
+    assert!(msg.contains("missing field `clearance`"), "{msg}");
+    assert_eq!(err.key(), Some("contact"), "{msg}");
+}
+
+#[test]
+fn zero_and_negative_dimensions() {
+    assert_invalid(
+        &set("parts.lower_beam", "thickness", "0.0"),
+        "parts.lower_beam.thickness",
+        "a finite value > 0 (m)",
+    );
+    assert_invalid(
+        &set("parts.upper_beam", "width_root", "-0.027"),
+        "parts.upper_beam.width_root",
+        "> 0",
+    );
+    assert_invalid(&set("rig", "beam_length", "0.0"), "rig.beam_length", "> 0");
+    assert_invalid(
+        &set("parts.clamp", "base_height", "-1.0"),
+        "parts.clamp.base_height",
+        "> 0",
+    );
+    assert_invalid(
+        &set("materials.steel", "youngs_modulus", "0.0"),
+        "materials.steel.youngs_modulus",
+        "> 0 (Pa)",
+    );
+    assert_invalid(
+        &set("materials.nickel_alloy", "poisson_ratio", "0.5"),
+        "materials.nickel_alloy.poisson_ratio",
+        "(-1, 0.5)",
+    );
+}
+
+#[test]
+fn unknown_material() {
+    let text = set("parts.upper_probe", "material", "\"titanium\"");
+    assert_invalid(
+        &text,
+        "parts.upper_probe.material",
+        "defined under [materials]",
+    );
+    let msg = parse(&text).unwrap_err().to_string();
+    assert!(
+        msg.contains("\"titanium\"") && msg.contains("nickel_alloy, steel"),
+        "{msg}"
+    );
+}
+
+#[test]
+fn protrusion_larger_than_the_probe_face() {
+    assert_invalid(
+        &set("parts.protrusion", "length", "0.020"),
+        "parts.protrusion.length",
+        "no longer than the probe face",
+    );
+    assert_invalid(
+        &set("parts.protrusion", "width", "0.015"),
+        "parts.protrusion.width",
+        "no wider than the probe face",
+    );
+    assert_invalid(
+        &set("parts.protrusion", "offset", "[0.005, 0.0]"),
+        "parts.protrusion.offset",
+        "inside the probe face along x",
+    );
+}
+
+#[test]
+fn protrusion_outside_the_beam_width() {
+    assert_invalid(
+        &set("parts.protrusion", "offset", "[0.0, 0.009]"),
+        "parts.protrusion.offset",
+        "inside the beam width",
+    );
+    // Inside the beam but past the probe's edge.
+    assert_invalid(
+        &set("parts.protrusion", "offset", "[0.0, -0.006]"),
+        "parts.protrusion.offset",
+        "inside the probe face along y",
+    );
+}
+
+#[test]
+fn probe_seat_must_fit_the_beams() {
+    assert_invalid(
+        &set("probe_seat", "width", "0.024"),
+        "probe_seat.width",
+        "no wider than the beams",
+    );
+    assert_invalid(
+        &set("probe_seat", "x_center", "0.295"),
+        "probe_seat.x_center",
+        "inside the free span",
+    );
+    assert_invalid(
+        &set("parts.clamp", "width", "0.025"),
+        "parts.clamp.width",
+        "covering the widest beam root",
+    );
+}
+
+#[test]
+fn contact_node_counts_below_two() {
+    assert_invalid(
+        &set("contact", "nodes", "[1, 16]"),
+        "contact.nodes",
+        "at least 2 nodes",
+    );
+    assert_invalid(
+        &set("contact", "nodes", "[12, 0]"),
+        "contact.nodes",
+        "at least 2 nodes",
+    );
+}
+
+#[test]
+fn clearance_must_be_positive() {
+    assert_invalid(
+        &set("contact", "clearance", "0.0"),
+        "contact.clearance",
+        "> 0 (m)",
+    );
+    assert_invalid(
+        &set("contact", "clearance", "-1e-4"),
+        "contact.clearance",
+        "> 0 (m)",
+    );
+}
+
+#[test]
+fn friction_must_not_be_negative() {
+    assert_invalid(
+        &set("contact", "friction", "-0.1"),
+        "contact.friction",
+        "friction coefficient >= 0",
+    );
+}
+
+#[test]
+fn damping_outside_zero_one() {
+    let text = reference_text();
+    let bad = text.replacen("ratio = 0.00183", "ratio = 1.0", 1);
+    assert_invalid(&bad, "damping.ratios[1].ratio", "in [0, 1)");
+    let bad = text.replacen("ratio = 0.00153", "ratio = -0.001", 1);
+    assert_invalid(&bad, "damping.ratios[0].ratio", "in [0, 1)");
+    let bad = text.replacen("label = \"1EU\"", "label = \"1XU\"", 1);
+    assert_invalid(&bad, "damping.ratios[2].label", "<order><F|E|T|A><L|U|C>");
+}
+
+#[test]
+fn reduction_takes_one_selection() {
+    let text = reference_text().replacen(
+        "cutoff_ratio = 180.0",
+        "cutoff_ratio = 180.0\nmodes = 40",
+        1,
+    );
+    assert_invalid(&text, "reduction", "exactly one of");
+    assert_invalid(
+        &set("reduction", "cutoff_ratio", "0.0"),
+        "reduction.cutoff_ratio",
+        "> 0",
+    );
+}
+
+#[test]
+fn mesh_settings() {
+    assert_invalid(
+        &set("mesh.beams", "thickness_cells", "0"),
+        "mesh.beams.thickness_cells",
+        "2 or more nodes",
+    );
+    assert_invalid(&set("mesh", "growth", "0.9"), "mesh.growth", ">= 1");
+    assert_invalid(
+        &set("mesh.probes", "element", "0.0"),
+        "mesh.probes.element",
+        "> 0",
+    );
+}
+
+#[test]
+fn sensor_off_its_face() {
+    let text = reference_text().replacen("x = 0.150 ", "x = 0.350 ", 1);
+    assert_invalid(&text, "sensors[1].x", "x in [0, 0.3] m");
+    let text = reference_text().replacen("y = -0.015", "y = -0.030", 1);
+    assert_invalid(&text, "sensors[4].y", "|y| <= 0.02 m");
+}
+
+#[test]
+fn unreadable_file_names_the_path() {
+    let err = RigConfig::from_path(Path::new("/nonexistent/rig.toml")).unwrap_err();
+    let msg = err.to_string();
+    assert!(matches!(err, ConfigError::Io { .. }));
+    assert!(msg.contains("/nonexistent/rig.toml"), "{msg}");
+}
+
+#[test]
+fn canonical_hash_ignores_layout_but_not_values() {
+    let text = reference_text();
+    let h = parse(&text).unwrap().canonical_hash();
+    assert_eq!(h.len(), 64);
+    assert!(h.chars().all(|c| c.is_ascii_hexdigit()));
+    // Comments, blank lines and number spelling do not matter.
+    let stripped: String = text
+        .lines()
+        .map(|l| l.split('#').next().unwrap_or("").trim_end())
+        .filter(|l| !l.is_empty())
+        .collect::<Vec<_>>()
+        .join("\n")
+        .replace("clearance = 0.699e-3", "clearance = 0.000699");
+    let other = RigConfig::from_str(&stripped, "elsewhere.toml").unwrap();
+    assert_eq!(other.canonical_hash(), h);
+    // Omitting a key that holds its default does not matter.
+    let no_friction = text.replacen("friction = 0.4", "", 1);
+    assert_eq!(parse(&no_friction).unwrap().canonical_hash(), h);
+    // A changed value does.
+    let changed = set("contact", "clearance", "0.0007");
+    assert_ne!(parse(&changed).unwrap().canonical_hash(), h);
+}

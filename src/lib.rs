@@ -13,5 +13,7 @@ pub mod cli;
 pub mod config;
 pub mod contact;
 pub mod fe;
+pub mod plan;
+pub mod report;
 pub mod rom;
 pub mod signal;

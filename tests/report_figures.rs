@@ -204,6 +204,10 @@ fn amplitude_range_draws_one_panel_per_level() {
     let png = out_dir().join("amplitude_range_upper.png");
     amplitude_range(&response(), Beam::Upper, &png, &opts).unwrap();
     assert_png(&png, &opts);
+    // A small figure keeps its layout (fonts scale with the size).
+    let small_png = out_dir().join("amplitude_range_upper_small.png");
+    amplitude_range(&response(), Beam::Upper, &small_png, &small()).unwrap();
+    assert_png(&small_png, &small());
     let svg = out_dir().join("amplitude_range_upper.svg");
     amplitude_range(&response(), Beam::Upper, &svg, &small()).unwrap();
     assert_svg_has(

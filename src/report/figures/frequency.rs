@@ -274,11 +274,21 @@ pub fn amplitude_range(
                 polygons: band_polygons(&c.omega_ratio, lo, hi),
                 color: colors[i],
             });
-            for (v, width) in [(lo, 1), (hi, 1), (mean, fonts.line + 1)] {
+            // Markers only on the mean: on min and max they would triple the clutter.
+            let edge_kind = if kind == LineKind::Markers {
+                LineKind::Solid
+            } else {
+                kind
+            };
+            for (v, k, width) in [
+                (lo, edge_kind, 1),
+                (hi, edge_kind, 1),
+                (mean, kind, fonts.line + 1),
+            ] {
                 series.push(Series {
                     runs: segments(&c.omega_ratio, v),
                     color: colors[i],
-                    kind,
+                    kind: k,
                     width,
                 });
             }

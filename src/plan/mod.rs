@@ -21,7 +21,7 @@
 //! omega_end = 0.94
 //! ```
 //!
-//! Parsing is serde with `deny_unknown_fields` ([`raw`]); validation ([`validate`]) checks
+//! Parsing is serde with `deny_unknown_fields` (`raw.rs`); validation (`validate.rs`) checks
 //! every value and reports the file, the test (number and name) or `[defaults]`, the key and
 //! what was expected ([`PlanError`]).
 

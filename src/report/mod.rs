@@ -6,8 +6,8 @@
 //! - [`time_histories`]: tip velocities u/(Omega l) over time,
 //! - [`contact_activity`]: contact state and integrated contact forces normalised by their
 //!   maximum in the window,
-//! - [`scalogram`]: Morlet scalogram heat map with a log10 colour scale,
-//! - [`convergence`]: relative RMS error vs time steps per period or number of modes.
+//! - [`scalogram()`]: Morlet scalogram heat map with a log10 colour scale,
+//! - [`convergence()`]: relative RMS error vs time steps per period or number of modes.
 //!
 //! Overlays of several sources are part of the data model ([`Source`]): colours tell tests
 //! apart, line styles tell sources apart, and the legend sits in its own strip below the

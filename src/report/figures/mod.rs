@@ -1,6 +1,6 @@
 //! The figure functions, one file per family: frequency responses ([`frequency`]), time
 //! histories and contact activity ([`time`]), the scalogram ([`scalogram`](mod@scalogram)),
-//! convergence studies ([`convergence`](mod@convergence)); [`panel`] is the shared x-y panel.
+//! convergence studies ([`convergence`](mod@convergence)); `panel.rs` is the shared x-y panel.
 
 pub mod convergence;
 pub mod frequency;

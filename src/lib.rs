@@ -5,7 +5,8 @@
 //! layers, sparse assembly, CalculiX exchange) -> [`rom`] (sparse eigen solver, MacNeal reduction
 //! with a massless contact boundary, the ROM file) -> [`contact`] and [`sim`] (implicit frictional
 //! contact inside a leapfrog integrator). [`signal`] holds the per-period metrics shared by
-//! simulation and measurement. [`cli`] wires the commands of the `rigtwin` binary.
+//! simulation and measurement. [`plan`] holds the stepped-sine test plans and [`report`]
+//! draws the paper-style figures. [`cli`] wires the commands of the `rigtwin` binary.
 //!
 //! Numerical modules are synchronous, deterministic and never read the clock.
 
@@ -13,5 +14,7 @@ pub mod cli;
 pub mod config;
 pub mod contact;
 pub mod fe;
+pub mod plan;
+pub mod report;
 pub mod rom;
 pub mod signal;

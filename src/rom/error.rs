@@ -24,6 +24,9 @@ pub enum RomError {
         /// Number of free DOFs.
         n_dof: usize,
     },
+    /// The mode selection is not usable.
+    #[error("mode selection {0}")]
+    InvalidSelection(String),
     /// The model has nothing the reduction can work on.
     #[error("FE model: {0}")]
     EmptyModel(String),

@@ -16,19 +16,28 @@
 
 use std::time::Instant;
 
-use faer::dyn_stack::{MemBuffer, MemStack};
-use faer::linalg::cholesky::ldlt::factor::LdltRegularization;
-use faer::linalg::matmul::matmul;
-use faer::sparse::linalg::cholesky::{
-    factorize_symbolic_cholesky, supernodal::SupernodalLdltRef, LdltRef, SymbolicCholesky,
-    SymbolicCholeskyRaw, SymmetricOrdering,
-};
+use faer::reborrow::ReborrowMut;
 use faer::sparse::linalg::matmul::sparse_dense_matmul;
-use faer::sparse::{SparseColMat, SparseColMatRef, SymbolicSparseColMat};
-use faer::reborrow::{Reborrow, ReborrowMut};
-use faer::{Accum, Conj, Mat, MatMut, MatRef, Par, Side};
+use faer::sparse::SparseColMatRef;
+use faer::{Accum, Mat, MatMut, MatRef};
 
 use crate::rom::error::RomError;
+
+mod dense;
+mod factor;
+mod lanczos;
+
+pub use dense::symmetric_eigen;
+use factor::{shift_hz, Factor, Shifted, SplitMix};
+use lanczos::LanczosRun;
+
+/// Acceptance of a Ritz pair by its explicitly computed residual `||S y - theta y||_M`,
+/// relative to |theta|.
+///
+/// NOTE: this guards against gross failures (Ritz values far from an ill-placed shift); the
+/// accuracy comes from the Lanczos tolerance. The explicit residual cannot go below the solve's
+/// forward error, about eps cond(K - sigma M), which reaches 1e-9..1e-8 on fine solid meshes.
+const EXPLICIT_TOLERANCE: f64 = 1e-7;
 
 /// Tuning of the eigen solver. The defaults suit FE models of 1e3-1e5 DOFs.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -171,230 +180,14 @@ struct Pair {
     lambda: f64,
     vector: Vec<f64>,
     residual: f64,
+    /// The Lanczos run that found it.
+    run: usize,
 }
 
-/// A numeric LDL^T factorisation of `K - sigma M` with its inertia.
-struct Factor {
-    sigma: f64,
-    values: Vec<f64>,
-    negative: usize,
-}
-
-/// The union pattern of K and M (lower triangle), the value maps and the symbolic analysis,
-/// shared by all shifts.
-struct Shifted {
-    a: SparseColMat<usize, f64>,
-    k_pos: Vec<usize>,
-    m_pos: Vec<usize>,
-    symbolic: SymbolicCholesky<usize>,
-}
-
-const ABSENT: usize = usize::MAX;
-
-/// Acceptance of a Ritz pair by its explicitly computed residual, relative to |theta|.
-const EXPLICIT_TOLERANCE: f64 = 1e-9;
-
-impl Shifted {
-    fn new(
-        k: SparseColMatRef<'_, usize, f64>,
-        m: SparseColMatRef<'_, usize, f64>,
-    ) -> Result<Self, RomError> {
-        let n = k.nrows();
-        let mut slot = vec![ABSENT; n];
-        let mut col_ptr = Vec::with_capacity(n + 1);
-        let mut row_idx = Vec::new();
-        let mut k_pos = Vec::new();
-        let mut m_pos = Vec::new();
-        col_ptr.push(0usize);
-        let mut col_rows: Vec<usize> = Vec::new();
-        for j in 0..n {
-            col_rows.clear();
-            let start = row_idx.len();
-            // Gather the rows i >= j of column j of K and M, then sort them.
-            for (mat, is_k) in [(k, true), (m, false)] {
-                let range = mat.col_range(j);
-                for (off, &i) in mat.row_idx()[range.clone()].iter().enumerate() {
-                    if i < j {
-                        continue;
-                    }
-                    let pos = range.start + off;
-                    if slot[i] == ABSENT {
-                        slot[i] = col_rows.len();
-                        col_rows.push(i);
-                        k_pos.push(ABSENT);
-                        m_pos.push(ABSENT);
-                    }
-                    let e = start + slot[i];
-                    if is_k {
-                        k_pos[e] = pos;
-                    } else {
-                        m_pos[e] = pos;
-                    }
-                }
-            }
-            // Sort the column by row index, carrying the value maps along.
-            let mut order: Vec<usize> = (0..col_rows.len()).collect();
-            order.sort_unstable_by_key(|&o| col_rows[o]);
-            let kp: Vec<usize> = order.iter().map(|&o| k_pos[start + o]).collect();
-            let mp: Vec<usize> = order.iter().map(|&o| m_pos[start + o]).collect();
-            k_pos[start..].copy_from_slice(&kp);
-            m_pos[start..].copy_from_slice(&mp);
-            for &o in &order {
-                row_idx.push(col_rows[o]);
-            }
-            for &i in &col_rows {
-                slot[i] = ABSENT;
-            }
-            col_ptr.push(row_idx.len());
-        }
-        let nnz = row_idx.len();
-        let symbolic = SymbolicSparseColMat::new_checked(n, n, col_ptr, None, row_idx);
-        let a = SparseColMat::new(symbolic, vec![0.0; nnz]);
-        let symbolic = factorize_symbolic_cholesky(
-            a.symbolic(),
-            Side::Lower,
-            SymmetricOrdering::Amd,
-            Default::default(),
-        )
-        .map_err(|e| RomError::Factorisation {
-            shift_hz: 0.0,
-            detail: format!("symbolic analysis: {e:?}"),
-        })?;
-        Ok(Shifted {
-            a,
-            k_pos,
-            m_pos,
-            symbolic,
-        })
-    }
-
-    /// Sets the values of the lower triangle of `K - sigma M`.
-    fn set_shift(&mut self, k: &[f64], m: &[f64], sigma: f64) {
-        for (e, v) in self.a.val_mut().iter_mut().enumerate() {
-            let kv = if self.k_pos[e] == ABSENT {
-                0.0
-            } else {
-                k[self.k_pos[e]]
-            };
-            let mv = if self.m_pos[e] == ABSENT {
-                0.0
-            } else {
-                m[self.m_pos[e]]
-            };
-            *v = kv - sigma * mv;
-        }
-    }
-
-    /// Numeric LDL^T of `K - sigma M` and the signs of its pivots.
-    fn factor(&mut self, k: &[f64], m: &[f64], sigma: f64) -> Result<Factor, RomError> {
-        self.set_shift(k, m, sigma);
-        let par = faer::get_global_parallelism();
-        let fail = |detail: String| RomError::Factorisation {
-            shift_hz: shift_hz(sigma),
-            detail,
-        };
-        let mut values = vec![0.0; self.symbolic.len_val()];
-        let req = self
-            .symbolic
-            .factorize_numeric_ldlt_scratch::<f64>(par, Default::default());
-        let mut mem = MemBuffer::try_new(req).map_err(|_| fail("out of memory".into()))?;
-        self.symbolic
-            .factorize_numeric_ldlt(
-                &mut values,
-                self.a.as_ref(),
-                Side::Lower,
-                LdltRegularization::default(),
-                par,
-                MemStack::new(&mut mem),
-                Default::default(),
-            )
-            .map_err(|e| fail(format!("{e:?}")))?;
-        let (mut negative, mut zero, mut non_finite) = (0usize, 0usize, false);
-        let mut count = |d: f64| {
-            if !d.is_finite() {
-                non_finite = true;
-            } else if d < 0.0 {
-                negative += 1;
-            } else if d == 0.0 {
-                zero += 1;
-            }
-        };
-        match self.symbolic.raw() {
-            SymbolicCholeskyRaw::Simplicial(s) => {
-                // NOTE: the simplicial factor stores each column's diagonal (D) first.
-                let cp = s.col_ptr();
-                for j in 0..s.nrows() {
-                    count(values[cp[j]]);
-                }
-            }
-            SymbolicCholeskyRaw::Supernodal(s) => {
-                let f = SupernodalLdltRef::new(s, &values);
-                for sn in 0..s.n_supernodes() {
-                    let v = f.supernode(sn).val();
-                    for c in 0..v.ncols() {
-                        count(v[(c, c)]);
-                    }
-                }
-            }
-        }
-        if non_finite {
-            return Err(fail("non-finite pivot".into()));
-        }
-        if zero > 0 {
-            return Err(fail(format!("{zero} zero pivots")));
-        }
-        Ok(Factor {
-            sigma,
-            values,
-            negative,
-        })
-    }
-
-    fn solve_scratch(&self, ncols: usize) -> MemBuffer {
-        let par = faer::get_global_parallelism();
-        MemBuffer::new(self.symbolic.solve_in_place_scratch::<f64>(ncols, par))
-    }
-
-    /// `rhs <- (K - sigma M)^-1 rhs`.
-    fn solve(&self, f: &Factor, rhs: MatMut<'_, f64>, mem: &mut MemBuffer) {
-        let par = faer::get_global_parallelism();
-        LdltRef::new(&self.symbolic, &f.values).solve_in_place_with_conj(
-            Conj::No,
-            rhs,
-            par,
-            MemStack::new(mem),
-        );
-    }
-}
-
-fn shift_hz(sigma: f64) -> f64 {
-    sigma.signum() * sigma.abs().sqrt() / (2.0 * std::f64::consts::PI)
-}
-
-/// Deterministic pseudo-random numbers for start blocks (SplitMix64).
-#[derive(Clone, Debug)]
-struct SplitMix(u64);
-
-impl SplitMix {
-    fn next_f64(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^= z >> 31;
-        // Uniform in [-1, 1).
-        (z >> 11) as f64 / (1u64 << 52) as f64 - 1.0
-    }
-}
-
-/// Outcome of one Lanczos run at one shift.
-struct Run {
-    /// New converged pairs (not yet merged).
+/// New converged pairs of a Lanczos run and its unconverged Ritz estimates above the shift.
+struct RunResult {
     pairs: Vec<Pair>,
-    /// Unconverged Ritz estimates of eigenvalues above the shift, ascending.
     estimates: Vec<f64>,
-    /// The basis reached its maximum size (or the space was exhausted).
-    full: bool,
 }
 
 /// How the runs at one shift ended.
@@ -424,6 +217,8 @@ pub struct EigenSolver<'a> {
     last_shift: f64,
     /// Unconverged Ritz estimates above the converged range of the last run.
     estimates: Vec<f64>,
+    /// The first run (sigma = 0) with its id, while it can be resumed: no other run since.
+    active: Option<(LanczosRun, usize)>,
     rng: SplitMix,
     stats: EigenStats,
 }
@@ -463,28 +258,15 @@ impl<'a> EigenSolver<'a> {
                 what: "mass matrix".into(),
             });
         }
+        let block = options.block_size.max(1);
         let options = EigenOptions {
-            block_size: options.block_size.max(1),
-            max_basis: options.max_basis.max(2 * options.block_size.max(1)),
+            block_size: block,
+            max_basis: options.max_basis.max(2 * block),
             ..options
         };
         let t0 = Instant::now();
-        let shifted = Shifted::new(k, m)?;
-        let mut solver = EigenSolver {
-            k,
-            m,
-            options,
-            shifted,
-            stat: None,
-            pairs: Vec::new(),
-            verified_lambda: f64::NEG_INFINITY,
-            verified_count: 0,
-            last_shift: 0.0,
-            estimates: Vec::new(),
-            rng: SplitMix(options.seed),
-            stats: EigenStats::default(),
-        };
-        let f = match solver.shifted.factor(k.val(), m.val(), 0.0) {
+        let mut shifted = Shifted::new(k, m)?;
+        let f = match shifted.factor(k.val(), m.val(), 0.0) {
             Ok(f) => f,
             Err(RomError::Factorisation { detail, .. }) if detail.contains("zero pivot") => {
                 return Err(RomError::StiffnessNotPositiveDefinite {
@@ -494,18 +276,32 @@ impl<'a> EigenSolver<'a> {
             }
             Err(e) => return Err(e),
         };
-        solver.stats.factorisations += 1;
-        solver.stats.factorisation_seconds += t0.elapsed().as_secs_f64();
         if f.negative > 0 {
             return Err(RomError::StiffnessNotPositiveDefinite {
                 negative: f.negative,
                 zero: 0,
             });
         }
-        solver.verified_lambda = 0.0;
-        solver.verified_count = 0;
-        solver.stat = Some(f);
-        Ok(solver)
+        let stats = EigenStats {
+            factorisations: 1,
+            factorisation_seconds: t0.elapsed().as_secs_f64(),
+            ..EigenStats::default()
+        };
+        Ok(EigenSolver {
+            k,
+            m,
+            options,
+            shifted,
+            stat: Some(f),
+            pairs: Vec::new(),
+            verified_lambda: 0.0,
+            verified_count: 0,
+            last_shift: 0.0,
+            estimates: Vec::new(),
+            active: None,
+            rng: SplitMix(options.seed),
+            stats,
+        })
     }
 
     /// Work counters and timings so far.
@@ -521,6 +317,12 @@ impl<'a> EigenSolver<'a> {
     /// Number of eigenpairs found and verified by an inertia count.
     pub fn verified_count(&self) -> usize {
         self.verified_count
+    }
+
+    /// Frees the Lanczos basis kept for resuming (about `2 n_dof max_basis` doubles); later
+    /// solves start new runs.
+    pub fn release_workspace(&mut self) {
+        self.active = None;
     }
 
     /// `rhs <- K^-1 rhs` with the factorisation of K (static solves).
@@ -562,7 +364,8 @@ impl<'a> EigenSolver<'a> {
     }
 
     /// Finds eigenpairs until `target` is met (all wanted pairs converged and verified by an
-    /// inertia count). Can be called again with a larger target; the work done is kept.
+    /// inertia count). Can be called again with a larger target; the work done is kept and the
+    /// first Lanczos run is resumed while that is the cheapest way forward.
     pub fn solve(
         &mut self,
         target: EigenTarget,
@@ -590,21 +393,29 @@ impl<'a> EigenSolver<'a> {
             if guard > 1000 {
                 return Err(self.not_converged(target, "too many shifts".into()));
             }
-            let first = self.stats.runs == 0;
-            // The first run uses the factorisation of K itself (taken out of `self` for the
-            // run and put back afterwards).
-            let factor = if first {
-                self.stat
+            let resume = self.stats.runs > 0
+                && cap.is_none()
+                && self.active.as_ref().is_some_and(|(r, _)| !r.is_full())
+                && self.next_shift(target).1;
+            if self.stats.runs == 0 || resume {
+                // The run at sigma = 0 with the factorisation of K: started first, resumed
+                // while it can grow and the target lies beyond the known pairs.
+                let f = self
+                    .stat
                     .take()
-                    .ok_or_else(|| self.not_converged(target, "no factorisation of K".into()))?
-            } else {
-                self.place_shift(target, cap)?
-            };
-            let outcome = self.runs_at_shift(&factor, target, progress);
-            if first {
-                self.stat = Some(factor);
+                    .ok_or_else(|| self.not_converged(target, "no factorisation of K".into()))?;
+                let result = self.run_at_zero(&f, target, progress);
+                self.stat = Some(f);
+                let new = result?;
+                if new == 0 && self.active.is_none() {
+                    // Nothing more from this run; the next pass places a shift.
+                    continue;
+                }
+                self.report(target, progress, 0);
+                continue;
             }
-            match outcome? {
+            let f = self.place_shift(target, cap)?;
+            match self.runs_at_shift(&f, target, progress)? {
                 ShiftOutcome::Verified { sigma, negative } => {
                     self.verified_lambda = sigma;
                     self.verified_count = negative;
@@ -616,6 +427,57 @@ impl<'a> EigenSolver<'a> {
         }
         self.report(target, progress, 0);
         Ok(())
+    }
+
+    /// Starts or resumes the run at sigma = 0; returns the number of new pairs.
+    fn run_at_zero(
+        &mut self,
+        f: &Factor,
+        target: EigenTarget,
+        progress: &mut dyn FnMut(EigenProgress),
+    ) -> Result<usize, RomError> {
+        let (mut run, id) = match self.active.take() {
+            Some(a) => a,
+            None => {
+                let id = self.stats.runs;
+                self.stats.runs += 1;
+                let (run, cols) = LanczosRun::start(
+                    &self.shifted,
+                    f,
+                    self.m,
+                    Mat::zeros(self.n_dof(), 0),
+                    self.options.max_basis,
+                    self.options.block_size,
+                    &mut self.rng,
+                );
+                self.stats.operator_columns += cols;
+                (run, id)
+            }
+        };
+        let result = self.drive(&mut run, id, f, 0, target, progress)?;
+        let before = self.pairs.len();
+        self.merge(result, id);
+        self.last_shift = 0.0;
+        let new = self.pairs.len().saturating_sub(before);
+        tracing::debug!(basis = run.len(), pairs = self.pairs.len(), "Lanczos run at zero");
+        if !run.is_full() {
+            self.active = Some((run, id));
+        }
+        Ok(new)
+    }
+
+    /// Replaces the unverified pairs of run `id` by the run's current converged pairs.
+    fn merge(&mut self, result: RunResult, id: usize) {
+        let v = self.verified_lambda;
+        self.pairs.retain(|p| p.run != id || p.lambda <= v);
+        for p in result.pairs {
+            if p.lambda <= v {
+                continue;
+            }
+            let at = self.pairs.partition_point(|q| q.lambda < p.lambda);
+            self.pairs.insert(at, p);
+        }
+        self.estimates = result.estimates;
     }
 
     /// Chooses and factorises the next shift. Extension shifts are pulled back toward the
@@ -683,32 +545,51 @@ impl<'a> EigenSolver<'a> {
         if need == 0 && within {
             return Ok(ShiftOutcome::Verified { sigma, negative });
         }
+        // A run at another shift: the run at sigma = 0 can no longer be resumed.
+        self.active = None;
         let mut found_below = 0usize;
         let mut runs = 0usize;
         loop {
-            let run = self.lanczos(f, need - found_below, target, progress)?;
+            let v = self.verified_lambda;
+            // Deflation: the known pairs near the shift.
+            let window_lo = v - (sigma - v).max(0.0);
+            let defl_idx: Vec<usize> = (0..self.pairs.len())
+                .filter(|&i| self.pairs[i].lambda >= window_lo)
+                .collect();
+            let defl = Mat::<f64>::from_fn(self.n_dof(), defl_idx.len(), |i, j| {
+                self.pairs[defl_idx[j]].vector[i]
+            });
+            let id = self.stats.runs;
             self.stats.runs += 1;
             runs += 1;
-            if std::env::var("EIG_DEBUG").is_ok() {
-                eprintln!("run sigma={sigma:.4e} v={:.4e} need={need} found_below={found_below} new={:?} est={:?} full={}", self.verified_lambda, run.pairs.iter().map(|p| p.lambda).collect::<Vec<_>>(), &run.estimates[..run.estimates.len().min(6)], run.full);
-            }
-            let v = self.verified_lambda;
-            let new_below = run
+            let (mut run, cols) = LanczosRun::start(
+                &self.shifted,
+                f,
+                self.m,
+                defl,
+                self.options.max_basis,
+                self.options.block_size,
+                &mut self.rng,
+            );
+            self.stats.operator_columns += cols;
+            let result = self.drive(&mut run, id, f, need - found_below, target, progress)?;
+            let new_below = result
                 .pairs
                 .iter()
                 .filter(|p| p.lambda < sigma && p.lambda > v)
                 .count();
+            let new_total = result.pairs.len();
             found_below += new_below;
-            let new_total = run.pairs.len();
-            for p in run.pairs {
-                if p.lambda <= v {
-                    continue;
-                }
-                let at = self.pairs.partition_point(|q| q.lambda < p.lambda);
-                self.pairs.insert(at, p);
-            }
-            self.estimates = run.estimates;
+            self.merge(result, id);
             self.last_shift = sigma;
+            tracing::debug!(
+                shift_hz = shift_hz(sigma),
+                need,
+                found_below,
+                new_total,
+                basis = run.len(),
+                "Lanczos run"
+            );
             if found_below > need {
                 return Err(self.not_converged(
                     target,
@@ -724,7 +605,7 @@ impl<'a> EigenSolver<'a> {
             }
             // Missing eigenvalues below the shift: run again (deflated against what was found)
             // while that makes progress, otherwise try a shift nearer the verified bound.
-            if runs > self.options.max_restarts || (new_below == 0 && new_total == 0) {
+            if runs > self.options.max_restarts || new_total == 0 {
                 return Ok(ShiftOutcome::Incomplete { sigma });
             }
         }
@@ -892,211 +773,82 @@ impl<'a> EigenSolver<'a> {
         }
     }
 
-    /// One block Lanczos run at the shift of `f`.
-    fn lanczos(
+
+    /// Drives `run` (id `id`) until it may stop or its basis is full; returns its converged
+    /// pairs beyond the verified bound.
+    fn drive(
         &mut self,
+        run: &mut LanczosRun,
+        id: usize,
         f: &Factor,
         need_below: usize,
         target: EigenTarget,
         progress: &mut dyn FnMut(EigenProgress),
-    ) -> Result<Run, RomError> {
-        let par = faer::get_global_parallelism();
-        let n = self.n_dof();
-        let p = self.options.block_size.min(n);
-        let sigma = f.sigma;
+    ) -> Result<RunResult, RomError> {
         let v = self.verified_lambda;
-
-        // Deflation: pairs near the shift that are already known.
-        let window_lo = if v.is_finite() && sigma > v {
-            v - (sigma - v)
-        } else {
-            f64::NEG_INFINITY
-        };
-        let defl_idx: Vec<usize> = (0..self.pairs.len())
-            .filter(|&i| self.pairs[i].lambda >= window_lo)
-            .collect();
-        let d = defl_idx.len();
-        let defl = Mat::<f64>::from_fn(n, d, |i, j| self.pairs[defl_idx[j]].vector[i]);
-        let room = n.saturating_sub(d);
-        let kmax = (self.options.max_basis.min(room) / p) * p;
-        if kmax == 0 {
-            return Ok(Run {
-                pairs: Vec::new(),
-                estimates: Vec::new(),
-                full: true,
-            });
-        }
-
-        let mut q = Mat::<f64>::zeros(n, kmax + p);
-        let mut t = Mat::<f64>::zeros(kmax + p, kmax + p);
-        let mut w = Mat::<f64>::zeros(n, p);
-        let mut mw = Mat::<f64>::zeros(n, p);
-        let mut mem = self.shifted.solve_scratch(p);
-
-        // Start block: S applied to random vectors (keeps the basis in the range of S, free of
-        // components with infinite eigenvalues when M is singular).
-        for j in 0..p {
-            for i in 0..n {
-                w[(i, j)] = self.rng.next_f64();
-            }
-        }
-        sparse_dense_matmul(mw.as_mut(), Accum::Replace, self.m, w.as_ref(), 1.0, par);
-        w.copy_from(&mw);
-        self.shifted.solve(f, w.as_mut(), &mut mem);
-        self.stats.operator_columns += p;
-        let mut scale = 0.0f64;
-        for _ in 0..2 {
-            project_out(self.m, w.as_mut(), q.subcols(0, 0), defl.as_ref(), mw.as_mut(), par);
-        }
-        let r0 = orthonormalize_block(
-            self.m,
-            w.as_mut(),
-            q.subcols(0, 0),
-            defl.as_ref(),
-            1.0,
-            &mut self.rng,
-        );
-        if r0.is_none() {
-            return Ok(Run {
-                pairs: Vec::new(),
-                estimates: Vec::new(),
-                full: true,
-            });
-        }
-        q.subcols_mut(0, p).copy_from(&w);
-
-        let mut next_check = p;
-        let mut j = 0usize;
+        let sigma = f.sigma;
         loop {
-            let c0 = j * p;
-            let c1 = c0 + p;
-            // W = S Q_j, A_j = Q_j^T M S Q_j.
-            sparse_dense_matmul(mw.as_mut(), Accum::Replace, self.m, q.subcols(c0, p), 1.0, par);
-            w.copy_from(&mw);
-            self.shifted.solve(f, w.as_mut(), &mut mem);
-            self.stats.operator_columns += p;
-            let mut aj = Mat::<f64>::zeros(p, p);
-            matmul(aj.as_mut(), Accum::Replace, mw.transpose(), w.as_ref(), 1.0, par);
-            for a in 0..p {
-                for b in 0..a {
-                    let s = 0.5 * (aj[(a, b)] + aj[(b, a)]);
-                    aj[(a, b)] = s;
-                    aj[(b, a)] = s;
-                }
-                scale = scale.max(aj[(a, a)].abs());
+            if run.len() == 0 && run.is_full() {
+                return Ok(RunResult {
+                    pairs: Vec::new(),
+                    estimates: Vec::new(),
+                });
             }
-            t.submatrix_mut(c0, c0, p, p).copy_from(&aj);
-            // Three-term recurrence, then full reorthogonalisation (twice is enough).
-            matmul(w.as_mut(), Accum::Add, q.subcols(c0, p), aj.as_ref(), -1.0, par);
-            if j > 0 {
-                let bj = t.submatrix(c0, c0 - p, p, p).to_owned();
-                matmul(w.as_mut(), Accum::Add, q.subcols(c0 - p, p), bj.transpose(), -1.0, par);
+            if !run.is_full() {
+                self.stats.operator_columns += run.step(&self.shifted, f, self.m, &mut self.rng);
             }
-            for _ in 0..2 {
-                project_out(self.m, w.as_mut(), q.subcols(0, c1), defl.as_ref(), mw.as_mut(), par);
+            let k = run.len();
+            if k < run.next_check && !run.is_full() {
+                continue;
             }
-            let full = c1 >= kmax;
-            let b = if full {
-                None
-            } else {
-                orthonormalize_block(
-                    self.m,
-                    w.as_mut(),
-                    q.subcols(0, c1),
-                    defl.as_ref(),
-                    scale,
-                    &mut self.rng,
-                )
-            };
-            let exhausted = !full && b.is_none();
-            // The residual block for the convergence estimates: W = Q_{j+1} B_{j+1}.
-            let bnext = match &b {
-                Some(b) => b.clone(),
-                None => {
-                    // Basis full: estimates from the unnormalised residual block's M-norms.
-                    m_gram_cholesky_like(self.m, w.as_ref(), par)
-                }
-            };
-            if let Some(b) = &b {
-                q.subcols_mut(c1, p).copy_from(&w);
-                t.submatrix_mut(c1, c0, p, p).copy_from(b);
-                t.submatrix_mut(c0, c1, p, p).copy_from(b.transpose());
+            run.next_check = k + (k / 6).max(run.block());
+            let ritz = run.ritz()?;
+            let theta_max = ritz.theta.iter().fold(0.0f64, |a, t| a.max(t.abs()));
+            let lam: Vec<f64> = ritz
+                .theta
+                .iter()
+                .map(|&t| if t == 0.0 { f64::NAN } else { sigma + 1.0 / t })
+                .collect();
+            // NOTE: roundoff limits the attainable residual to about eps x theta_max; Ritz
+            // values far from the shift (|theta| < 1e-6 theta_max) are left to a later shift.
+            let conv: Vec<bool> = (0..k)
+                .map(|i| {
+                    ritz.theta[i] != 0.0
+                        && ritz.est[i] <= self.options.tolerance * ritz.theta[i].abs()
+                        && ritz.theta[i].abs() >= 1e-6 * theta_max
+                })
+                .collect();
+            let new_conv = (0..k).filter(|&i| conv[i] && lam[i] > v).count();
+            let own = self.pairs.iter().filter(|p| p.run == id && p.lambda > v).count();
+            self.report(target, progress, new_conv.saturating_sub(own));
+            if !(self.run_may_stop(target, f, id, need_below, &lam, &conv) || run.is_full()) {
+                continue;
             }
-            let k = c1;
-            if k >= next_check || full || exhausted {
-                next_check = k + (k / 6).max(p);
-                let tk = t.submatrix(0, 0, k, k).to_owned();
-                let eig = tk.self_adjoint_eigen(Side::Lower).map_err(|e| RomError::Dense {
-                    what: "Lanczos projected matrix".into(),
-                    detail: format!("{e:?}"),
-                })?;
-                let theta: Vec<f64> = eig.S().column_vector().iter().copied().collect();
-                let y = eig.U();
-                let theta_max = theta.iter().fold(0.0f64, |a, t| a.max(t.abs()));
-                let mut conv = vec![false; k];
-                let mut lam = vec![f64::NAN; k];
-                for i in 0..k {
-                    if theta[i] == 0.0 {
-                        continue;
-                    }
-                    lam[i] = sigma + 1.0 / theta[i];
-                    let mut est2 = 0.0;
-                    for r in 0..p {
-                        let mut s = 0.0;
-                        for c in 0..p {
-                            s += bnext[(r, c)] * y[(c0 + c, i)];
-                        }
-                        est2 += s * s;
-                    }
-                    // NOTE: roundoff limits the attainable residual to about eps x theta_max;
-                    // Ritz values far from the shift (|theta| < 1e-6 theta_max) are left to a
-                    // later shift instead of being trusted.
-                    conv[i] = est2.sqrt() <= self.options.tolerance * theta[i].abs()
-                        && theta[i].abs() >= 1e-6 * theta_max;
-                }
-                let new_conv = (0..k).filter(|&i| conv[i] && lam[i] > v).count();
-                self.report(target, progress, new_conv);
-                if self.run_may_stop(target, f, need_below, &lam, &conv) || full || exhausted {
-                    // Ritz vectors of the converged pairs beyond the verified bound, checked by
-                    // an explicit operator application: ||S y - theta y||_M <= tol_x |theta|.
-                    let sel: Vec<usize> = (0..k).filter(|&i| conv[i] && lam[i] > v).collect();
-                    let mut ys = Mat::<f64>::zeros(k, sel.len());
-                    for (c, &i) in sel.iter().enumerate() {
-                        for r in 0..k {
-                            ys[(r, c)] = y[(r, i)];
-                        }
-                    }
-                    let mut vecs = Mat::<f64>::zeros(n, sel.len());
-                    matmul(vecs.as_mut(), Accum::Replace, q.subcols(0, k), ys.as_ref(), 1.0, par);
-                    let sel_theta: Vec<f64> = sel.iter().map(|&i| theta[i]).collect();
-                    let ok = self.explicit_check(f, vecs.as_ref(), &sel_theta);
-                    let mut conv2 = conv.clone();
-                    for (c, &i) in sel.iter().enumerate() {
-                        conv2[i] = ok[c];
-                    }
-                    if !(self.run_may_stop(target, f, need_below, &lam, &conv2) || full || exhausted)
-                    {
-                        // Some estimates were optimistic: keep iterating.
-                        next_check = k + p;
-                        j += 1;
-                        continue;
-                    }
-                    let keep: Vec<usize> = (0..sel.len()).filter(|&c| ok[c]).collect();
-                    let vecs = Mat::from_fn(n, keep.len(), |r, c| vecs[(r, keep[c])]);
-                    let pairs = self.make_pairs(vecs)?;
-                    let mut estimates: Vec<f64> = (0..k)
-                        .filter(|&i| !conv2[i] && lam[i] > sigma)
-                        .map(|i| lam[i])
-                        .collect();
-                    estimates.sort_by(f64::total_cmp);
-                    return Ok(Run {
-                        pairs,
-                        estimates,
-                        full: full || exhausted,
-                    });
-                }
+            // Ritz vectors of the converged pairs beyond the verified bound, checked by an
+            // explicit operator application.
+            let sel: Vec<usize> = (0..k).filter(|&i| conv[i] && lam[i] > v).collect();
+            let (vecs, mvecs) = run.vectors(ritz.y.as_ref(), &sel);
+            let sel_theta: Vec<f64> = sel.iter().map(|&i| ritz.theta[i]).collect();
+            let ok = self.explicit_check(f, vecs.as_ref(), mvecs.as_ref(), &sel_theta);
+            let mut conv2 = conv.clone();
+            for (c, &i) in sel.iter().enumerate() {
+                conv2[i] = ok[c];
             }
-            j += 1;
+            if !(self.run_may_stop(target, f, id, need_below, &lam, &conv2) || run.is_full()) {
+                continue;
+            }
+            let keep: Vec<usize> = (0..sel.len()).filter(|&c| ok[c]).collect();
+            let n = self.n_dof();
+            let v_keep = Mat::from_fn(n, keep.len(), |r, c| vecs[(r, keep[c])]);
+            let mv_keep = Mat::from_fn(n, keep.len(), |r, c| mvecs[(r, keep[c])]);
+            let l_keep: Vec<f64> = keep.iter().map(|&c| lam[sel[c]]).collect();
+            let pairs = self.make_pairs(v_keep, mv_keep, &l_keep, id)?;
+            let mut estimates: Vec<f64> = (0..k)
+                .filter(|&i| !conv2[i] && lam[i] > sigma)
+                .map(|i| lam[i])
+                .collect();
+            estimates.sort_by(f64::total_cmp);
+            return Ok(RunResult { pairs, estimates });
         }
     }
 
@@ -1106,6 +858,7 @@ impl<'a> EigenSolver<'a> {
         &self,
         target: EigenTarget,
         f: &Factor,
+        id: usize,
         need_below: usize,
         lam: &[f64],
         conv: &[bool],
@@ -1123,9 +876,12 @@ impl<'a> EigenSolver<'a> {
             .filter(|&i| !conv[i] && lam[i] > v)
             .map(|i| lam[i])
             .fold(f64::INFINITY, f64::min);
+        // Known pairs in (lo, hi): stored ones (except this run's unverified ones, which its
+        // converged Ritz pairs replace) and this run's converged ones.
         let known = |lo: f64, hi: f64| {
             self.pairs
                 .iter()
+                .filter(|p| !(p.run == id && p.lambda > v))
                 .filter(|p| p.lambda > lo && p.lambda < hi)
                 .count()
                 + (0..k)
@@ -1133,9 +889,7 @@ impl<'a> EigenSolver<'a> {
                     .count()
         };
         match target {
-            EigenTarget::Count(c) => {
-                f.negative >= c || known(f64::NEG_INFINITY, first_unconv) > c
-            }
+            EigenTarget::Count(c) => f.negative >= c || known(f64::NEG_INFINITY, first_unconv) > c,
             EigenTarget::BelowOmega(wc) => {
                 let lc = wc * wc;
                 sigma > lc || (first_unconv > lc && known(lc, first_unconv) > 0)
@@ -1143,210 +897,87 @@ impl<'a> EigenSolver<'a> {
         }
     }
 
-    /// Explicit convergence check of Ritz vectors `y` (M-normalised columns) with Ritz values
-    /// `theta` of the operator of `f`.
-    fn explicit_check(&mut self, f: &Factor, y: MatRef<'_, f64>, theta: &[f64]) -> Vec<bool> {
+    /// Explicit convergence check of Ritz vectors `y` (M-normalised columns, `my = M y`) with
+    /// Ritz values `theta` of the operator of `f`.
+    fn explicit_check(
+        &mut self,
+        f: &Factor,
+        y: MatRef<'_, f64>,
+        my: MatRef<'_, f64>,
+        theta: &[f64],
+    ) -> Vec<bool> {
         let par = faer::get_global_parallelism();
         let (n, s) = (y.nrows(), y.ncols());
         if s == 0 {
             return Vec::new();
         }
-        let mut my = Mat::<f64>::zeros(n, s);
-        sparse_dense_matmul(my.as_mut(), Accum::Replace, self.m, y, 1.0, par);
-        let mut sy = my.clone();
-        let mut mem = self.shifted.solve_scratch(s);
-        self.shifted.solve(f, sy.as_mut(), &mut mem);
+        let mut sy = my.to_owned();
+        let mut mem = self.shifted.solve_scratch(s.min(64));
+        let mut c = 0;
+        while c < s {
+            let w = 64.min(s - c);
+            self.shifted.solve(f, sy.as_mut().subcols_mut(c, w), &mut mem);
+            c += w;
+        }
         self.stats.operator_columns += s;
         for c in 0..s {
             for i in 0..n {
                 sy[(i, c)] -= theta[c] * y[(i, c)];
             }
         }
-        sparse_dense_matmul(my.as_mut(), Accum::Replace, self.m, sy.as_ref(), 1.0, par);
+        let mut mr = Mat::<f64>::zeros(n, s);
+        sparse_dense_matmul(mr.as_mut(), Accum::Replace, self.m, sy.as_ref(), 1.0, par);
         (0..s)
             .map(|c| {
-                let r2: f64 = (0..n).map(|i| sy[(i, c)] * my[(i, c)]).sum();
+                let r2: f64 = (0..n).map(|i| sy[(i, c)] * mr[(i, c)]).sum();
                 r2.max(0.0).sqrt() <= EXPLICIT_TOLERANCE * theta[c].abs()
             })
             .collect()
     }
 
-    /// Rayleigh quotients and residuals of converged Ritz vectors.
-    fn make_pairs(&self, vecs: Mat<f64>) -> Result<Vec<Pair>, RomError> {
+    /// Converged Ritz pairs (M-normalised) with their residuals.
+    ///
+    /// NOTE: the eigenvalue is the Ritz value `sigma + 1 / theta`, not the Rayleigh quotient
+    /// `phi^T K phi`: the latter sums terms of size lambda_max |phi|^2 and loses about
+    /// eps lambda_max / lambda relative accuracy (1e-8 for the lowest mode of a fine solid
+    /// mesh), while theta comes from the smooth operator S.
+    fn make_pairs(
+        &self,
+        vecs: Mat<f64>,
+        mvecs: Mat<f64>,
+        lambda: &[f64],
+        run: usize,
+    ) -> Result<Vec<Pair>, RomError> {
         let par = faer::get_global_parallelism();
         let (n, s) = (vecs.nrows(), vecs.ncols());
         let mut kv = Mat::<f64>::zeros(n, s);
-        let mut mv = Mat::<f64>::zeros(n, s);
         sparse_dense_matmul(kv.as_mut(), Accum::Replace, self.k, vecs.as_ref(), 1.0, par);
-        sparse_dense_matmul(mv.as_mut(), Accum::Replace, self.m, vecs.as_ref(), 1.0, par);
         let mut out = Vec::with_capacity(s);
         for j in 0..s {
-            let (mut vkv, mut vmv) = (0.0, 0.0);
-            for i in 0..n {
-                vkv += vecs[(i, j)] * kv[(i, j)];
-                vmv += vecs[(i, j)] * mv[(i, j)];
-            }
-            if !(vmv > 0.0) || !vkv.is_finite() {
+            let vmv: f64 = (0..n).map(|i| vecs[(i, j)] * mvecs[(i, j)]).sum();
+            let lambda = lambda[j];
+            if !(vmv > 0.0) || !lambda.is_finite() {
                 return Err(RomError::NonFinite {
                     what: "a Ritz vector (zero mass or non-finite)".into(),
                 });
             }
-            let lambda = vkv / vmv;
-            let scale = 1.0 / vmv.sqrt();
             let (mut r2, mut m2) = (0.0, 0.0);
             for i in 0..n {
-                let r = kv[(i, j)] - lambda * mv[(i, j)];
+                let r = kv[(i, j)] - lambda * mvecs[(i, j)];
                 r2 += r * r;
-                m2 += mv[(i, j)] * mv[(i, j)];
+                m2 += mvecs[(i, j)] * mvecs[(i, j)];
             }
+            // The relative residual is scale invariant.
             let residual = r2.sqrt() / (lambda.abs() * m2.sqrt()).max(f64::MIN_POSITIVE);
+            let scale = 1.0 / vmv.sqrt();
             out.push(Pair {
                 lambda,
                 vector: (0..n).map(|i| vecs[(i, j)] * scale).collect(),
                 residual,
+                run,
             });
         }
         Ok(out)
-    }
-}
-
-/// `w <- w - B (B^T M w)` for the M-orthonormal bases `b1` and `b2` (one pass).
-fn project_out(
-    m: SparseColMatRef<'_, usize, f64>,
-    mut w: MatMut<'_, f64>,
-    b1: MatRef<'_, f64>,
-    b2: MatRef<'_, f64>,
-    mut mw: MatMut<'_, f64>,
-    par: Par,
-) {
-    if b1.ncols() + b2.ncols() == 0 {
-        return;
-    }
-    sparse_dense_matmul(mw.rb_mut(), Accum::Replace, m, w.rb(), 1.0, par);
-    for b in [b1, b2] {
-        if b.ncols() == 0 {
-            continue;
-        }
-        let mut c = Mat::<f64>::zeros(b.ncols(), w.ncols());
-        matmul(c.as_mut(), Accum::Replace, b.transpose(), mw.rb(), 1.0, par);
-        matmul(w.rb_mut(), Accum::Add, b, c.as_ref(), -1.0, par);
-    }
-}
-
-/// M-norm of a vector given M times it.
-fn dot(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| x * y).sum()
-}
-
-/// Orthonormalises the columns of `w` among themselves in the M-inner product (modified
-/// Gram-Schmidt, twice), `w <- Q`, and returns the upper-triangular `R` with `W = Q R`.
-/// A column that vanishes (relative to `scale`) is replaced by a random vector orthogonal to
-/// `prev`, `defl` and the previous columns, with a zero row in R. Returns None when the
-/// space is exhausted.
-fn orthonormalize_block(
-    m: SparseColMatRef<'_, usize, f64>,
-    mut w: MatMut<'_, f64>,
-    prev: MatRef<'_, f64>,
-    defl: MatRef<'_, f64>,
-    scale: f64,
-    rng: &mut SplitMix,
-) -> Option<Mat<f64>> {
-    let par = faer::get_global_parallelism();
-    let (n, p) = (w.nrows(), w.ncols());
-    let mut r = Mat::<f64>::zeros(p, p);
-    let mut mx = Mat::<f64>::zeros(n, 1);
-    let mut mcol = Mat::<f64>::zeros(n, 1);
-    for c in 0..p {
-        let mut random_tries = 0;
-        let mut is_random = false;
-        loop {
-            // Two MGS passes against the previous columns of the block.
-            for _ in 0..2 {
-                sparse_dense_matmul(mx.as_mut(), Accum::Replace, m, w.rb().subcols(c, 1), 1.0, par);
-                for c2 in 0..c {
-                    let h = dot(
-                        w.rb().col(c2).try_as_col_major().unwrap().as_slice(),
-                        mx.col(0).try_as_col_major().unwrap().as_slice(),
-                    );
-                    if !is_random {
-                        r[(c2, c)] += h;
-                    }
-                    for i in 0..n {
-                        let v = w[(i, c2)];
-                        w[(i, c)] -= h * v;
-                    }
-                }
-            }
-            sparse_dense_matmul(mx.as_mut(), Accum::Replace, m, w.rb().subcols(c, 1), 1.0, par);
-            let nrm = dot(
-                w.rb().col(c).try_as_col_major().unwrap().as_slice(),
-                mx.col(0).try_as_col_major().unwrap().as_slice(),
-            )
-            .max(0.0)
-            .sqrt();
-            // NOTE: a column is dependent when the reorthogonalised residual is at roundoff
-            // level relative to the operator norm; it is replaced by a fresh random direction
-            // (the Krylov space became invariant, the run continues in new directions).
-            let threshold = if is_random { 1e-6 } else { 1e-13 * scale.max(f64::MIN_POSITIVE) };
-            if nrm > threshold && nrm.is_finite() {
-                if !is_random {
-                    r[(c, c)] = nrm;
-                }
-                for i in 0..n {
-                    w[(i, c)] /= nrm;
-                }
-                break;
-            }
-            random_tries += 1;
-            if random_tries > 3 {
-                return None;
-            }
-            is_random = true;
-            for i in 0..n {
-                w[(i, c)] = rng.next_f64();
-            }
-            // Random directions are projected off the whole basis (twice), then normalised
-            // in the MGS loop above.
-            let mut wc = Mat::<f64>::from_fn(n, 1, |i, _| w[(i, c)]);
-            for _ in 0..2 {
-                project_out(m, wc.as_mut(), prev, defl, mcol.as_mut(), par);
-            }
-            let scale_rand = {
-                sparse_dense_matmul(mcol.as_mut(), Accum::Replace, m, wc.as_ref(), 1.0, par);
-                dot(
-                    wc.col(0).try_as_col_major().unwrap().as_slice(),
-                    mcol.col(0).try_as_col_major().unwrap().as_slice(),
-                )
-                .max(0.0)
-                .sqrt()
-            };
-            if !(scale_rand > 0.0) {
-                return None;
-            }
-            for i in 0..n {
-                w[(i, c)] = wc[(i, 0)] / scale_rand;
-            }
-        }
-    }
-    Some(r)
-}
-
-/// For a residual block W that is not normalised (basis full), an upper-triangular factor
-/// `R` with `R^T R = W^T M W`, used only for the residual estimates.
-fn m_gram_cholesky_like(m: SparseColMatRef<'_, usize, f64>, w: MatRef<'_, f64>, par: Par) -> Mat<f64> {
-    let (n, p) = (w.nrows(), w.ncols());
-    let mut mw = Mat::<f64>::zeros(n, p);
-    sparse_dense_matmul(mw.as_mut(), Accum::Replace, m, w, 1.0, par);
-    let mut g = Mat::<f64>::zeros(p, p);
-    matmul(g.as_mut(), Accum::Replace, w.transpose(), mw.as_ref(), 1.0, par);
-    // Eigen-based square root (robust to rank deficiency): R = diag(sqrt(s)) U^T.
-    match g.self_adjoint_eigen(Side::Lower) {
-        Ok(e) => {
-            let s = e.S().column_vector();
-            let u = e.U();
-            Mat::from_fn(p, p, |i, j| s[i].max(0.0).sqrt() * u[(j, i)])
-        }
-        Err(_) => Mat::from_fn(p, p, |i, j| if i == j { f64::INFINITY } else { 0.0 }),
     }
 }
 

@@ -1,7 +1,8 @@
 //! Unit tests of the eigen solver against dense reference solves.
 
 use super::*;
-use faer::sparse::Triplet;
+use faer::sparse::{SparseColMat, Triplet};
+use faer::{Par, Side};
 
 /// A spring lattice on an `nx x ny x nz` node grid (unit spacing), springs along the grid axes
 /// acting on all three displacement directions (stiffness `k` per spring and direction), nodes

@@ -9,11 +9,14 @@
 //! `K_eta_eta = Omega^2 + Phi_g^T K_gg Phi_g`.
 
 pub mod eigen;
+pub mod error;
 pub mod file;
 pub mod info;
 pub mod labels;
 pub mod macneal;
 pub mod stability;
+
+pub use error::RomError;
 
 use faer::Mat;
 

@@ -20,7 +20,10 @@ fn ccx_or_skip() -> bool {
     if ccx_available() {
         return true;
     }
-    assert!(!rigtwin::fe::calculix::ccx_required(), "RIGTWIN_REQUIRE_CCX is set but ccx cannot be started");
+    assert!(
+        !rigtwin::fe::calculix::ccx_required(),
+        "RIGTWIN_REQUIRE_CCX is set but ccx cannot be started"
+    );
     eprintln!(
         "SKIPPED: `{}` is not on PATH (install calculix-ccx or set RIGTWIN_CCX)",
         ccx_command()

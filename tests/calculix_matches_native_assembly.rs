@@ -32,7 +32,10 @@ fn max_abs(m: &Mat<f64>) -> f64 {
 #[test]
 fn ccx_matrices_condensed_equal_the_native_assembly() {
     if !ccx_available() {
-        assert!(!rigtwin::fe::calculix::ccx_required(), "RIGTWIN_REQUIRE_CCX is set but ccx cannot be started");
+        assert!(
+            !rigtwin::fe::calculix::ccx_required(),
+            "RIGTWIN_REQUIRE_CCX is set but ccx cannot be started"
+        );
         eprintln!(
             "SKIPPED: `{}` is not on PATH (install calculix-ccx)",
             ccx_command()

@@ -148,7 +148,10 @@ fn cantilever(kind: ElementKind, size: [f64; 3], cells: [usize; 3], root_factor:
 #[test]
 fn hex8_matches_calculix_to_printed_precision() {
     if !ccx_available() {
-        assert!(!rigtwin::fe::calculix::ccx_required(), "RIGTWIN_REQUIRE_CCX is set but ccx cannot be started");
+        assert!(
+            !rigtwin::fe::calculix::ccx_required(),
+            "RIGTWIN_REQUIRE_CCX is set but ccx cannot be started"
+        );
         eprintln!("SKIPPED: `ccx` (CalculiX) is not on PATH; the C3D8 check did not run");
         return;
     }
@@ -164,7 +167,10 @@ fn hex8_matches_calculix_to_printed_precision() {
 #[test]
 fn hex8i_matches_calculix_on_the_project_beam() {
     if !ccx_available() {
-        assert!(!rigtwin::fe::calculix::ccx_required(), "RIGTWIN_REQUIRE_CCX is set but ccx cannot be started");
+        assert!(
+            !rigtwin::fe::calculix::ccx_required(),
+            "RIGTWIN_REQUIRE_CCX is set but ccx cannot be started"
+        );
         eprintln!("SKIPPED: `ccx` (CalculiX) is not on PATH; the C3D8I check did not run");
         return;
     }

@@ -165,7 +165,10 @@ fn assemble(parts: &[Part]) -> (FeModel, Vec<usize>) {
         }
     }
     let n = dofs.len();
-    let base = dofs.iter().map(|d| if d.dir == 2 { 1.0 } else { 0.0 }).collect();
+    let base = dofs
+        .iter()
+        .map(|d| if d.dir == 2 { 1.0 } else { 0.0 })
+        .collect();
     let model = FeModel {
         k: SparseColMat::try_new_from_triplets(n, n, &kt).unwrap(),
         m: SparseColMat::try_new_from_triplets(n, n, &mt).unwrap(),
@@ -191,9 +194,19 @@ fn two_cantilevers() -> FeModel {
 /// `pair_stations` x-stations.
 fn two_cantilevers_sized(nx: usize, ny: usize, nz: usize, pair_stations: usize) -> FeModel {
     let (l, w, t_l, t_u, c) = (0.3, 0.02, 0.004, 0.0044, 0.001);
-    let lower = BoxGrid::new(&linspace(0.0, l, nx), &linspace(0.0, w, ny), &linspace(0.0, t_l, nz), |p| p);
+    let lower = BoxGrid::new(
+        &linspace(0.0, l, nx),
+        &linspace(0.0, w, ny),
+        &linspace(0.0, t_l, nz),
+        |p| p,
+    );
     let z0 = t_l + c;
-    let upper = BoxGrid::new(&linspace(0.0, l, nx), &linspace(0.0, w, ny), &linspace(z0, z0 + t_u, nz), |p| p);
+    let upper = BoxGrid::new(
+        &linspace(0.0, l, nx),
+        &linspace(0.0, w, ny),
+        &linspace(z0, z0 + t_u, nz),
+        |p| p,
+    );
     let n_lower = lower.nodes.len();
     let parts = [
         Part {
@@ -222,7 +235,10 @@ fn two_cantilevers_sized(nx: usize, ny: usize, nz: usize, pair_stations: usize) 
         }
     }
     model.clearance = c;
-    for (name, node) in [("lower_tip", lg.node(nx, ny / 2, nz)), ("upper_tip", ug.node(nx, ny / 2, nz) + n_lower)] {
+    for (name, node) in [
+        ("lower_tip", lg.node(nx, ny / 2, nz)),
+        ("upper_tip", ug.node(nx, ny / 2, nz) + n_lower),
+    ] {
         model.outputs.push(OutputDofs {
             name: name.into(),
             terms: vec![(free[3 * node + 2], 1.0)],
@@ -243,12 +259,24 @@ fn dense_eigen(model: &FeModel) -> (Vec<f64>, Mat<f64>) {
     let n = k.nrows();
     let l = k.llt(Side::Lower).unwrap().L().to_owned();
     let mut x = m.clone();
-    faer::linalg::triangular_solve::solve_lower_triangular_in_place(l.as_ref(), x.as_mut(), Par::Seq);
+    faer::linalg::triangular_solve::solve_lower_triangular_in_place(
+        l.as_ref(),
+        x.as_mut(),
+        Par::Seq,
+    );
     let mut c = x.transpose().to_owned();
-    faer::linalg::triangular_solve::solve_lower_triangular_in_place(l.as_ref(), c.as_mut(), Par::Seq);
+    faer::linalg::triangular_solve::solve_lower_triangular_in_place(
+        l.as_ref(),
+        c.as_mut(),
+        Par::Seq,
+    );
     let c = Mat::from_fn(n, n, |i, j| 0.5 * (c[(i, j)] + c[(j, i)]));
     let (mu, mut v) = symmetric_eigen(c.as_ref(), "reference").unwrap();
-    faer::linalg::triangular_solve::solve_upper_triangular_in_place(l.transpose(), v.as_mut(), Par::Seq);
+    faer::linalg::triangular_solve::solve_upper_triangular_in_place(
+        l.transpose(),
+        v.as_mut(),
+        Par::Seq,
+    );
     // Descending mu = ascending lambda; v^T M v = mu.
     let order: Vec<usize> = (0..n).rev().collect();
     let lambda = order.iter().map(|&j| 1.0 / mu[j]).collect();
@@ -266,7 +294,9 @@ fn dense_solve(model: &FeModel, x: MatRef<'_, f64>) -> Mat<f64> {
 }
 
 fn max_abs(a: MatRef<'_, f64>) -> f64 {
-    a.col_iter().flat_map(|c| c.iter().map(|v| v.abs()).collect::<Vec<_>>()).fold(0.0, f64::max)
+    a.col_iter()
+        .flat_map(|c| c.iter().map(|v| v.abs()).collect::<Vec<_>>())
+        .fold(0.0, f64::max)
 }
 
 fn mul(a: MatRef<'_, f64>, b: MatRef<'_, f64>) -> Mat<f64> {
@@ -284,7 +314,8 @@ fn build(count: usize) -> (FeModel, Rom) {
 /// The retained modes as the ROM sees them, recomputed densely (sign-independent quantities
 /// only are compared).
 fn modal_matrix(model: &FeModel, m: usize) -> Mat<f64> {
-    let mut solver = EigenSolver::new(model.k.as_ref(), model.m.as_ref(), EigenOptions::default()).unwrap();
+    let mut solver =
+        EigenSolver::new(model.k.as_ref(), model.m.as_ref(), EigenOptions::default()).unwrap();
     solver.solve(EigenTarget::Count(m), &mut |_| {}).unwrap();
     solver.modes(EigenTarget::Count(m)).vectors
 }
@@ -292,7 +323,11 @@ fn modal_matrix(model: &FeModel, m: usize) -> Mat<f64> {
 #[test]
 fn static_boundary_flexibility_is_exact() {
     let (model, rom) = build(20);
-    assert!(rom.meta.static_flexibility_error < 1e-8, "{:e}", rom.meta.static_flexibility_error);
+    assert!(
+        rom.meta.static_flexibility_error < 1e-8,
+        "{:e}",
+        rom.meta.static_flexibility_error
+    );
     let c3 = 3 * model.pairs.len();
     let mut rng = ChaCha8Rng::seed_from_u64(7);
     let loads = Mat::<f64>::from_fn(c3, 5, |_, _| rng.gen_range(-1.0..1.0));
@@ -308,21 +343,41 @@ fn static_boundary_flexibility_is_exact() {
         }
     }
     let mut g_rom = mul(rom.phi_g.as_ref(), eta.as_ref());
-    matmul(g_rom.as_mut(), Accum::Add, rom.g_res.as_ref(), loads.as_ref(), 1.0, Par::Seq);
+    matmul(
+        g_rom.as_mut(),
+        Accum::Add,
+        rom.g_res.as_ref(),
+        loads.as_ref(),
+        1.0,
+        Par::Seq,
+    );
     for j in 0..5 {
-        let num: f64 = (0..c3).map(|i| (g_rom[(i, j)] - g_fe[(i, j)]).powi(2)).sum();
+        let num: f64 = (0..c3)
+            .map(|i| (g_rom[(i, j)] - g_fe[(i, j)]).powi(2))
+            .sum();
         let den: f64 = (0..c3).map(|i| g_fe[(i, j)].powi(2)).sum();
         let rel = (num / den).sqrt();
         assert!(rel < 1e-8, "load {j}: relative error {rel:e}");
     }
     // Sensor rows: y = c_eta eta + c_lambda lambda equals the FE static output.
     for o in &rom.outputs {
-        let terms = &model.outputs.iter().find(|x| x.name == o.name).unwrap().terms;
+        let terms = &model
+            .outputs
+            .iter()
+            .find(|x| x.name == o.name)
+            .unwrap()
+            .terms;
         for j in 0..5 {
             let y_fe: f64 = terms.iter().map(|&(d, w)| w * u[(d, j)]).sum();
-            let y_rom: f64 = (0..rom.n_modes()).map(|i| o.c_eta[i] * eta[(i, j)]).sum::<f64>()
+            let y_rom: f64 = (0..rom.n_modes())
+                .map(|i| o.c_eta[i] * eta[(i, j)])
+                .sum::<f64>()
                 + (0..c3).map(|r| o.c_lambda[r] * loads[(r, j)]).sum::<f64>();
-            assert!((y_rom - y_fe).abs() < 1e-8 * y_fe.abs().max(1e-12), "{}: {y_rom} vs {y_fe}", o.name);
+            assert!(
+                (y_rom - y_fe).abs() < 1e-8 * y_fe.abs().max(1e-12),
+                "{}: {y_rom} vs {y_fe}",
+                o.name
+            );
         }
     }
 }
@@ -335,10 +390,14 @@ fn free_boundary_frequencies_match_fe() {
     // Stiffness form [K_gg, K_g_eta; K_eta_g, K_eta_eta], mass diag(0, I); condense g out.
     let k_ge = {
         let mut a = mul(rom.k_gg.as_ref(), rom.phi_g.as_ref());
-        a.col_iter_mut().for_each(|c| c.iter_mut().for_each(|v| *v = -*v));
+        a.col_iter_mut()
+            .for_each(|c| c.iter_mut().for_each(|v| *v = -*v));
         a
     };
-    let mut k_ee = mul(rom.phi_g.transpose(), mul(rom.k_gg.as_ref(), rom.phi_g.as_ref()).as_ref());
+    let mut k_ee = mul(
+        rom.phi_g.transpose(),
+        mul(rom.k_gg.as_ref(), rom.phi_g.as_ref()).as_ref(),
+    );
     for i in 0..m {
         k_ee[(i, i)] += rom.omega[i] * rom.omega[i];
     }
@@ -356,7 +415,12 @@ fn free_boundary_frequencies_match_fe() {
     let (reference, _) = dense_eigen(&model);
     for i in 0..m {
         let rel = (ev[i] - reference[i]).abs() / reference[i];
-        assert!(rel < 1e-8, "mode {i}: {} vs {} ({rel:e})", ev[i], reference[i]);
+        assert!(
+            rel < 1e-8,
+            "mode {i}: {} vs {} ({rel:e})",
+            ev[i],
+            reference[i]
+        );
     }
     assert_eq!(c3, rom.g_res.nrows());
 }
@@ -370,19 +434,40 @@ fn reduction_basis_massless_boundary() {
     let bt = b_transpose(&model);
     let mut psi = dense_solve(&model, bt.as_ref());
     let phi_g = apply_b(&model, phi.as_ref());
-    let scaled = Mat::<f64>::from_fn(phi_g.nrows(), m, |i, j| phi_g[(i, j)] / rom.omega[j].powi(2));
-    matmul(psi.as_mut(), Accum::Add, phi.as_ref(), scaled.transpose(), -1.0, Par::Seq);
+    let scaled = Mat::<f64>::from_fn(phi_g.nrows(), m, |i, j| {
+        phi_g[(i, j)] / rom.omega[j].powi(2)
+    });
+    matmul(
+        psi.as_mut(),
+        Accum::Add,
+        phi.as_ref(),
+        scaled.transpose(),
+        -1.0,
+        Par::Seq,
+    );
     let att = mul(psi.as_ref(), rom.k_gg.as_ref());
     let c3 = att.ncols();
     let n = model.n_dof();
-    let r = Mat::<f64>::from_fn(n, c3 + m, |i, j| if j < c3 { att[(i, j)] } else { phi[(i, j - c3)] });
+    let r = Mat::<f64>::from_fn(n, c3 + m, |i, j| {
+        if j < c3 {
+            att[(i, j)]
+        } else {
+            phi[(i, j - c3)]
+        }
+    });
     let md = dense(&model.m);
     let kd = dense(&model.k);
     let mr = mul(r.transpose(), mul(md.as_ref(), r.as_ref()).as_ref());
     let kr = mul(r.transpose(), mul(kd.as_ref(), r.as_ref()).as_ref());
     // eta-eta block of the mass: identity.
-    let ee = Mat::<f64>::from_fn(m, m, |i, j| mr[(c3 + i, c3 + j)] - if i == j { 1.0 } else { 0.0 });
-    assert!(max_abs(ee.as_ref()) < 1e-10, "eta-eta mass block deviates by {:e}", max_abs(ee.as_ref()));
+    let ee = Mat::<f64>::from_fn(m, m, |i, j| {
+        mr[(c3 + i, c3 + j)] - if i == j { 1.0 } else { 0.0 }
+    });
+    assert!(
+        max_abs(ee.as_ref()) < 1e-10,
+        "eta-eta mass block deviates by {:e}",
+        max_abs(ee.as_ref())
+    );
     // Coupling of residual attachment modes and retained modes: M-orthogonal. Phi^T M Psi_res
     // is the difference of Phi^T M K^-1 B^T and Omega^-2 Phi_g^T; it must vanish relative to
     // them. (As cosines between the vectors it is larger: Psi_res is 1e3 times smaller than
@@ -397,7 +482,9 @@ fn reduction_basis_massless_boundary() {
         .flat_map(|i| (0..m).map(move |j| (i, j)))
         .map(|(i, j)| mr[(i, c3 + j)].abs() / mr[(i, i)].sqrt())
         .fold(0.0, f64::max);
-    eprintln!("Phi^T M Psi_res relative to Phi^T M K^-1 B^T: {rel:.2e}; largest cosine {cosine:.2e}");
+    eprintln!(
+        "Phi^T M Psi_res relative to Phi^T M K^-1 B^T: {rel:.2e}; largest cosine {cosine:.2e}"
+    );
     // Stiffness: diag(K_gg, Omega^2) in (h, eta), i.e. the DESIGN stiffness form in (g, eta).
     let kgg_dev = Mat::<f64>::from_fn(c3, c3, |i, j| kr[(i, j)] - rom.k_gg[(i, j)]);
     assert!(max_abs(kgg_dev.as_ref()) < 1e-8 * max_abs(rom.k_gg.as_ref()));
@@ -433,7 +520,12 @@ fn reduction_basis_massless_boundary() {
 #[test]
 fn lanczos_matches_dense_with_repeated_eigenvalues() {
     // Square section, symmetric mesh: flap and edge bending modes are exactly repeated.
-    let grid = BoxGrid::new(&linspace(0.0, 0.2, 14), &linspace(0.0, 0.01, 2), &linspace(0.0, 0.01, 2), |p| p);
+    let grid = BoxGrid::new(
+        &linspace(0.0, 0.2, 14),
+        &linspace(0.0, 0.01, 2),
+        &linspace(0.0, 0.01, 2),
+        |p| p,
+    );
     let (model, _) = assemble(&[Part {
         grid,
         group: DofGroup::Lower,
@@ -451,43 +543,82 @@ fn lanczos_matches_dense_with_repeated_eigenvalues() {
     let mut repeated = 0;
     for i in 0..want {
         let rel = (modes.lambda[i] - reference[i]).abs() / reference[i];
-        assert!(rel < 1e-9, "mode {i}: {} vs {} ({rel:e})", modes.lambda[i], reference[i]);
-        assert!(modes.residuals[i] < 1e-8, "mode {i}: residual {:e}", modes.residuals[i]);
+        assert!(
+            rel < 1e-9,
+            "mode {i}: {} vs {} ({rel:e})",
+            modes.lambda[i],
+            reference[i]
+        );
+        assert!(
+            modes.residuals[i] < 1e-8,
+            "mode {i}: residual {:e}",
+            modes.residuals[i]
+        );
         if i > 0 && (reference[i] - reference[i - 1]).abs() < 1e-9 * reference[i] {
             repeated += 1;
         }
     }
-    assert!(repeated >= 4, "the square beam should have repeated eigenvalues ({repeated})");
+    assert!(
+        repeated >= 4,
+        "the square beam should have repeated eigenvalues ({repeated})"
+    );
     // M-orthonormal eigenvectors.
     let mv = mul(dense(&model.m).as_ref(), modes.vectors.as_ref());
     let g = mul(modes.vectors.transpose(), mv.as_ref());
-    let dev = Mat::<f64>::from_fn(want, want, |i, j| g[(i, j)] - if i == j { 1.0 } else { 0.0 });
-    assert!(max_abs(dev.as_ref()) < 1e-10, "M-orthonormality {:e}", max_abs(dev.as_ref()));
+    let dev = Mat::<f64>::from_fn(want, want, |i, j| {
+        g[(i, j)] - if i == j { 1.0 } else { 0.0 }
+    });
+    assert!(
+        max_abs(dev.as_ref()) < 1e-10,
+        "M-orthonormality {:e}",
+        max_abs(dev.as_ref())
+    );
     eprintln!("stats {:?}", solver.stats());
 }
 
 #[test]
 fn cutoff_ratio_labels_and_stability() {
     let model = two_cantilevers();
-    let rom = reduce(&model, ModeSelection::CutoffRatio { ratio: 40.0 }, &mut |_| {}).unwrap();
+    let rom = reduce(
+        &model,
+        ModeSelection::CutoffRatio { ratio: 40.0 },
+        &mut |_| {},
+    )
+    .unwrap();
     let (reference, _) = dense_eigen(&model);
     let w_ref = rom.omega_ref();
     assert_eq!(rom.labels[rom.meta.reference_mode], "1FU");
-    assert_eq!(&rom.labels[..4], ["1FL", "1FU", "1EL", "1EU"], "{:?}", rom.labels);
+    assert_eq!(
+        &rom.labels[..4],
+        ["1FL", "1FU", "1EL", "1EU"],
+        "{:?}",
+        rom.labels
+    );
     let mut seen = std::collections::HashSet::new();
-    assert!(rom.labels.iter().all(|l| seen.insert(l.clone())), "labels unique: {:?}", rom.labels);
+    assert!(
+        rom.labels.iter().all(|l| seen.insert(l.clone())),
+        "labels unique: {:?}",
+        rom.labels
+    );
     // Exactly the FE modes below 40 x w(1FU).
     let cut = 40.0 * w_ref;
     let expected = reference.partition_point(|&l| l <= cut * cut);
     assert_eq!(rom.n_modes(), expected);
     // The residual of the lowest mode is at the roundoff floor of K phi on this stiff mesh,
     // about eps lambda_max / lambda_1 = 1.2e-8.
-    assert!(rom.meta.max_eigen_residual < 5e-8, "{:e}", rom.meta.max_eigen_residual);
+    assert!(
+        rom.meta.max_eigen_residual < 5e-8,
+        "{:e}",
+        rom.meta.max_eigen_residual
+    );
     // Stability: open limit pi w_max / w_ref, closed limit tighter.
     let open = steps_per_period(*rom.omega.last().unwrap(), w_ref);
     assert!((rom.meta.stable_steps_per_period_open - open).abs() < 1e-12 * open);
     let closed = closed_limit(&rom.omega, rom.phi_g.as_ref(), rom.k_gg.as_ref()).unwrap();
-    assert!((rom.meta.stable_steps_per_period_closed - steps_per_period(closed, w_ref)).abs() < 1e-9 * open);
+    assert!(
+        (rom.meta.stable_steps_per_period_closed - steps_per_period(closed, w_ref)).abs()
+            < 1e-9 * open
+    );
     assert!(rom.meta.stable_steps_per_period_closed > rom.meta.stable_steps_per_period_open);
     eprintln!(
         "{} modes, labels {:?}\nsteps/period open {:.1}, closed {:.1}; timings {:?}",
@@ -502,8 +633,18 @@ fn cutoff_ratio_labels_and_stability() {
 #[test]
 fn all_modes_retained_is_rejected() {
     // A tiny model: retaining every mode leaves no residual flexibility.
-    let grid = BoxGrid::new(&linspace(0.0, 0.02, 2), &linspace(0.0, 0.01, 1), &linspace(0.0, 0.01, 1), |p| p);
-    let grid2 = BoxGrid::new(&linspace(0.0, 0.02, 2), &linspace(0.0, 0.01, 1), &linspace(0.011, 0.021, 1), |p| p);
+    let grid = BoxGrid::new(
+        &linspace(0.0, 0.02, 2),
+        &linspace(0.0, 0.01, 1),
+        &linspace(0.0, 0.01, 1),
+        |p| p,
+    );
+    let grid2 = BoxGrid::new(
+        &linspace(0.0, 0.02, 2),
+        &linspace(0.0, 0.01, 1),
+        &linspace(0.011, 0.021, 1),
+        |p| p,
+    );
     let (mut model, free) = assemble(&[
         Part {
             grid,
@@ -524,11 +665,13 @@ fn all_modes_retained_is_rejected() {
     });
     let n = model.n_dof();
     let err = reduce(&model, ModeSelection::Count { count: n }, &mut |_| {}).unwrap_err();
-    assert!(matches!(err, RomError::ResidualFlexibilityNotPositive { .. }), "{err}");
+    assert!(
+        matches!(err, RomError::ResidualFlexibilityNotPositive { .. }),
+        "{err}"
+    );
     // A few modes are fine.
     assert!(reduce(&model, ModeSelection::Count { count: 3 }, &mut |_| {}).is_ok());
 }
-
 
 /// Size and speed on a model of rig size (about 20k DOFs, 16 x 13 = 208 pairs): run with
 /// `cargo test --release --test macneal_properties -- --ignored --nocapture`.
@@ -547,12 +690,16 @@ fn rig_sized_model_builds() {
     let model = two_cantilevers_sized(size[0], size[1], size[2], size[3]);
     let t0 = std::time::Instant::now();
     let mut last = std::time::Instant::now();
-    let rom = reduce(&model, ModeSelection::CutoffRatio { ratio: 180.0 }, &mut |p| {
-        if last.elapsed().as_secs_f64() > 1.0 {
-            last = std::time::Instant::now();
-            eprintln!("{:.1} s: {p:?}", t0.elapsed().as_secs_f64());
-        }
-    })
+    let rom = reduce(
+        &model,
+        ModeSelection::CutoffRatio { ratio: 180.0 },
+        &mut |p| {
+            if last.elapsed().as_secs_f64() > 1.0 {
+                last = std::time::Instant::now();
+                eprintln!("{:.1} s: {p:?}", t0.elapsed().as_secs_f64());
+            }
+        },
+    )
     .unwrap();
     eprintln!(
         "{} DOFs, {} pairs, {} modes (labels {:?}...), {:.2} s: {:?}\nmax residual {:.2e}, \
@@ -570,4 +717,3 @@ fn rig_sized_model_builds() {
     );
     assert!(rom.meta.static_flexibility_error < 1e-8);
 }
-

@@ -1,6 +1,88 @@
 //! Command-line interface of the `rigtwin` binary (clap). `main.rs` only calls [`main`].
+//!
+//! Every command that produces results can write them as JSON (`--json PATH`) so scripts and
+//! tests never parse the human-readable text.
+
+mod demo;
+mod fe;
+mod progress;
+mod rom;
+
+use clap::{Parser, Subcommand};
+use std::path::PathBuf;
+
+/// rigtwin: reduced-order model, stepped-sine controller and digital twin of a vibro-impact rig.
+#[derive(Parser, Debug)]
+#[command(name = "rigtwin", version, about, long_about = None)]
+pub struct Cli {
+    /// Log filter (tracing EnvFilter syntax), e.g. "info" or "rigtwin=debug".
+    #[arg(long, global = true, default_value = "warn")]
+    pub log: String,
+    /// The command.
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// Top-level commands.
+#[derive(Subcommand, Debug)]
+pub enum Command {
+    /// The main job on the embedded default rig: build (or reuse) the default ROM and report it.
+    Demo(demo::DemoArgs),
+    /// Reduced-order models: build and inspect.
+    #[command(subcommand)]
+    Rom(rom::RomCommand),
+    /// The FE parent model: export to CalculiX.
+    #[command(subcommand)]
+    Fe(fe::FeCommand),
+}
 
 /// Entry point of the binary.
 pub fn main() -> std::process::ExitCode {
-    std::process::ExitCode::SUCCESS
+    let cli = Cli::parse();
+    let filter = tracing_subscriber::EnvFilter::try_new(&cli.log)
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn"));
+    tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .init();
+    let result = match cli.command {
+        Command::Demo(a) => demo::run(a),
+        Command::Rom(c) => rom::run(c),
+        Command::Fe(c) => fe::run(c),
+    };
+    match result {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
+
+/// Writes a value as pretty JSON to `path` (creating parent folders).
+pub(crate) fn write_json<T: serde::Serialize>(
+    path: &std::path::Path,
+    value: &T,
+) -> anyhow::Result<()> {
+    use anyhow::Context;
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    let text = serde_json::to_string_pretty(value)?;
+    std::fs::write(path, text + "\n").with_context(|| format!("writing {}", path.display()))
+}
+
+/// The cache folder for built ROMs: `$RIGTWIN_CACHE`, else `$XDG_CACHE_HOME/rigtwin`, else
+/// `~/.cache/rigtwin`, else `./.rigtwin-cache`.
+pub(crate) fn cache_dir() -> PathBuf {
+    if let Some(d) = std::env::var_os("RIGTWIN_CACHE") {
+        return PathBuf::from(d);
+    }
+    if let Some(d) = std::env::var_os("XDG_CACHE_HOME") {
+        return PathBuf::from(d).join("rigtwin");
+    }
+    if let Some(h) = std::env::var_os("HOME") {
+        return PathBuf::from(h).join(".cache").join("rigtwin");
+    }
+    PathBuf::from(".rigtwin-cache")
 }

@@ -22,6 +22,11 @@ pub use schema::{
     ReductionSpec, RigSection, SensorSpec, TaperedBeamSpec, UpperProbeSpec,
 };
 
+/// Text of the embedded default rig description.
+pub const DEFAULT_RIG_TOML: &str = include_str!("../../rig-config/two-beam.toml");
+/// Source name used for the embedded default rig in messages.
+pub const DEFAULT_RIG_SOURCE: &str = "rig-config/two-beam.toml (embedded)";
+
 /// A parsed and validated rig description.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -129,6 +134,12 @@ impl RigConfig {
     /// runs it; call it after building or editing a description in code.
     pub fn validate(&self) -> Result<(), ConfigError> {
         validate::validate(self)
+    }
+
+    /// The embedded default rig (`rig-config/two-beam.toml`, compiled into the binary).
+    pub fn default_rig() -> RigConfig {
+        RigConfig::from_str(DEFAULT_RIG_TOML, DEFAULT_RIG_SOURCE)
+            .expect("the embedded default rig description is valid (checked by tests)")
     }
 
     /// Material by name (validated to exist for every part).

@@ -49,7 +49,9 @@ pub enum RomError {
         zero: usize,
     },
     /// The sparse factorisation of K - sigma M failed.
-    #[error("sparse LDL^T factorisation of K - sigma M failed at shift {shift_hz:.6e} Hz: {detail}")]
+    #[error(
+        "sparse LDL^T factorisation of K - sigma M failed at shift {shift_hz:.6e} Hz: {detail}"
+    )]
     Factorisation {
         /// Shift as a frequency, Hz (negative for negative shifts).
         shift_hz: f64,

@@ -83,7 +83,8 @@ pub fn classify_mode(model: &FeModel, phi: &[f64], m_phi: &[f64]) -> Option<Mode
     let n_nodes = model.n_nodes();
     let mut energy = [[0.0f64; 3]; 3];
     for (i, info) in model.dofs.iter().enumerate() {
-        let (Some(g), Some(&p), Some(&mp)) = (group_slot(info.group), phi.get(i), m_phi.get(i)) else {
+        let (Some(g), Some(&p), Some(&mp)) = (group_slot(info.group), phi.get(i), m_phi.get(i))
+        else {
             continue;
         };
         if info.node >= n_nodes || info.dir > 2 {
@@ -151,8 +152,16 @@ fn torsion_share(model: &FeModel, group: DofGroup, phi: &[f64]) -> f64 {
         let station = &nodes[start..end];
         start = end;
         let c = station.len() as f64;
-        let yc = station.iter().map(|&n| model.node_coords[n][1]).sum::<f64>() / c;
-        let zc = station.iter().map(|&n| model.node_coords[n][2]).sum::<f64>() / c;
+        let yc = station
+            .iter()
+            .map(|&n| model.node_coords[n][1])
+            .sum::<f64>()
+            / c;
+        let zc = station
+            .iter()
+            .map(|&n| model.node_coords[n][2])
+            .sum::<f64>()
+            / c;
         let (mut num, mut den, mut sq) = (0.0, 0.0, 0.0);
         for &n in station {
             let [v, w] = disp[&n];
@@ -225,7 +234,11 @@ mod tests {
                 for j in 0..3 {
                     for k in 0..2 {
                         let node = node_coords.len();
-                        node_coords.push([i as f64 + 1.0, j as f64 * 2.0 - 2.0, b as f64 + 0.2 * k as f64]);
+                        node_coords.push([
+                            i as f64 + 1.0,
+                            j as f64 * 2.0 - 2.0,
+                            b as f64 + 0.2 * k as f64,
+                        ]);
                         for dir in 0..3 {
                             dofs.push(DofInfo { node, dir, group });
                         }
@@ -234,7 +247,8 @@ mod tests {
             }
         }
         let n = dofs.len();
-        let eye: Vec<Triplet<usize, usize, f64>> = (0..n).map(|i| Triplet::new(i, i, 1.0)).collect();
+        let eye: Vec<Triplet<usize, usize, f64>> =
+            (0..n).map(|i| Triplet::new(i, i, 1.0)).collect();
         let m = SparseColMat::try_new_from_triplets(n, n, &eye).unwrap();
         FeModel {
             k: m.clone(),
@@ -253,7 +267,13 @@ mod tests {
         model
             .dofs
             .iter()
-            .map(|d| if d.group == group { f(model.node_coords[d.node])[d.dir as usize] } else { 0.0 })
+            .map(|d| {
+                if d.group == group {
+                    f(model.node_coords[d.node])[d.dir as usize]
+                } else {
+                    0.0
+                }
+            })
             .collect()
     }
 
@@ -264,9 +284,13 @@ mod tests {
             shape(&model, DofGroup::Lower, |x| [0.0, 0.0, x[0] * x[0]]),
             shape(&model, DofGroup::Upper, |x| [0.0, 0.0, x[0] * x[0]]),
             shape(&model, DofGroup::Lower, |x| [0.0, x[0] * x[0], 0.1 * x[0]]),
-            shape(&model, DofGroup::Upper, |x| [0.0, -0.3 * x[0] * (x[2] - 1.1), x[0] * x[1]]),
+            shape(&model, DofGroup::Upper, |x| {
+                [0.0, -0.3 * x[0] * (x[2] - 1.1), x[0] * x[1]]
+            }),
             shape(&model, DofGroup::Lower, |x| [x[0], 0.0, 0.0]),
-            shape(&model, DofGroup::Lower, |x| [0.0, 0.0, x[0] * x[0] * (x[0] - 3.0)]),
+            shape(&model, DofGroup::Lower, |x| {
+                [0.0, 0.0, x[0] * x[0] * (x[0] - 3.0)]
+            }),
         ];
         let n = model.n_dof();
         let v = Mat::<f64>::from_fn(n, modes.len(), |i, j| modes[j][i]);

@@ -104,7 +104,14 @@ pub fn reduce_with(
     let mut m_b = Mat::<f64>::zeros(n, 1);
     let base = Mat::<f64>::from_fn(n, 1, |i, _| model.base[i]);
     let par = faer::get_global_parallelism();
-    sparse_dense_matmul(m_b.as_mut(), Accum::Replace, model.m.as_ref(), base.as_ref(), 1.0, par);
+    sparse_dense_matmul(
+        m_b.as_mut(),
+        Accum::Replace,
+        model.m.as_ref(),
+        base.as_ref(),
+        1.0,
+        par,
+    );
     let beta: Vec<f64> = (0..m)
         .map(|j| (0..n).map(|i| phi[(i, j)] * m_b[(i, 0)]).sum())
         .collect();
@@ -117,7 +124,14 @@ pub fn reduce_with(
     // Phi_g Omega^-2 (3C x m).
     let phi_g_scaled = Mat::<f64>::from_fn(c3, m, |i, j| phi_g[(i, j)] * inv_l[j]);
     let mut g_res = g_full.clone();
-    matmul(g_res.as_mut(), Accum::Add, phi_g_scaled.as_ref(), phi_g.transpose(), -1.0, par);
+    matmul(
+        g_res.as_mut(),
+        Accum::Add,
+        phi_g_scaled.as_ref(),
+        phi_g.transpose(),
+        -1.0,
+        par,
+    );
     symmetrise(&mut g_res);
     if g_res.col_iter().any(|c| c.iter().any(|v| !v.is_finite())) {
         return Err(RomError::NonFinite {
@@ -153,8 +167,13 @@ pub fn reduce_with(
         })
         .collect();
 
-    let static_flexibility_error =
-        static_flexibility_check(model, &solver, phi_g.as_ref(), phi_g_scaled.as_ref(), g_res.as_ref())?;
+    let static_flexibility_error = static_flexibility_check(
+        model,
+        &solver,
+        phi_g.as_ref(),
+        phi_g_scaled.as_ref(),
+        g_res.as_ref(),
+    )?;
     let attachment = t_attach.elapsed().as_secs_f64();
 
     let omega_ref = omega[reference_mode];
@@ -370,14 +389,14 @@ fn invert_spd(g_res: &Mat<f64>, n_modes: usize) -> Result<Mat<f64>, RomError> {
     let llt = match g_res.llt(Side::Lower) {
         Ok(l) => l,
         Err(_) => {
-            let ev = g_res.self_adjoint_eigenvalues(Side::Lower).unwrap_or_default();
+            let ev = g_res
+                .self_adjoint_eigenvalues(Side::Lower)
+                .unwrap_or_default();
             let (lo, hi) = (
                 ev.first().copied().unwrap_or(f64::NAN),
                 ev.last().copied().unwrap_or(f64::NAN),
             );
-            return Err(fail(format!(
-                "eigenvalues from {lo:.3e} to {hi:.3e} m/N"
-            )));
+            return Err(fail(format!("eigenvalues from {lo:.3e} to {hi:.3e} m/N")));
         }
     };
     // NOTE: a positive but nearly singular G_res makes K_gg huge and the closed-contact
@@ -423,11 +442,25 @@ fn static_flexibility_check(
     // Full model: u = K^-1 B^T lambda with one step of iterative refinement.
     let bt = b_transpose(model);
     let mut rhs = Mat::<f64>::zeros(n, FLEXIBILITY_CHECKS);
-    matmul(rhs.as_mut(), Accum::Replace, bt.as_ref(), loads.as_ref(), 1.0, par);
+    matmul(
+        rhs.as_mut(),
+        Accum::Replace,
+        bt.as_ref(),
+        loads.as_ref(),
+        1.0,
+        par,
+    );
     let mut u = rhs.clone();
     solver.static_solve(u.as_mut())?;
     let mut r = rhs.clone();
-    sparse_dense_matmul(r.as_mut(), Accum::Add, model.k.as_ref(), u.as_ref(), -1.0, par);
+    sparse_dense_matmul(
+        r.as_mut(),
+        Accum::Add,
+        model.k.as_ref(),
+        u.as_ref(),
+        -1.0,
+        par,
+    );
     solver.static_solve(r.as_mut())?;
     for j in 0..FLEXIBILITY_CHECKS {
         for i in 0..n {
@@ -437,9 +470,23 @@ fn static_flexibility_check(
     let g_fe = apply_b(model, u.as_ref());
     // ROM: Phi_g Omega^-2 Phi_g^T lambda + G_res lambda.
     let mut q = Mat::<f64>::zeros(phi_g.ncols(), FLEXIBILITY_CHECKS);
-    matmul(q.as_mut(), Accum::Replace, phi_g.transpose(), loads.as_ref(), 1.0, par);
+    matmul(
+        q.as_mut(),
+        Accum::Replace,
+        phi_g.transpose(),
+        loads.as_ref(),
+        1.0,
+        par,
+    );
     let mut g_rom = Mat::<f64>::zeros(c3, FLEXIBILITY_CHECKS);
-    matmul(g_rom.as_mut(), Accum::Replace, phi_g_scaled, q.as_ref(), 1.0, par);
+    matmul(
+        g_rom.as_mut(),
+        Accum::Replace,
+        phi_g_scaled,
+        q.as_ref(),
+        1.0,
+        par,
+    );
     matmul(g_rom.as_mut(), Accum::Add, g_res, loads.as_ref(), 1.0, par);
     let mut worst = 0.0f64;
     for j in 0..FLEXIBILITY_CHECKS {

@@ -8,6 +8,7 @@
 //! In stiffness form `K_gg = G_res^-1`, `K_g_eta = -K_gg Phi_g`,
 //! `K_eta_eta = Omega^2 + Phi_g^T K_gg Phi_g`.
 
+pub mod build;
 pub mod eigen;
 pub mod error;
 pub mod file;

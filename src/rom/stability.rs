@@ -57,14 +57,25 @@ pub fn open_limit(omega: &[f64]) -> f64 {
 
 /// The closed limit with all pairs closed: sqrt of the largest eigenvalue of
 /// `Omega^2 + Phi_g^T K_gg Phi_g`, rad/s.
-pub fn closed_limit(omega: &[f64], phi_g: MatRef<'_, f64>, k_gg: MatRef<'_, f64>) -> Result<f64, RomError> {
+pub fn closed_limit(
+    omega: &[f64],
+    phi_g: MatRef<'_, f64>,
+    k_gg: MatRef<'_, f64>,
+) -> Result<f64, RomError> {
     let m = omega.len();
     check_shapes(m, phi_g, k_gg.nrows(), k_gg.ncols())?;
     let par = faer::get_global_parallelism();
     let mut kp = Mat::<f64>::zeros(phi_g.nrows(), m);
     matmul(kp.as_mut(), Accum::Replace, k_gg, phi_g, 1.0, par);
     let mut a = Mat::<f64>::zeros(m, m);
-    matmul(a.as_mut(), Accum::Replace, phi_g.transpose(), kp.as_ref(), 1.0, par);
+    matmul(
+        a.as_mut(),
+        Accum::Replace,
+        phi_g.transpose(),
+        kp.as_ref(),
+        1.0,
+        par,
+    );
     largest_with_diagonal(a, omega)
 }
 
@@ -90,12 +101,16 @@ pub fn closed_limit_subset(
         return Ok(open_limit(omega));
     }
     let c = closed.len();
-    let gcc = Mat::<f64>::from_fn(c, c, |i, j| 0.5 * (g_res[(closed[i], closed[j])] + g_res[(closed[j], closed[i])]));
-    let llt = gcc.llt(Side::Lower).map_err(|e| RomError::ResidualFlexibilityNotPositive {
-        n_modes: m,
-        n_boundary: c,
-        detail: format!("closed sub-block: {e:?}"),
-    })?;
+    let gcc = Mat::<f64>::from_fn(c, c, |i, j| {
+        0.5 * (g_res[(closed[i], closed[j])] + g_res[(closed[j], closed[i])])
+    });
+    let llt = gcc
+        .llt(Side::Lower)
+        .map_err(|e| RomError::ResidualFlexibilityNotPositive {
+            n_modes: m,
+            n_boundary: c,
+            detail: format!("closed sub-block: {e:?}"),
+        })?;
     // Z = L^-1 Phi_gc, so Phi_gc^T G_cc^-1 Phi_gc = Z^T Z (better conditioned than forming
     // the inverse).
     let mut z = Mat::<f64>::from_fn(c, m, |i, j| phi_g[(closed[i], j)]);
@@ -105,7 +120,14 @@ pub fn closed_limit_subset(
         faer::get_global_parallelism(),
     );
     let mut a = Mat::<f64>::zeros(m, m);
-    matmul(a.as_mut(), Accum::Replace, z.transpose(), z.as_ref(), 1.0, faer::get_global_parallelism());
+    matmul(
+        a.as_mut(),
+        Accum::Replace,
+        z.transpose(),
+        z.as_ref(),
+        1.0,
+        faer::get_global_parallelism(),
+    );
     largest_with_diagonal(a, omega)
 }
 
@@ -121,7 +143,12 @@ pub fn stability_limits(rom: &Rom) -> Result<StabilityLimits, RomError> {
 /// `omega_limit` (rad/s). `omega_ref` (rad/s) converts the limit into steps per reference
 /// period for the message; `state` names the contact state the limit applies to
 /// (e.g. "all pairs open").
-pub fn check_time_step(dt: f64, omega_limit: f64, omega_ref: f64, state: &str) -> Result<(), RomError> {
+pub fn check_time_step(
+    dt: f64,
+    omega_limit: f64,
+    omega_ref: f64,
+    state: &str,
+) -> Result<(), RomError> {
     let dt_max = max_stable_dt(omega_limit);
     if dt.is_finite() && dt > 0.0 && dt < dt_max {
         Ok(())
@@ -135,7 +162,12 @@ pub fn check_time_step(dt: f64, omega_limit: f64, omega_ref: f64, state: &str) -
     }
 }
 
-fn check_shapes(m: usize, phi_g: MatRef<'_, f64>, rows: usize, cols: usize) -> Result<(), RomError> {
+fn check_shapes(
+    m: usize,
+    phi_g: MatRef<'_, f64>,
+    rows: usize,
+    cols: usize,
+) -> Result<(), RomError> {
     if phi_g.ncols() != m {
         return Err(RomError::Dimension {
             what: "columns of Phi_g (one per mode)".into(),
@@ -143,7 +175,10 @@ fn check_shapes(m: usize, phi_g: MatRef<'_, f64>, rows: usize, cols: usize) -> R
             found: phi_g.ncols(),
         });
     }
-    for (what, found) in [("rows of the boundary matrix", rows), ("columns of the boundary matrix", cols)] {
+    for (what, found) in [
+        ("rows of the boundary matrix", rows),
+        ("columns of the boundary matrix", cols),
+    ] {
         if found != phi_g.nrows() {
             return Err(RomError::Dimension {
                 what: what.into(),
@@ -169,10 +204,12 @@ fn largest_with_diagonal(mut a: Mat<f64>, omega: &[f64]) -> Result<f64, RomError
             a[(j, i)] = s;
         }
     }
-    let ev = a.self_adjoint_eigenvalues(Side::Lower).map_err(|e| RomError::Dense {
-        what: "closed-contact modal stiffness".into(),
-        detail: format!("{e:?}"),
-    })?;
+    let ev = a
+        .self_adjoint_eigenvalues(Side::Lower)
+        .map_err(|e| RomError::Dense {
+            what: "closed-contact modal stiffness".into(),
+            detail: format!("{e:?}"),
+        })?;
     let top = ev.iter().copied().fold(f64::NEG_INFINITY, f64::max);
     if !top.is_finite() {
         return Err(RomError::NonFinite {
@@ -216,7 +253,11 @@ mod tests {
         let (p, q, r) = (w1 * w1 + k * a * a, w2 * w2 + k * b * b, k * a * b);
         let top = 0.5 * (p + q) + (0.25 * (p - q) * (p - q) + r * r).sqrt();
         let closed = closed_limit(&omega, phi_g.as_ref(), k_gg.as_ref()).unwrap();
-        assert!((closed - top.sqrt()).abs() < 1e-12, "{closed} vs {}", top.sqrt());
+        assert!(
+            (closed - top.sqrt()).abs() < 1e-12,
+            "{closed} vs {}",
+            top.sqrt()
+        );
         let limits = StabilityLimits {
             omega_open: open_limit(&omega),
             omega_closed: closed,
@@ -225,7 +266,10 @@ mod tests {
         assert!(limits.dt_max_closed() < limits.dt_max_open());
         // No closed coordinates: the open limit.
         let g_res = Mat::<f64>::from_fn(1, 1, |_, _| 1.0 / k);
-        assert_eq!(closed_limit_subset(&omega, phi_g.as_ref(), g_res.as_ref(), &[]).unwrap(), 3.0);
+        assert_eq!(
+            closed_limit_subset(&omega, phi_g.as_ref(), g_res.as_ref(), &[]).unwrap(),
+            3.0
+        );
     }
 
     #[test]
@@ -234,7 +278,10 @@ mod tests {
         assert!(check_time_step(0.0199, w, 1.0, "all pairs open").is_ok());
         let err = check_time_step(0.0201, w, 1.0, "all pairs open").unwrap_err();
         let text = err.to_string();
-        assert!(text.contains("all pairs open") && text.contains("2.000000e-2"), "{text}");
+        assert!(
+            text.contains("all pairs open") && text.contains("2.000000e-2"),
+            "{text}"
+        );
         assert!(check_time_step(f64::NAN, w, 1.0, "x").is_err());
         assert!(check_time_step(-1.0, w, 1.0, "x").is_err());
     }

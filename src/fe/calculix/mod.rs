@@ -126,7 +126,9 @@ use std::path::PathBuf;
 pub use condense::{condense_internal_dofs, CondenseError};
 pub use export::{export, ExportedFiles};
 pub use import::import;
-pub use run::{ccx_available, ccx_command, ccx_required, read_dat_frequencies, run_ccx, CcxRun, CCX_ENV};
+pub use run::{
+    ccx_available, ccx_command, ccx_required, read_dat_frequencies, run_ccx, CcxRun, CCX_ENV,
+};
 
 /// Errors of the CalculiX exchange. Every variant names the file (or job) and says what was
 /// expected.

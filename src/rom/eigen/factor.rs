@@ -32,8 +32,6 @@ pub(crate) struct Shifted {
 
 const ABSENT: usize = usize::MAX;
 
-
-
 impl Shifted {
     pub(crate) fn new(
         k: SparseColMatRef<'_, usize, f64>,

@@ -137,7 +137,14 @@ impl LanczosRun {
         let mut mem = shifted.solve_scratch(p);
         shifted.solve(f, w.as_mut(), &mut mem);
         let mut a = Mat::<f64>::zeros(p, p);
-        matmul(a.as_mut(), Accum::Replace, self.mq.subcols(c0, p).transpose(), w.as_ref(), 1.0, par);
+        matmul(
+            a.as_mut(),
+            Accum::Replace,
+            self.mq.subcols(c0, p).transpose(),
+            w.as_ref(),
+            1.0,
+            par,
+        );
         for i in 0..p {
             for j in 0..i {
                 let s = 0.5 * (a[(i, j)] + a[(j, i)]);
@@ -148,10 +155,24 @@ impl LanczosRun {
         }
         self.t.submatrix_mut(c0, c0, p, p).copy_from(&a);
         // Three-term recurrence, then full reorthogonalisation.
-        matmul(w.as_mut(), Accum::Add, self.q.subcols(c0, p), a.as_ref(), -1.0, par);
+        matmul(
+            w.as_mut(),
+            Accum::Add,
+            self.q.subcols(c0, p),
+            a.as_ref(),
+            -1.0,
+            par,
+        );
         if c0 >= p {
             let b = self.t.submatrix(c0, c0 - p, p, p).to_owned();
-            matmul(w.as_mut(), Accum::Add, self.q.subcols(c0 - p, p), b.transpose(), -1.0, par);
+            matmul(
+                w.as_mut(),
+                Accum::Add,
+                self.q.subcols(c0 - p, p),
+                b.transpose(),
+                -1.0,
+                par,
+            );
         }
         self.reorthogonalise(w.as_mut(), c0 + p);
         self.k = c0 + p;
@@ -185,13 +206,41 @@ impl LanczosRun {
         for _ in 0..2 {
             if cols > 0 {
                 let mut c = Mat::<f64>::zeros(cols, p);
-                matmul(c.as_mut(), Accum::Replace, self.mq.subcols(0, cols).transpose(), w.rb(), 1.0, par);
-                matmul(w.rb_mut(), Accum::Add, self.q.subcols(0, cols), c.as_ref(), -1.0, par);
+                matmul(
+                    c.as_mut(),
+                    Accum::Replace,
+                    self.mq.subcols(0, cols).transpose(),
+                    w.rb(),
+                    1.0,
+                    par,
+                );
+                matmul(
+                    w.rb_mut(),
+                    Accum::Add,
+                    self.q.subcols(0, cols),
+                    c.as_ref(),
+                    -1.0,
+                    par,
+                );
             }
             if self.defl.ncols() > 0 {
                 let mut c = Mat::<f64>::zeros(self.defl.ncols(), p);
-                matmul(c.as_mut(), Accum::Replace, self.mdefl.transpose(), w.rb(), 1.0, par);
-                matmul(w.rb_mut(), Accum::Add, self.defl.as_ref(), c.as_ref(), -1.0, par);
+                matmul(
+                    c.as_mut(),
+                    Accum::Replace,
+                    self.mdefl.transpose(),
+                    w.rb(),
+                    1.0,
+                    par,
+                );
+                matmul(
+                    w.rb_mut(),
+                    Accum::Add,
+                    self.defl.as_ref(),
+                    c.as_ref(),
+                    -1.0,
+                    par,
+                );
             }
         }
     }
@@ -220,7 +269,14 @@ impl LanczosRun {
                 let mqn = right_solve_lt(mw1.as_ref(), l2.as_ref());
                 // R = L2^T L1^T.
                 let mut r = Mat::<f64>::zeros(p, p);
-                matmul(r.as_mut(), Accum::Replace, l2.transpose(), l1.transpose(), 1.0, par);
+                matmul(
+                    r.as_mut(),
+                    Accum::Replace,
+                    l2.transpose(),
+                    l1.transpose(),
+                    1.0,
+                    par,
+                );
                 return Some((qn, mqn, r));
             }
         }
@@ -267,8 +323,22 @@ impl LanczosRun {
         let ys = Mat::<f64>::from_fn(k, sel.len(), |r, c| y[(r, sel[c])]);
         let mut v = Mat::<f64>::zeros(n, sel.len());
         let mut mv = Mat::<f64>::zeros(n, sel.len());
-        matmul(v.as_mut(), Accum::Replace, self.q.subcols(0, k), ys.as_ref(), 1.0, par);
-        matmul(mv.as_mut(), Accum::Replace, self.mq.subcols(0, k), ys.as_ref(), 1.0, par);
+        matmul(
+            v.as_mut(),
+            Accum::Replace,
+            self.q.subcols(0, k),
+            ys.as_ref(),
+            1.0,
+            par,
+        );
+        matmul(
+            mv.as_mut(),
+            Accum::Replace,
+            self.mq.subcols(0, k),
+            ys.as_ref(),
+            1.0,
+            par,
+        );
         (v, mv)
     }
 }
@@ -380,7 +450,14 @@ fn mgs_block(
                         continue;
                     }
                     let mut coef = Mat::<f64>::zeros(b.ncols(), 1);
-                    matmul(coef.as_mut(), Accum::Replace, mb.transpose(), x.as_ref(), 1.0, par);
+                    matmul(
+                        coef.as_mut(),
+                        Accum::Replace,
+                        mb.transpose(),
+                        x.as_ref(),
+                        1.0,
+                        par,
+                    );
                     matmul(x.as_mut(), Accum::Add, b, coef.as_ref(), -1.0, par);
                 }
             }
@@ -404,7 +481,14 @@ fn gram_root(m: SparseColMatRef<'_, usize, f64>, w: MatRef<'_, f64>, par: Par) -
     let mut mw = Mat::<f64>::zeros(n, p);
     mmul(mw.as_mut(), m, w, par);
     let mut g = Mat::<f64>::zeros(p, p);
-    matmul(g.as_mut(), Accum::Replace, w.transpose(), mw.as_ref(), 1.0, par);
+    matmul(
+        g.as_mut(),
+        Accum::Replace,
+        w.transpose(),
+        mw.as_ref(),
+        1.0,
+        par,
+    );
     // Eigen-based square root (robust to rank deficiency): R = diag(sqrt(s)) U^T.
     match symmetric_eigen(g.as_ref(), "Lanczos residual block") {
         Ok((s, u)) => Mat::from_fn(p, p, |i, j| s[i].max(0.0).sqrt() * u[(j, i)]),

@@ -83,7 +83,10 @@ impl EigenTarget {
         match *self {
             EigenTarget::Count(n) => format!("wanted the lowest {n}"),
             EigenTarget::BelowOmega(w) => {
-                format!("wanted all below {:.6e} Hz", w / (2.0 * std::f64::consts::PI))
+                format!(
+                    "wanted all below {:.6e} Hz",
+                    w / (2.0 * std::f64::consts::PI)
+                )
             }
         }
     }
@@ -459,7 +462,11 @@ impl<'a> EigenSolver<'a> {
         self.merge(result, id);
         self.last_shift = 0.0;
         let new = self.pairs.len().saturating_sub(before);
-        tracing::debug!(basis = run.len(), pairs = self.pairs.len(), "Lanczos run at zero");
+        tracing::debug!(
+            basis = run.len(),
+            pairs = self.pairs.len(),
+            "Lanczos run at zero"
+        );
         if !run.is_full() {
             self.active = Some((run, id));
         }
@@ -494,10 +501,8 @@ impl<'a> EigenSolver<'a> {
             if sigma.partial_cmp(&v) != Some(std::cmp::Ordering::Greater)
                 || (sigma - v) <= 1e-9 * sigma.abs()
             {
-                return Err(self.not_converged(
-                    target,
-                    format!("no progress beyond {:.6e} Hz", shift_hz(v)),
-                ));
+                return Err(self
+                    .not_converged(target, format!("no progress beyond {:.6e} Hz", shift_hz(v))));
             }
             let f = self.factor_checked(sigma)?;
             let known = self.pairs.iter().filter(|p| p.lambda < f.sigma).count();
@@ -773,7 +778,6 @@ impl<'a> EigenSolver<'a> {
         }
     }
 
-
     /// Drives `run` (id `id`) until it may stop or its basis is full; returns its converged
     /// pairs beyond the verified bound.
     fn drive(
@@ -819,7 +823,11 @@ impl<'a> EigenSolver<'a> {
                 })
                 .collect();
             let new_conv = (0..k).filter(|&i| conv[i] && lam[i] > v).count();
-            let own = self.pairs.iter().filter(|p| p.run == id && p.lambda > v).count();
+            let own = self
+                .pairs
+                .iter()
+                .filter(|p| p.run == id && p.lambda > v)
+                .count();
             self.report(target, progress, new_conv.saturating_sub(own));
             if !(self.run_may_stop(target, f, id, need_below, &lam, &conv) || run.is_full()) {
                 continue;
@@ -916,7 +924,8 @@ impl<'a> EigenSolver<'a> {
         let mut c = 0;
         while c < s {
             let w = 64.min(s - c);
-            self.shifted.solve(f, sy.as_mut().subcols_mut(c, w), &mut mem);
+            self.shifted
+                .solve(f, sy.as_mut().subcols_mut(c, w), &mut mem);
             c += w;
         }
         self.stats.operator_columns += s;

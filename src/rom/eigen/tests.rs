@@ -89,14 +89,27 @@ pub(crate) fn dense_eigenvalues(
     let lmat = l.L().to_owned();
     let n = kd.nrows();
     let mut x = kd.clone();
-    faer::linalg::triangular_solve::solve_lower_triangular_in_place(lmat.as_ref(), x.as_mut(), Par::Seq);
+    faer::linalg::triangular_solve::solve_lower_triangular_in_place(
+        lmat.as_ref(),
+        x.as_mut(),
+        Par::Seq,
+    );
     let mut c = x.transpose().to_owned();
-    faer::linalg::triangular_solve::solve_lower_triangular_in_place(lmat.as_ref(), c.as_mut(), Par::Seq);
+    faer::linalg::triangular_solve::solve_lower_triangular_in_place(
+        lmat.as_ref(),
+        c.as_mut(),
+        Par::Seq,
+    );
     let c = Mat::from_fn(n, n, |i, j| 0.5 * (c[(i, j)] + c[(j, i)]));
     c.self_adjoint_eigenvalues(Side::Lower).unwrap()
 }
 
-fn check(k: &SparseColMat<usize, f64>, m: &SparseColMat<usize, f64>, target: EigenTarget, options: EigenOptions) -> Modes {
+fn check(
+    k: &SparseColMat<usize, f64>,
+    m: &SparseColMat<usize, f64>,
+    target: EigenTarget,
+    options: EigenOptions,
+) -> Modes {
     let reference = dense_eigenvalues(k.as_ref(), m.as_ref());
     let mut solver = EigenSolver::new(k.as_ref(), m.as_ref(), options).unwrap();
     solver.solve(target, &mut |_| {}).unwrap();
@@ -132,14 +145,24 @@ fn repeated_eigenvalues_square_lattice() {
 fn below_target_and_resume() {
     let (k, m) = lattice([30, 2, 3], 1e3, |i, j, _| 1.0 + 0.1 * (i + j) as f64);
     let reference = dense_eigenvalues(k.as_ref(), m.as_ref());
-    let mut solver = EigenSolver::new(k.as_ref(), m.as_ref(), EigenOptions { max_basis: 40, ..Default::default() }).unwrap();
+    let mut solver = EigenSolver::new(
+        k.as_ref(),
+        m.as_ref(),
+        EigenOptions {
+            max_basis: 40,
+            ..Default::default()
+        },
+    )
+    .unwrap();
     solver.solve(EigenTarget::Count(5), &mut |_| {}).unwrap();
     // A cutoff in a gap of the spectrum after about 70 modes.
     let j = (70..reference.len())
         .find(|&j| reference[j] - reference[j - 1] > 1e-6 * reference[j])
         .unwrap();
     let cut = (reference[j - 1] + reference[j]) * 0.5;
-    solver.solve(EigenTarget::BelowOmega(cut.sqrt()), &mut |_| {}).unwrap();
+    solver
+        .solve(EigenTarget::BelowOmega(cut.sqrt()), &mut |_| {})
+        .unwrap();
     let modes = solver.modes(EigenTarget::BelowOmega(cut.sqrt()));
     assert_eq!(modes.len(), j);
     for (i, (&a, &b)) in modes.lambda.iter().zip(&reference).enumerate() {

@@ -1,0 +1,70 @@
+//! `rigtwin demo`: the main job on the embedded default rig. Today it builds (or reuses from
+//! the cache) the default ROM and reports it; the stepped sine on the simulated rig joins it as
+//! the simulation and rig service land.
+
+use anyhow::Context;
+use clap::Args;
+use std::path::PathBuf;
+
+use super::progress::BuildProgress;
+use crate::rom::build::{build_hash, build_native, BuildOptions};
+use crate::rom::info::RomInfo;
+
+/// `rigtwin demo`
+#[derive(Args, Debug)]
+pub struct DemoArgs {
+    /// Output folder for the demo's results.
+    #[arg(long, default_value = "out/demo")]
+    pub out: PathBuf,
+    /// Rebuild the ROM even if the cache holds one for this rig.
+    #[arg(long)]
+    pub rebuild: bool,
+    /// No progress display.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// Returns the cached default ROM, building it if the cache has none for the current rig
+/// description (the cache key is the ROM's build hash).
+pub(crate) fn cached_rom(
+    cfg: &crate::config::RigConfig,
+    rebuild: bool,
+    quiet: bool,
+) -> anyhow::Result<(crate::rom::Rom, PathBuf, bool)> {
+    let selection = cfg.reduction.selection();
+    let hash = build_hash(cfg, &selection, "native");
+    let path = super::cache_dir().join(format!("{}-{}.rom", cfg.rig.name, &hash[..16]));
+    if !rebuild && path.exists() {
+        match crate::rom::file::read(&path) {
+            Ok(rom) if rom.meta.config_hash == hash => return Ok((rom, path, true)),
+            Ok(_) => tracing::warn!("cached ROM {} has another hash; rebuilding", path.display()),
+            Err(e) => tracing::warn!("cached ROM unreadable ({e}); rebuilding"),
+        }
+    }
+    let progress = BuildProgress::new(quiet);
+    let rom = build_native(cfg, &BuildOptions::default(), &mut |e| progress.event(&e))?;
+    progress.finish();
+    crate::rom::file::write(&rom, &path)
+        .with_context(|| format!("caching the ROM in {}", path.display()))?;
+    Ok((rom, path, false))
+}
+
+pub(crate) fn run(a: DemoArgs) -> anyhow::Result<()> {
+    let cfg = crate::config::RigConfig::default_rig();
+    let (rom, path, reused) = cached_rom(&cfg, a.rebuild, a.quiet)?;
+    let info = RomInfo::new(&rom);
+    println!("{}", info.text());
+    println!(
+        "ROM {} {}",
+        if reused {
+            "reused from"
+        } else {
+            "built and cached in"
+        },
+        path.display()
+    );
+    let json = a.out.join("rom-info.json");
+    super::write_json(&json, &info)?;
+    println!("summary: {}", json.display());
+    Ok(())
+}

@@ -1,0 +1,122 @@
+//! `rigtwin rom build|info`.
+
+use anyhow::{bail, Context};
+use clap::{Args, Subcommand};
+use std::path::PathBuf;
+
+use super::progress::BuildProgress;
+use crate::config::RigConfig;
+use crate::rom::build::{build_calculix, build_native, BuildOptions};
+use crate::rom::info::RomInfo;
+use crate::rom::ModeSelection;
+
+/// `rigtwin rom ...`
+#[derive(Subcommand, Debug)]
+pub enum RomCommand {
+    /// Build a ROM from a rig description (default: the embedded default rig) or from CalculiX matrices.
+    Build(BuildArgs),
+    /// Summarise a ROM file.
+    Info(InfoArgs),
+}
+
+/// Mode-selection flags shared by commands that build ROMs.
+#[derive(Args, Debug, Clone, Default)]
+pub struct SelectionArgs {
+    /// Keep all modes up to this multiple of f(1FU) (overrides the rig description).
+    #[arg(long, conflicts_with = "modes")]
+    pub cutoff_ratio: Option<f64>,
+    /// Keep this many modes (overrides the rig description).
+    #[arg(long)]
+    pub modes: Option<usize>,
+}
+
+impl SelectionArgs {
+    /// The selection the flags ask for, if any.
+    pub fn selection(&self) -> anyhow::Result<Option<ModeSelection>> {
+        match (self.cutoff_ratio, self.modes) {
+            (Some(r), _) if !(r.is_finite() && r > 1.0) => {
+                bail!("--cutoff-ratio must be a number > 1 (multiple of f(1FU)), got {r}")
+            }
+            (Some(ratio), _) => Ok(Some(ModeSelection::CutoffRatio { ratio })),
+            (None, Some(0)) => bail!("--modes must be at least 1"),
+            (None, Some(count)) => Ok(Some(ModeSelection::Count { count })),
+            (None, None) => Ok(None),
+        }
+    }
+}
+
+/// `rigtwin rom build`
+#[derive(Args, Debug)]
+pub struct BuildArgs {
+    /// Rig description (TOML). Default: the embedded default rig (rig-config/two-beam.toml).
+    pub config: Option<PathBuf>,
+    /// Build from CalculiX matrices instead: path of the job without extension (JOB.inp,
+    /// JOB.sti, JOB.mas, JOB.dof). CONFIG (or the default) still supplies damping and friction.
+    #[arg(long, value_name = "JOB")]
+    pub calculix: Option<PathBuf>,
+    /// Output ROM file.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Also write the `rom info` JSON here.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+    /// No progress display.
+    #[arg(long)]
+    pub quiet: bool,
+    #[command(flatten)]
+    pub selection: SelectionArgs,
+}
+
+/// `rigtwin rom info`
+#[derive(Args, Debug)]
+pub struct InfoArgs {
+    /// ROM file.
+    pub file: PathBuf,
+    /// Write the summary as JSON here.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+}
+
+/// Loads a rig description from a path, or the embedded default.
+pub(crate) fn load_config(path: Option<&std::path::Path>) -> anyhow::Result<RigConfig> {
+    Ok(match path {
+        Some(p) => RigConfig::from_path(p)?,
+        None => RigConfig::default_rig(),
+    })
+}
+
+pub(crate) fn run(cmd: RomCommand) -> anyhow::Result<()> {
+    match cmd {
+        RomCommand::Build(a) => {
+            let cfg = load_config(a.config.as_deref())?;
+            let opts = BuildOptions {
+                selection: a.selection.selection()?,
+            };
+            let progress = BuildProgress::new(a.quiet);
+            let mut on_event = |e: crate::rom::build::BuildEvent| progress.event(&e);
+            let rom = match &a.calculix {
+                Some(job) => build_calculix(job, &cfg, &opts, &mut on_event)?,
+                None => build_native(&cfg, &opts, &mut on_event)?,
+            };
+            progress.finish();
+            crate::rom::file::write(&rom, &a.out)?;
+            let info = RomInfo::new(&rom);
+            println!("{}", info.text());
+            println!("wrote {}", a.out.display());
+            if let Some(j) = &a.json {
+                super::write_json(j, &info)?;
+            }
+            Ok(())
+        }
+        RomCommand::Info(a) => {
+            let rom =
+                crate::rom::file::read(&a.file).with_context(|| "reading the ROM".to_string())?;
+            let info = RomInfo::new(&rom);
+            println!("{}", info.text());
+            if let Some(j) = &a.json {
+                super::write_json(j, &info)?;
+            }
+            Ok(())
+        }
+    }
+}

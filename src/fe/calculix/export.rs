@@ -449,11 +449,17 @@ fn model_text(mesh: &Mesh, job: &str) -> Result<String, CalculixError> {
         mass_sets.push((name, p.mass));
     }
 
-    // Node sets: the mesh's (the contact sets are rewritten in pair order below).
+    // Node sets: the mesh's. The contact sets are rewritten in pair order below, and a
+    // mesh set that is exactly a sensor's one-node set is rewritten from the sensor.
     let reserved = ["CONTACT_LOWER", "CONTACT_UPPER"];
+    let sensor_set = |ccx: &str, members: &[usize]| {
+        mesh.sensors
+            .iter()
+            .any(|s| format!("SENSOR_{}", ccx_name(&s.name)) == ccx && members == [s.node])
+    };
     for (name, members) in &mesh.node_sets {
         let ccx = ccx_name(name);
-        if reserved.contains(&ccx.as_str()) || members.is_empty() {
+        if reserved.contains(&ccx.as_str()) || members.is_empty() || sensor_set(&ccx, members) {
             continue;
         }
         let ccx = nsets.add(ccx, &format!("node set {name}"))?;

@@ -10,6 +10,9 @@
 //! - the Lanczos solver finds exactly the dense eigenvalues, repeated ones included;
 //! - labels, reference mode and stability limits are consistent.
 
+// Element and matrix code below indexes by (row, column) on purpose.
+#![allow(clippy::needless_range_loop)]
+
 use faer::linalg::matmul::matmul;
 use faer::sparse::{SparseColMat, Triplet};
 use faer::{Accum, Mat, MatRef, Par, Side};
@@ -690,9 +693,16 @@ fn rig_sized_model_builds() {
     let model = two_cantilevers_sized(size[0], size[1], size[2], size[3]);
     let t0 = std::time::Instant::now();
     let mut last = std::time::Instant::now();
-    let rom = reduce(
+    let block: usize = std::env::var("BLOCK").map_or(4, |b| b.parse().unwrap());
+    let ratio: f64 = std::env::var("RATIO").map_or(180.0, |b| b.parse().unwrap());
+    let options = EigenOptions {
+        block_size: block,
+        ..EigenOptions::default()
+    };
+    let rom = rigtwin::rom::macneal::reduce_with(
         &model,
-        ModeSelection::CutoffRatio { ratio: 180.0 },
+        ModeSelection::CutoffRatio { ratio },
+        options,
         &mut |p| {
             if last.elapsed().as_secs_f64() > 1.0 {
                 last = std::time::Instant::now();

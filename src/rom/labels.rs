@@ -98,7 +98,7 @@ pub fn classify_mode(model: &FeModel, phi: &[f64], m_phi: &[f64]) -> Option<Mode
         .iter()
         .enumerate()
         .max_by(|a, b| a.1.total_cmp(b.1))?;
-    if !(best > 0.0) {
+    if best.is_nan() || best <= 0.0 {
         return None;
     }
     let group = GROUPS[g];

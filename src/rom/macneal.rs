@@ -116,10 +116,10 @@ pub fn reduce_with(
         .map(|j| (0..n).map(|i| phi[(i, j)] * m_b[(i, 0)]).sum())
         .collect();
 
-    // Static flexibility and residual attachment modes.
-    let mut x = b_transpose(model);
-    solver.static_solve(x.as_mut())?;
-    let g_full = apply_b(model, x.as_ref());
+    // Static flexibility G = B K^-1 B^T and the sensor rows of K^-1 B^T, by chunks of
+    // right-hand sides (K^-1 B^T itself is n x 3C: too large to keep for big models).
+    solver.release_workspace();
+    let (g_full, x_out) = static_flexibility(model, &solver)?;
     let inv_l: Vec<f64> = modes.lambda.iter().map(|l| 1.0 / l).collect();
     // Phi_g Omega^-2 (3C x m).
     let phi_g_scaled = Mat::<f64>::from_fn(c3, m, |i, j| phi_g[(i, j)] * inv_l[j]);
@@ -144,15 +144,13 @@ pub fn reduce_with(
     let outputs = model
         .outputs
         .iter()
-        .map(|o| {
+        .enumerate()
+        .map(|(oi, o)| {
             let mut c_eta = vec![0.0; m];
-            let mut c_lambda = vec![0.0; c3];
+            let mut c_lambda = x_out[oi].clone();
             for &(dof, w) in &o.terms {
                 for (j, c) in c_eta.iter_mut().enumerate() {
                     *c += w * phi[(dof, j)];
-                }
-                for (r, c) in c_lambda.iter_mut().enumerate() {
-                    *c += w * x[(dof, r)];
                 }
             }
             // Residual part: subtract c_eta Omega^-2 Phi_g^T.
@@ -334,6 +332,44 @@ fn validate_selection(selection: ModeSelection) -> Result<(), RomError> {
     }
 }
 
+/// Chunk of right-hand sides for the static solves.
+const STATIC_CHUNK: usize = 64;
+
+/// `G = B K^-1 B^T` (3C x 3C) and, for each sensor output row o, `o . K^-1 B^T` (length 3C).
+fn static_flexibility(
+    model: &FeModel,
+    solver: &EigenSolver<'_>,
+) -> Result<(Mat<f64>, Vec<Vec<f64>>), RomError> {
+    let n = model.n_dof();
+    let c3 = 3 * model.pairs.len();
+    let mut g = Mat::<f64>::zeros(c3, c3);
+    let mut rows = vec![vec![0.0; c3]; model.outputs.len()];
+    let mut start = 0;
+    while start < c3 {
+        let width = STATIC_CHUNK.min(c3 - start);
+        // Columns start..start+width of B^T.
+        let mut x = Mat::<f64>::zeros(n, width);
+        for col in 0..width {
+            let (k, r) = ((start + col) / 3, (start + col) % 3);
+            let p = &model.pairs[k];
+            for d in 0..3 {
+                x[(p.upper[d], col)] += p.frame[r][d];
+                x[(p.lower[d], col)] -= p.frame[r][d];
+            }
+        }
+        solver.static_solve(x.as_mut())?;
+        let bx = apply_b(model, x.as_ref());
+        g.subcols_mut(start, width).copy_from(&bx);
+        for (o, row) in model.outputs.iter().zip(rows.iter_mut()) {
+            for col in 0..width {
+                row[start + col] = o.terms.iter().map(|&(dof, w)| w * x[(dof, col)]).sum();
+            }
+        }
+        start += width;
+    }
+    Ok((g, rows))
+}
+
 /// `B v` for the columns of `v` (n x s): 3C x s.
 pub fn apply_b(model: &FeModel, v: MatRef<'_, f64>) -> Mat<f64> {
     let c3 = 3 * model.pairs.len();
@@ -352,7 +388,24 @@ pub fn apply_b(model: &FeModel, v: MatRef<'_, f64>) -> Mat<f64> {
     out
 }
 
-/// `B^T` as a dense n x 3C matrix.
+/// `B^T l` for the columns of `l` (3C x s): n x s.
+pub fn apply_bt(model: &FeModel, l: MatRef<'_, f64>) -> Mat<f64> {
+    let mut out = Mat::<f64>::zeros(model.n_dof(), l.ncols());
+    for (k, p) in model.pairs.iter().enumerate() {
+        for col in 0..l.ncols() {
+            for r in 0..3 {
+                let v = l[(3 * k + r, col)];
+                for d in 0..3 {
+                    out[(p.upper[d], col)] += p.frame[r][d] * v;
+                    out[(p.lower[d], col)] -= p.frame[r][d] * v;
+                }
+            }
+        }
+    }
+    out
+}
+
+/// `B^T` as a dense n x 3C matrix (for small models and tests).
 pub fn b_transpose(model: &FeModel) -> Mat<f64> {
     let n = model.n_dof();
     let mut bt = Mat::<f64>::zeros(n, 3 * model.pairs.len());
@@ -407,7 +460,7 @@ fn invert_spd(g_res: &Mat<f64>, n_modes: usize) -> Result<Mat<f64>, RomError> {
         dmin = dmin.min(l[(i, i)]);
         dmax = dmax.max(l[(i, i)]);
     }
-    if !(dmin > 1e-7 * dmax) {
+    if dmin.is_nan() || dmin <= 1e-7 * dmax {
         return Err(fail(format!(
             "numerically singular: Cholesky diagonal ratio {:.3e}",
             dmin / dmax
@@ -440,16 +493,7 @@ fn static_flexibility_check(
     };
     let loads = Mat::<f64>::from_fn(c3, FLEXIBILITY_CHECKS, |_, _| next());
     // Full model: u = K^-1 B^T lambda with one step of iterative refinement.
-    let bt = b_transpose(model);
-    let mut rhs = Mat::<f64>::zeros(n, FLEXIBILITY_CHECKS);
-    matmul(
-        rhs.as_mut(),
-        Accum::Replace,
-        bt.as_ref(),
-        loads.as_ref(),
-        1.0,
-        par,
-    );
+    let rhs = apply_bt(model, loads.as_ref());
     let mut u = rhs.clone();
     solver.static_solve(u.as_mut())?;
     let mut r = rhs.clone();

@@ -463,7 +463,7 @@ fn mgs_block(
             }
             mmul(mx.as_mut(), m, x.as_ref(), par);
             let xn = dot(x.as_ref(), mx.as_ref()).max(0.0).sqrt();
-            if !(xn > 0.0) {
+            if xn.is_nan() || xn <= 0.0 {
                 return None;
             }
             for i in 0..n {

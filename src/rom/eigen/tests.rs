@@ -13,16 +13,6 @@ pub(crate) fn lattice(
     mass: impl Fn(usize, usize, usize) -> f64,
 ) -> (SparseColMat<usize, f64>, SparseColMat<usize, f64>) {
     let [nx, ny, nz] = dims;
-    let node = |i: usize, j: usize, l: usize| i + nx * (j + ny * l);
-    // free DOF numbering: nodes with i >= 1
-    let dof = |i: usize, j: usize, l: usize, d: usize| -> Option<usize> {
-        if i == 0 {
-            None
-        } else {
-            Some(3 * (node(i, j, l) - (j + ny * l) - 1 - (j + ny * l) * 0) + d)
-        }
-    };
-    let _ = dof;
     let free_index = |i: usize, j: usize, l: usize| -> Option<usize> {
         (i > 0).then(|| (i - 1) + (nx - 1) * (j + ny * l))
     };
@@ -70,7 +60,6 @@ pub(crate) fn lattice(
             }
         }
     }
-    let _ = node;
     (
         SparseColMat::try_new_from_triplets(n, n, &kt).unwrap(),
         SparseColMat::try_new_from_triplets(n, n, &mt).unwrap(),

@@ -727,3 +727,122 @@ fn rig_sized_model_builds() {
     );
     assert!(rom.meta.static_flexibility_error < 1e-8);
 }
+
+/// The reference rig (rig-config/two-beam.toml) end to end: mesher, native assembly and
+/// reduction with its own selection. A speed measurement: run with
+/// `cargo test --release --test macneal_properties -- --ignored --nocapture`.
+#[test]
+#[ignore = "a speed measurement on the full reference rig"]
+fn reference_rig_builds() {
+    let path =
+        std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("rig-config/two-beam.toml");
+    let cfg = rigtwin::config::RigConfig::from_path(&path).unwrap();
+    let t0 = std::time::Instant::now();
+    let mesh = rigtwin::fe::rig::mesh_rig(&cfg).unwrap();
+    let model = rigtwin::fe::assembly::assemble(&mesh, cfg.contact.clearance).unwrap();
+    let t_asm = t0.elapsed().as_secs_f64();
+    let ratio: f64 = std::env::var("RATIO").map_or(180.0, |b| b.parse().unwrap());
+    let rom = reduce(&model, ModeSelection::CutoffRatio { ratio }, &mut |_| {}).unwrap();
+    eprintln!(
+        "{} DOFs, {} pairs, {} modes, assembly {t_asm:.2} s, build {:.2} s: {:?}\nlabels {:?}\n\
+         f = {:?}\nmax residual {:.2e}, static flexibility error {:.2e}, steps/period open {:.0} \
+         closed {:.0}",
+        model.n_dof(),
+        model.pairs.len(),
+        rom.n_modes(),
+        rom.meta.build_seconds,
+        rom.meta.timings,
+        rom.labels,
+        rom.frequencies_hz()
+            .iter()
+            .map(|f| (f * 10.0).round() / 10.0)
+            .collect::<Vec<_>>(),
+        rom.meta.max_eigen_residual,
+        rom.meta.static_flexibility_error,
+        rom.meta.stable_steps_per_period_open,
+        rom.meta.stable_steps_per_period_closed
+    );
+    assert_eq!(rom.labels[rom.meta.reference_mode], "1FU");
+    assert!(rom.meta.static_flexibility_error < 1e-8);
+    if std::env::var("LABEL_DEBUG").is_ok() {
+        let mut solver =
+            EigenSolver::new(model.k.as_ref(), model.m.as_ref(), EigenOptions::default()).unwrap();
+        solver.solve(EigenTarget::Count(14), &mut |_| {}).unwrap();
+        let modes = solver.modes(EigenTarget::Count(14));
+        let md = &model.m;
+        for j in 0..14 {
+            let phi: Vec<f64> = modes.vectors.col(j).iter().copied().collect();
+            let mut mphi = Mat::<f64>::zeros(model.n_dof(), 1);
+            faer::sparse::linalg::matmul::sparse_dense_matmul(
+                mphi.as_mut(),
+                Accum::Replace,
+                md.as_ref(),
+                modes.vectors.subcols(j, 1),
+                1.0,
+                Par::Seq,
+            );
+            let mphi: Vec<f64> = mphi.col(0).iter().copied().collect();
+            eprintln!(
+                "{j}: {:?}",
+                rigtwin::rom::labels::classify_mode(&model, &phi, &mphi)
+            );
+        }
+    }
+}
+
+/// A coarse version of the reference rig (mesher, native assembly, 4 x 5 contact patch):
+/// the reduction runs on the real part layout, names the modes as the reference does and
+/// keeps the exact static boundary flexibility.
+#[test]
+fn coarse_reference_rig_reduces() {
+    let path =
+        std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("rig-config/two-beam.toml");
+    let mut cfg = rigtwin::config::RigConfig::from_path(&path).unwrap();
+    cfg.contact.nodes = [4, 5];
+    cfg.mesh.beams.free_element = 0.012;
+    cfg.mesh.beams.width_element = 0.01;
+    cfg.mesh.beams.clamp_element = 0.01;
+    cfg.mesh.beams.clamp_exit_element = 0.004;
+    cfg.validate().unwrap();
+    let mesh = rigtwin::fe::rig::mesh_rig(&cfg).unwrap();
+    let model = rigtwin::fe::assembly::assemble(&mesh, cfg.contact.clearance).unwrap();
+    let rom = reduce(
+        &model,
+        ModeSelection::CutoffRatio { ratio: 40.0 },
+        &mut |_| {},
+    )
+    .unwrap();
+    eprintln!(
+        "{} DOFs, {} pairs, {} modes in {:.2} s: {:?}\nlabels {:?}\nf {:?}",
+        model.n_dof(),
+        model.pairs.len(),
+        rom.n_modes(),
+        rom.meta.build_seconds,
+        rom.meta.timings,
+        rom.labels,
+        rom.frequencies_hz()
+    );
+    assert_eq!(rom.n_pairs(), 20);
+    assert_eq!(&rom.labels[..6], ["1FL", "1FU", "1EL", "1EU", "2FL", "2FU"]);
+    assert_eq!(rom.meta.reference_mode, 1);
+    let f = rom.frequencies_hz();
+    assert!(
+        (0.85..0.97).contains(&(f[0] / f[1])),
+        "1FL/1FU = {}",
+        f[0] / f[1]
+    );
+    assert!(*f.last().unwrap() <= 40.0 * f[1] * (1.0 + 1e-12));
+    assert!(
+        rom.meta.static_flexibility_error < 1e-8,
+        "{:e}",
+        rom.meta.static_flexibility_error
+    );
+    assert!(
+        rom.meta.max_eigen_residual < 1e-6,
+        "{:e}",
+        rom.meta.max_eigen_residual
+    );
+    assert!(rom.meta.stable_steps_per_period_closed > rom.meta.stable_steps_per_period_open);
+    assert_eq!(rom.outputs.len(), model.outputs.len());
+    assert_eq!(rom.clearance, cfg.contact.clearance);
+}

@@ -4,12 +4,10 @@
 //!
 //! - Part: the group ([`DofGroup`]) holding most of the mode's kinetic energy
 //!   `phi_i (M phi)_i` (internal DOFs without a node are ignored).
-//! - Type: within that part, the direction with most kinetic energy (z flap, y edge, x axial),
-//!   unless the transverse motion is mostly a rotation of the cross sections about the beam
-//!   axis: at each x-station of the part the (y, z) displacements are fitted by a rigid
-//!   cross-section motion `v = a_y - theta dz`, `w = a_z + theta dy` (dy, dz offsets from the
-//!   station's centre); when the rotation part carries more than half of the transverse motion
-//!   (for flat beams: z motion antisymmetric across the width) the mode is torsion.
+//! - Type: within that part, the direction with most kinetic energy (z flap, y edge, x axial);
+//!   a z-dominant mode is torsion when its z motion is mostly antisymmetric across the width:
+//!   at each x-station of the part, `w = a + b dy` is fitted (dy the offset from the station's
+//!   centre line) and the antisymmetric part `b dy` carries more than half of the sum of w^2.
 //! - Order: running count per (type, part) in ascending frequency.
 
 use std::collections::HashMap;
@@ -53,7 +51,7 @@ pub struct ModeClass {
     pub kind: ModeKind,
     /// Share of the kinetic energy in that part, 0..1.
     pub energy_share: f64,
-    /// Share of the part's transverse motion that is cross-section rotation, 0..1.
+    /// Share of the part's z motion that is antisymmetric across the width, 0..1.
     pub torsion_share: f64,
 }
 
@@ -105,7 +103,7 @@ pub fn classify_mode(model: &FeModel, phi: &[f64], m_phi: &[f64]) -> Option<Mode
     let e = energy[g];
     let dir = (0..3).max_by(|&a, &b| e[a].total_cmp(&e[b])).unwrap_or(2);
     let torsion_share = torsion_share(model, group, phi);
-    let kind = if dir != 0 && torsion_share > 0.5 {
+    let kind = if dir == 2 && torsion_share > 0.5 {
         ModeKind::Torsion
     } else {
         match dir {
@@ -122,27 +120,28 @@ pub fn classify_mode(model: &FeModel, phi: &[f64], m_phi: &[f64]) -> Option<Mode
     })
 }
 
-/// Share of the transverse (y, z) motion of `group`'s nodes that is rigid rotation of the
-/// x-station cross sections about their centres.
+/// Share of the z motion of `group`'s nodes that is antisymmetric across the width: per
+/// x-station, `w = a + b dy` fitted by least squares, share = sum (b dy)^2 / sum w^2.
 fn torsion_share(model: &FeModel, group: DofGroup, phi: &[f64]) -> f64 {
-    // Displacements (y, z) of the group's nodes.
-    let mut disp: HashMap<usize, [f64; 2]> = HashMap::new();
+    // z displacements of the group's nodes.
+    let mut w_of: HashMap<usize, f64> = HashMap::new();
     for (i, info) in model.dofs.iter().enumerate() {
-        if info.group != group || info.node >= model.n_nodes() || info.dir == 0 || info.dir > 2 {
+        if info.group != group || info.node >= model.n_nodes() || info.dir != 2 {
             continue;
         }
-        let Some(&p) = phi.get(i) else { continue };
-        disp.entry(info.node).or_insert([0.0; 2])[info.dir as usize - 1] = p;
+        if let Some(&p) = phi.get(i) {
+            w_of.insert(info.node, p);
+        }
     }
-    if disp.len() < 2 {
+    if w_of.len() < 2 {
         return 0.0;
     }
-    let mut nodes: Vec<usize> = disp.keys().copied().collect();
+    let mut nodes: Vec<usize> = w_of.keys().copied().collect();
     nodes.sort_by(|&a, &b| model.node_coords[a][0].total_cmp(&model.node_coords[b][0]));
     let x_of = |n: usize| model.node_coords[n][0];
     let extent = x_of(nodes[nodes.len() - 1]) - x_of(nodes[0]);
     let tol = 1e-9 * extent.abs().max(f64::MIN_POSITIVE);
-    let (mut rot, mut total) = (0.0, 0.0);
+    let (mut anti, mut total) = (0.0, 0.0);
     let mut start = 0;
     while start < nodes.len() {
         let mut end = start + 1;
@@ -151,34 +150,26 @@ fn torsion_share(model: &FeModel, group: DofGroup, phi: &[f64]) -> f64 {
         }
         let station = &nodes[start..end];
         start = end;
-        let c = station.len() as f64;
         let yc = station
             .iter()
             .map(|&n| model.node_coords[n][1])
             .sum::<f64>()
-            / c;
-        let zc = station
-            .iter()
-            .map(|&n| model.node_coords[n][2])
-            .sum::<f64>()
-            / c;
+            / station.len() as f64;
         let (mut num, mut den, mut sq) = (0.0, 0.0, 0.0);
         for &n in station {
-            let [v, w] = disp[&n];
+            let w = w_of[&n];
             let dy = model.node_coords[n][1] - yc;
-            let dz = model.node_coords[n][2] - zc;
-            num += w * dy - v * dz;
-            den += dy * dy + dz * dz;
-            sq += v * v + w * w;
+            num += w * dy;
+            den += dy * dy;
+            sq += w * w;
         }
         total += sq;
         if den > 0.0 {
-            let theta = num / den;
-            rot += theta * theta * den;
+            anti += num * num / den;
         }
     }
     if total > 0.0 {
-        (rot / total).min(1.0)
+        (anti / total).min(1.0)
     } else {
         0.0
     }

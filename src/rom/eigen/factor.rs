@@ -10,7 +10,7 @@ use faer::sparse::linalg::cholesky::{
     SymbolicCholeskyRaw, SymmetricOrdering,
 };
 use faer::sparse::{SparseColMat, SparseColMatRef, SymbolicSparseColMat};
-use faer::{Conj, MatMut, Side};
+use faer::{Conj, MatMut, Par, Side};
 
 use crate::rom::error::RomError;
 
@@ -188,14 +188,12 @@ impl Shifted {
         })
     }
 
-    pub(crate) fn solve_scratch(&self, ncols: usize) -> MemBuffer {
-        let par = faer::get_global_parallelism();
+    pub(crate) fn solve_scratch(&self, ncols: usize, par: Par) -> MemBuffer {
         MemBuffer::new(self.symbolic.solve_in_place_scratch::<f64>(ncols, par))
     }
 
     /// `rhs <- (K - sigma M)^-1 rhs`.
-    pub(crate) fn solve(&self, f: &Factor, rhs: MatMut<'_, f64>, mem: &mut MemBuffer) {
-        let par = faer::get_global_parallelism();
+    pub(crate) fn solve(&self, f: &Factor, rhs: MatMut<'_, f64>, mem: &mut MemBuffer, par: Par) {
         LdltRef::new(&self.symbolic, &f.values).solve_in_place_with_conj(
             Conj::No,
             rhs,

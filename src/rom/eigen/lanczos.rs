@@ -44,6 +44,14 @@ pub(crate) struct LanczosRun {
     pub(crate) next_check: usize,
 }
 
+/// Parallelism of the Lanczos kernels.
+///
+/// NOTE: a step works on a few columns; thread synchronisation in faer's parallel triangular
+/// solves and sparse products cost more than it gained (the reference rig's eigen solve was
+/// 1.5x slower with two threads on a loaded 2-core machine), so the run is sequential. The
+/// factorisations and the many-column static solves use the global setting.
+pub(crate) const LANCZOS_PAR: Par = Par::Seq;
+
 fn mmul(dst: MatMut<'_, f64>, m: SparseColMatRef<'_, usize, f64>, x: MatRef<'_, f64>, par: Par) {
     sparse_dense_matmul(dst, Accum::Replace, m, x, 1.0, par);
 }
@@ -60,7 +68,7 @@ impl LanczosRun {
         block: usize,
         rng: &mut SplitMix,
     ) -> (Self, usize) {
-        let par = faer::get_global_parallelism();
+        let par = LANCZOS_PAR;
         let n = m.nrows();
         let p = block.min(n).max(1);
         let d = defl.ncols();
@@ -90,8 +98,8 @@ impl LanczosRun {
         let mut mw = Mat::<f64>::zeros(n, p);
         mmul(mw.as_mut(), m, w.as_ref(), par);
         w.copy_from(&mw);
-        let mut mem = shifted.solve_scratch(p);
-        shifted.solve(f, w.as_mut(), &mut mem);
+        let mut mem = shifted.solve_scratch(p, par);
+        shifted.solve(f, w.as_mut(), &mut mem, par);
         run.reorthogonalise(w.as_mut(), 0);
         match run.orthonormalise(m, w, 0, rng) {
             Some((qn, mqn, _)) => {
@@ -129,13 +137,13 @@ impl LanczosRun {
         if self.full {
             return 0;
         }
-        let par = faer::get_global_parallelism();
+        let par = LANCZOS_PAR;
         let p = self.p;
         let c0 = self.k;
         // W = S Q_j and A_j = Q_j^T M S Q_j.
         let mut w = self.mq.subcols(c0, p).to_owned();
-        let mut mem = shifted.solve_scratch(p);
-        shifted.solve(f, w.as_mut(), &mut mem);
+        let mut mem = shifted.solve_scratch(p, par);
+        shifted.solve(f, w.as_mut(), &mut mem, par);
         let mut a = Mat::<f64>::zeros(p, p);
         matmul(
             a.as_mut(),
@@ -201,7 +209,7 @@ impl LanczosRun {
 
     /// `w <- w - Q (MQ^T w) - D (MD^T w)` twice, with the first `cols` basis columns.
     fn reorthogonalise(&self, mut w: MatMut<'_, f64>, cols: usize) {
-        let par = faer::get_global_parallelism();
+        let par = LANCZOS_PAR;
         let p = w.ncols();
         for _ in 0..2 {
             if cols > 0 {
@@ -256,7 +264,7 @@ impl LanczosRun {
         cols: usize,
         rng: &mut SplitMix,
     ) -> Option<(Mat<f64>, Mat<f64>, Mat<f64>)> {
-        let par = faer::get_global_parallelism();
+        let par = LANCZOS_PAR;
         let (n, p) = (w.nrows(), w.ncols());
         let mut mw = Mat::<f64>::zeros(n, p);
         mmul(mw.as_mut(), m, w.as_ref(), par);
@@ -317,7 +325,7 @@ impl LanczosRun {
 
     /// Ritz vectors `Q y` and `M Q y` of the columns `sel` of `y`.
     pub(crate) fn vectors(&self, y: MatRef<'_, f64>, sel: &[usize]) -> (Mat<f64>, Mat<f64>) {
-        let par = faer::get_global_parallelism();
+        let par = LANCZOS_PAR;
         let k = self.k;
         let n = self.q.nrows();
         let ys = Mat::<f64>::from_fn(k, sel.len(), |r, c| y[(r, sel[c])]);
@@ -398,7 +406,7 @@ fn mgs_block(
     scale: f64,
     rng: &mut SplitMix,
 ) -> Option<Mat<f64>> {
-    let par = faer::get_global_parallelism();
+    let par = LANCZOS_PAR;
     let (n, p) = (w.nrows(), w.ncols());
     let mut r = Mat::<f64>::zeros(p, p);
     let mut mx = Mat::<f64>::zeros(n, 1);

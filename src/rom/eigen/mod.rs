@@ -29,7 +29,7 @@ mod lanczos;
 
 pub use dense::symmetric_eigen;
 use factor::{shift_hz, Factor, Shifted, SplitMix};
-use lanczos::LanczosRun;
+use lanczos::{LanczosRun, LANCZOS_PAR};
 
 /// Acceptance of a Ritz pair by its explicitly computed residual `||S y - theta y||_M`,
 /// relative to |theta|.
@@ -345,12 +345,15 @@ impl<'a> EigenSolver<'a> {
         }
         // Chunks of columns bound the solver scratch memory.
         const CHUNK: usize = 64;
-        let mut mem = self.shifted.solve_scratch(CHUNK.min(rhs.ncols()).max(1));
+        let par = faer::get_global_parallelism();
+        let mut mem = self
+            .shifted
+            .solve_scratch(CHUNK.min(rhs.ncols()).max(1), par);
         let mut c = 0;
         while c < rhs.ncols() {
             let w = CHUNK.min(rhs.ncols() - c);
             self.shifted
-                .solve(f, rhs.rb_mut().subcols_mut(c, w), &mut mem);
+                .solve(f, rhs.rb_mut().subcols_mut(c, w), &mut mem, par);
             c += w;
         }
         Ok(())
@@ -678,11 +681,11 @@ impl<'a> EigenSolver<'a> {
     /// Normwise backward error of a solve with `f` on a random right-hand side.
     fn backward_error(&mut self, f: &Factor) -> f64 {
         let n = self.n_dof();
-        let par = faer::get_global_parallelism();
+        let par = LANCZOS_PAR;
         let b = Mat::<f64>::from_fn(n, 1, |_, _| self.rng.next_f64());
         let mut x = b.clone();
-        let mut mem = self.shifted.solve_scratch(1);
-        self.shifted.solve(f, x.as_mut(), &mut mem);
+        let mut mem = self.shifted.solve_scratch(1, par);
+        self.shifted.solve(f, x.as_mut(), &mut mem, par);
         let mut r = b.clone();
         sparse_dense_matmul(r.as_mut(), Accum::Add, self.k, x.as_ref(), -1.0, par);
         sparse_dense_matmul(r.as_mut(), Accum::Add, self.m, x.as_ref(), f.sigma, par);
@@ -925,18 +928,18 @@ impl<'a> EigenSolver<'a> {
         my: MatRef<'_, f64>,
         theta: &[f64],
     ) -> Vec<bool> {
-        let par = faer::get_global_parallelism();
+        let par = LANCZOS_PAR;
         let (n, s) = (y.nrows(), y.ncols());
         if s == 0 {
             return Vec::new();
         }
         let mut sy = my.to_owned();
-        let mut mem = self.shifted.solve_scratch(s.min(64));
+        let mut mem = self.shifted.solve_scratch(s.min(64), par);
         let mut c = 0;
         while c < s {
             let w = 64.min(s - c);
             self.shifted
-                .solve(f, sy.as_mut().subcols_mut(c, w), &mut mem);
+                .solve(f, sy.as_mut().subcols_mut(c, w), &mut mem, par);
             c += w;
         }
         self.stats.operator_columns += s;
@@ -968,7 +971,7 @@ impl<'a> EigenSolver<'a> {
         lambda: &[f64],
         run: usize,
     ) -> Result<Vec<Pair>, RomError> {
-        let par = faer::get_global_parallelism();
+        let par = LANCZOS_PAR;
         let (n, s) = (vecs.nrows(), vecs.ncols());
         let mut kv = Mat::<f64>::zeros(n, s);
         sparse_dense_matmul(kv.as_mut(), Accum::Replace, self.k, vecs.as_ref(), 1.0, par);

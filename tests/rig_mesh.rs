@@ -318,7 +318,12 @@ fn fixed_nodes_node_sets_and_sensors() {
     let names: Vec<&str> = mesh.sensors.iter().map(|s| s.name.as_str()).collect();
     assert_eq!(names, ["lower_tip", "lower_mid", "upper_tip", "upper_mid"]);
     for s in &cfg.sensors {
-        let set = &mesh.node_sets[&format!("SENSOR_{}", s.name)];
+        let prefix = if s.mount == Mount::Platform {
+            "PLATFORM"
+        } else {
+            "SENSOR"
+        };
+        let set = &mesh.node_sets[&format!("{prefix}_{}", s.name)];
         assert_eq!(set.len(), 1);
         let q = mesh.nodes[set[0]];
         if s.mount == Mount::Platform {

@@ -309,12 +309,6 @@ fn build(
                 members.len()
             )));
         };
-        // A sensor on a node with no free DOF sits on the clamped base (the platform
-        // accelerometers): it measures the prescribed base motion, not a model output.
-        if (0..3u8).all(|d| !index.contains_key(&(node, d))) {
-            tracing::debug!("sensor set {set_name} is on a fixed node: not a model output");
-            continue;
-        }
         let mut terms = Vec::new();
         for (dir, &w) in direction.iter().enumerate() {
             if w != 0.0 {

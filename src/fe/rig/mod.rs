@@ -38,7 +38,7 @@ use parts::{invalid, BlockIds, Builder, FaceRegion};
 ///
 /// Node sets: `LOWER` (lower beam + lower probe), `UPPER` (upper beam + upper probe +
 /// protrusion), `CLAMP` (blocks), `FIXED` (base block bottom face), `CONTACT_LOWER` and
-/// `CONTACT_UPPER` (the pairs' nodes), `SENSOR_<name>` per sensor. Contact pair (i, j) of the
+/// `CONTACT_UPPER` (the pairs' nodes), `SENSOR_<name>` per model-output sensor, `PLATFORM_<name>` per platform accelerometer. Contact pair (i, j) of the
 /// patch (i along x, j along y) is at index `i + nodes_x * j`, frame n = +z, t1 = +x, t2 = +y.
 pub fn mesh_rig(cfg: &RigConfig) -> Result<Mesh, ConfigError> {
     // A description built in code has not been through the parser's validation.
@@ -212,12 +212,18 @@ pub fn mesh_rig(cfg: &RigConfig) -> Result<Mesh, ConfigError> {
         let node = part
             .nearest_on_face(&b, k, s.x, s.y)
             .ok_or_else(|| invalid(cfg, &key, "no node on the mounting face"))?;
+        // Platform accelerometers sit on the clamped base: they measure the prescribed base
+        // motion, not a model output, so their set is PLATFORM_<name> (SENSOR_<name> sets are
+        // model outputs, also in the CalculiX exchange).
+        if s.mount == Mount::Platform {
+            b.mesh
+                .node_sets
+                .insert(format!("PLATFORM_{}", s.name), vec![node]);
+            continue;
+        }
         b.mesh
             .node_sets
             .insert(format!("SENSOR_{}", s.name), vec![node]);
-        if s.mount == Mount::Platform {
-            continue;
-        }
         let norm = s.direction.iter().map(|d| d * d).sum::<f64>().sqrt();
         b.mesh.sensors.push(SensorPoint {
             name: s.name.clone(),

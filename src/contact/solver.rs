@@ -1,0 +1,654 @@
+//! The implicit contact solver: augmented-Lagrangian fixed point
+//! `lambda <- proj_C(lambda - eps .* (W lambda + c))` with projected Jacobi sweeps (the
+//! reference method) or projected Gauss-Seidel sweeps, on the pairs not predicted open.
+//!
+//! One [`ContactSolver`] owns the constant Delassus matrix `W` (`G_res / dt` for a fixed time
+//! step) and a workspace sized for all pairs, so a solve never allocates. Per solve:
+//! 1. active-set prediction: pairs whose predicted normal gap (free gap plus predicted motion,
+//!    given by the caller) exceeds [`ContactParameters::open_gap_margin`] get `lambda = 0` and
+//!    leave the sweep;
+//! 2. when the active set differs from the previous solve, the active rows and columns of `W`
+//!    are gathered into a contiguous block and the step sizes `eps` are recomputed;
+//! 3. sweeps from the warm start until the relative change of `lambda` drops below
+//!    [`ContactParameters::tolerance`] or [`ContactParameters::max_iterations`] is reached;
+//! 4. gap velocities `gamma = W lambda + c` for all pairs, the natural-map residual and the
+//!    open/stick/slip state of every pair.
+//!
+//! Non-convergence and divergence are reported in [`SolveStats`], never by a panic; bad input
+//! (sizes, non-finite numbers) is a [`ContactError`].
+
+use super::projection::{project_pair, PairState};
+use super::{check_vector, validate_matrix, ContactError, ContactProblem, ContactSolution};
+
+/// How the pairs are swept.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SweepMethod {
+    /// All pairs updated from the previous iterate (the reference's projected Jacobi).
+    #[default]
+    Jacobi,
+    /// Pairs updated in order, each from the latest values of the others.
+    GaussSeidel,
+}
+
+/// How the augmented-Lagrangian step sizes `eps` (N per m/s) are chosen for the Jacobi sweep.
+/// Every rule gives one `eps` for the normal component of a pair and one shared by its two
+/// tangential components (a different `eps` for t1 and t2 would move the fixed points away
+/// from Coulomb's law). `relaxation` (r) multiplies all of them.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum StepRule {
+    /// DESIGN.md's rule: [`StepRule::Diagonal`] when the active block of `W` is diagonally
+    /// dominant, [`StepRule::RowSum`] otherwise.
+    #[default]
+    Auto,
+    /// `eps = r / W_ii` (tangential: the larger of the two diagonal entries). Converges for
+    /// diagonally dominant `W`; may diverge otherwise.
+    Diagonal,
+    /// `eps = r / sum_j |W_ij|`. Always convergent for r <= 1 (Gershgorin), slow when `W` is
+    /// strongly coupled.
+    RowSum,
+    /// `eps = r / (W_ii rho)` with `rho` the largest eigenvalue of `D^-1/2 W D^-1/2`
+    /// (`D` = the diagonal used by [`StepRule::Diagonal`]), estimated by power iteration once
+    /// per active-set change. Convergent for r < 2 (up to the estimate) and much faster than
+    /// row sums on strongly coupled `W`.
+    Spectral,
+}
+
+/// Parameters of the contact solver. Defaults follow DESIGN.md "The model" step 4.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ContactParameters {
+    /// Sweep method. Default: [`SweepMethod::Jacobi`].
+    pub method: SweepMethod,
+    /// Step-size rule of the Jacobi sweep. Default: [`StepRule::Auto`]. The Gauss-Seidel sweep
+    /// always uses the pair's own 3x3 block (row sums of the block), which suffices there.
+    pub step_rule: StepRule,
+    /// Relaxation factor r multiplying every step size, -. Must lie in (0, 2). Default 1.0.
+    pub relaxation: f64,
+    /// Stop when `||lambda_new - lambda_old|| <= tolerance * ||lambda_new||` (2-norms over the
+    /// active pairs), -. Default 1e-8.
+    pub tolerance: f64,
+    /// Sweep limit; reaching it is reported as [`SolveStatus::MaxIterations`]. Default 2000.
+    pub max_iterations: usize,
+    /// A pair whose predicted normal gap (m) is larger than this is predicted open and left out
+    /// of the sweep, m. Default 0.0.
+    pub open_gap_margin: f64,
+}
+
+impl Default for ContactParameters {
+    fn default() -> Self {
+        ContactParameters {
+            method: SweepMethod::Jacobi,
+            step_rule: StepRule::Auto,
+            relaxation: 1.0,
+            tolerance: 1e-8,
+            max_iterations: 2000,
+            open_gap_margin: 0.0,
+        }
+    }
+}
+
+impl ContactParameters {
+    /// Checks the ranges documented on the fields.
+    pub fn validate(&self) -> Result<(), ContactError> {
+        if !(self.relaxation > 0.0 && self.relaxation < 2.0) {
+            return Err(ContactError::InvalidParameter {
+                field: "relaxation",
+                value: self.relaxation,
+                expected: "a number in (0, 2)",
+            });
+        }
+        if !(self.tolerance > 0.0 && self.tolerance.is_finite()) {
+            return Err(ContactError::InvalidParameter {
+                field: "tolerance",
+                value: self.tolerance,
+                expected: "a finite number > 0",
+            });
+        }
+        if self.max_iterations == 0 {
+            return Err(ContactError::InvalidParameter {
+                field: "max_iterations",
+                value: 0.0,
+                expected: "at least 1",
+            });
+        }
+        if !self.open_gap_margin.is_finite() {
+            return Err(ContactError::InvalidParameter {
+                field: "open_gap_margin",
+                value: self.open_gap_margin,
+                expected: "a finite length in m",
+            });
+        }
+        Ok(())
+    }
+}
+
+/// How a solve ended.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SolveStatus {
+    /// The relative change dropped below the tolerance (or no pair was active).
+    Converged,
+    /// The sweep limit was reached first; the last iterate is returned.
+    MaxIterations,
+    /// The iterate became non-finite (step sizes too large for this `W`); the forces returned
+    /// are zero and must not be used.
+    Diverged,
+}
+
+/// What one solve did.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct SolveStats {
+    /// How the solve ended.
+    pub status: SolveStatus,
+    /// `status == Converged`.
+    pub converged: bool,
+    /// Sweeps done.
+    pub iterations: usize,
+    /// Relative change of `lambda` in the last sweep, -.
+    pub relative_change: f64,
+    /// Natural-map residual `||lambda - proj_C(lambda - eps .* gamma)||_2` at the returned
+    /// forces (N); zero exactly at a solution.
+    pub residual: f64,
+    /// `residual / max(||lambda||, ||eps .* c||)`, -.
+    pub relative_residual: f64,
+    /// Pairs in the sweep (not predicted open).
+    pub active_pairs: usize,
+    /// Pairs predicted open by the caller's gaps.
+    pub predicted_open: usize,
+    /// Pairs without normal force (predicted open or separating), stick and slip.
+    pub open: usize,
+    /// Pairs sticking.
+    pub stick: usize,
+    /// Pairs slipping.
+    pub slip: usize,
+    /// Whether the active set differed from the previous solve (W block regathered).
+    pub active_set_changed: bool,
+}
+
+/// Reusable contact solver: the Delassus matrix, friction coefficients, parameters and a
+/// workspace for all pairs. `solve` does not allocate.
+#[derive(Clone, Debug)]
+pub struct ContactSolver {
+    params: ContactParameters,
+    n_pairs: usize,
+    /// Full Delassus matrix, row-major `3n x 3n`.
+    w: Vec<f64>,
+    mu: Vec<f64>,
+    /// Pairs in the sweep, ascending, and whether the gathered block below belongs to them.
+    active: Vec<usize>,
+    candidate: Vec<usize>,
+    block_valid: bool,
+    /// Active block of W, row-major `m x m` with m = 3 * active.len() (capacity for all pairs).
+    w_act: Vec<f64>,
+    mu_act: Vec<f64>,
+    /// Step size per active component, N per m/s.
+    eps: Vec<f64>,
+    /// Active forces, gap velocities, free gap velocities; scratch for the power iteration.
+    lam: Vec<f64>,
+    y: Vec<f64>,
+    c_act: Vec<f64>,
+    scratch: Vec<f64>,
+    scratch2: Vec<f64>,
+    states: Vec<PairState>,
+}
+
+impl ContactSolver {
+    /// A solver for `n = mu.len()` pairs with Delassus matrix `w` (row-major `3n x 3n`,
+    /// symmetric positive definite, m/s/N) and friction coefficients `mu` (-). Checks the
+    /// inputs (sizes, finiteness, symmetry, positive diagonal) and the parameters.
+    pub fn new(
+        w: &[f64],
+        mu: &[f64],
+        params: ContactParameters,
+    ) -> Result<ContactSolver, ContactError> {
+        validate_matrix(w, mu)?;
+        params.validate()?;
+        let n = mu.len();
+        let dim = 3 * n;
+        Ok(ContactSolver {
+            params,
+            n_pairs: n,
+            w: w.to_vec(),
+            mu: mu.to_vec(),
+            active: Vec::with_capacity(n),
+            candidate: Vec::with_capacity(n),
+            block_valid: false,
+            w_act: vec![0.0; dim * dim],
+            mu_act: vec![0.0; n],
+            eps: vec![0.0; dim],
+            lam: vec![0.0; dim],
+            y: vec![0.0; dim],
+            c_act: vec![0.0; dim],
+            scratch: vec![0.0; dim],
+            scratch2: vec![0.0; dim],
+            states: vec![PairState::Open; n],
+        })
+    }
+
+    /// Number of contact pairs.
+    pub fn n_pairs(&self) -> usize {
+        self.n_pairs
+    }
+
+    /// The parameters in use.
+    pub fn parameters(&self) -> &ContactParameters {
+        &self.params
+    }
+
+    /// Replaces the parameters (checked); step sizes are recomputed at the next solve.
+    pub fn set_parameters(&mut self, params: ContactParameters) -> Result<(), ContactError> {
+        params.validate()?;
+        self.params = params;
+        self.block_valid = false;
+        Ok(())
+    }
+
+    /// State of every pair after the last solve (all open before the first).
+    pub fn pair_states(&self) -> &[PairState] {
+        &self.states
+    }
+
+    /// Pairs that were in the sweep of the last solve, ascending.
+    pub fn active_pairs(&self) -> &[usize] {
+        &self.active
+    }
+
+    /// The sub-problem on the active pairs of the last solve and its solution, for capture and
+    /// cross-checks (allocates; not for the hot path).
+    pub fn last_active_problem(&self, label: &str) -> (ContactProblem, ContactSolution) {
+        let m = 3 * self.active.len();
+        (
+            ContactProblem {
+                w: self.w_act[..m * m].to_vec(),
+                c: self.c_act[..m].to_vec(),
+                mu: self.mu_act[..self.active.len()].to_vec(),
+                label: label.to_string(),
+            },
+            ContactSolution {
+                lambda: self.lam[..m].to_vec(),
+                gamma: self.y[..m].to_vec(),
+            },
+        )
+    }
+
+    /// Solves one time step's contact problem.
+    ///
+    /// - `c`: gap velocity without contact forces, `3n`, m/s;
+    /// - `predicted_gap_n`: predicted normal gap per pair, `n`, m (free gap plus predicted
+    ///   motion); pairs above [`ContactParameters::open_gap_margin`] are left out. `None`: all
+    ///   pairs take part;
+    /// - `lambda`: in: warm start (e.g. the previous step's forces), `3n`, N; out: the forces
+    ///   (zero on pairs predicted open);
+    /// - `gamma`: out: gap velocities `W lambda + c` of all pairs, `3n`, m/s.
+    ///
+    /// Returns the statistics; a solve that did not converge still returns `Ok` with
+    /// `converged == false`.
+    pub fn solve(
+        &mut self,
+        c: &[f64],
+        predicted_gap_n: Option<&[f64]>,
+        lambda: &mut [f64],
+        gamma: &mut [f64],
+    ) -> Result<SolveStats, ContactError> {
+        let n = self.n_pairs;
+        let dim = 3 * n;
+        check_vector("c", c, dim, n)?;
+        check_vector("lambda (warm start)", lambda, dim, n)?;
+        if gamma.len() != dim {
+            return Err(ContactError::Dimension {
+                what: "gamma",
+                found: gamma.len(),
+                expected: dim,
+                n_pairs: n,
+            });
+        }
+        if let Some(gaps) = predicted_gap_n {
+            check_vector("predicted_gap_n", gaps, n, n)?;
+        }
+
+        // 1. Active-set prediction.
+        self.candidate.clear();
+        match predicted_gap_n {
+            Some(gaps) => {
+                let margin = self.params.open_gap_margin;
+                self.candidate
+                    .extend((0..n).filter(|&k| !(gaps[k] > margin)));
+            }
+            None => self.candidate.extend(0..n),
+        }
+        let active_set_changed = !self.block_valid || self.candidate != self.active;
+        if active_set_changed {
+            std::mem::swap(&mut self.active, &mut self.candidate);
+            self.gather_block();
+            self.compute_step_sizes();
+            self.block_valid = true;
+        }
+        let na = self.active.len();
+        let m = 3 * na;
+
+        // Warm start, projected onto the admissible set.
+        for (slot, &p) in self.active.iter().enumerate() {
+            let (start, _) = project_pair(
+                self.mu[p],
+                [lambda[3 * p], lambda[3 * p + 1], lambda[3 * p + 2]],
+            );
+            self.lam[3 * slot..3 * slot + 3].copy_from_slice(&start);
+            self.c_act[3 * slot..3 * slot + 3].copy_from_slice(&c[3 * p..3 * p + 3]);
+        }
+
+        // 2. Sweeps.
+        let mut status = SolveStatus::Converged;
+        let mut iterations = 0;
+        let mut relative_change = 0.0;
+        if m > 0 {
+            status = SolveStatus::MaxIterations;
+            let tol2 = self.params.tolerance * self.params.tolerance;
+            while iterations < self.params.max_iterations {
+                iterations += 1;
+                let (d2, n2) = match self.params.method {
+                    SweepMethod::Jacobi => self.jacobi_sweep(m),
+                    SweepMethod::GaussSeidel => self.gauss_seidel_sweep(m),
+                };
+                if !(d2.is_finite() && n2.is_finite()) {
+                    status = SolveStatus::Diverged;
+                    relative_change = f64::NAN;
+                    break;
+                }
+                relative_change = if d2 == 0.0 { 0.0 } else { (d2 / n2).sqrt() };
+                if d2 <= tol2 * n2 {
+                    status = SolveStatus::Converged;
+                    break;
+                }
+            }
+        }
+        if status == SolveStatus::Diverged {
+            self.lam[..m].fill(0.0);
+        }
+
+        // 3. Gap velocities, residual and states of the active pairs.
+        matvec(
+            &self.w_act[..m * m],
+            &self.lam[..m],
+            &self.c_act[..m],
+            &mut self.y[..m],
+        );
+        let (mut res2, mut lam2, mut ec2) = (0.0, 0.0, 0.0);
+        let (mut stick, mut slip) = (0, 0);
+        self.states.fill(PairState::Open);
+        for (slot, &p) in self.active.iter().enumerate() {
+            let b = 3 * slot;
+            let l = [self.lam[b], self.lam[b + 1], self.lam[b + 2]];
+            let trial = [
+                l[0] - self.eps[b] * self.y[b],
+                l[1] - self.eps[b + 1] * self.y[b + 1],
+                l[2] - self.eps[b + 2] * self.y[b + 2],
+            ];
+            let (proj, state) = project_pair(self.mu_act[slot], trial);
+            for a in 0..3 {
+                let r = l[a] - proj[a];
+                res2 += r * r;
+                lam2 += l[a] * l[a];
+                let ec = self.eps[b + a] * self.c_act[b + a];
+                ec2 += ec * ec;
+            }
+            self.states[p] = state;
+            match state {
+                PairState::Stick => stick += 1,
+                PairState::Slip => slip += 1,
+                PairState::Open => {}
+            }
+        }
+        let residual = res2.sqrt();
+        let scale = lam2.max(ec2).sqrt();
+        let relative_residual = if residual == 0.0 {
+            0.0
+        } else {
+            residual / scale
+        };
+
+        // 4. Outputs for all pairs: gamma = c + W lambda, using the symmetry of W (row j is
+        // column j), so only the rows of nonzero forces are read.
+        lambda.fill(0.0);
+        gamma.copy_from_slice(c);
+        for (slot, &p) in self.active.iter().enumerate() {
+            for a in 0..3 {
+                let f = self.lam[3 * slot + a];
+                lambda[3 * p + a] = f;
+                if f != 0.0 {
+                    let row = &self.w[(3 * p + a) * dim..(3 * p + a + 1) * dim];
+                    axpy(f, row, gamma);
+                }
+            }
+        }
+        for (slot, &p) in self.active.iter().enumerate() {
+            gamma[3 * p..3 * p + 3].copy_from_slice(&self.y[3 * slot..3 * slot + 3]);
+        }
+
+        Ok(SolveStats {
+            status,
+            converged: status == SolveStatus::Converged,
+            iterations,
+            relative_change,
+            residual,
+            relative_residual,
+            active_pairs: na,
+            predicted_open: n - na,
+            open: n - stick - slip,
+            stick,
+            slip,
+            active_set_changed,
+        })
+    }
+
+    /// One projected Jacobi sweep: `y = W lambda + c` from the previous iterate, then every pair
+    /// projected. Returns (||change||^2, ||lambda_new||^2).
+    fn jacobi_sweep(&mut self, m: usize) -> (f64, f64) {
+        matvec(
+            &self.w_act[..m * m],
+            &self.lam[..m],
+            &self.c_act[..m],
+            &mut self.y[..m],
+        );
+        let (mut d2, mut n2) = (0.0, 0.0);
+        for (k, &mu) in self.mu_act[..m / 3].iter().enumerate() {
+            let b = 3 * k;
+            let trial = [
+                self.lam[b] - self.eps[b] * self.y[b],
+                self.lam[b + 1] - self.eps[b + 1] * self.y[b + 1],
+                self.lam[b + 2] - self.eps[b + 2] * self.y[b + 2],
+            ];
+            let (p, _) = project_pair(mu, trial);
+            for a in 0..3 {
+                let d = p[a] - self.lam[b + a];
+                d2 += d * d;
+                n2 += p[a] * p[a];
+                self.lam[b + a] = p[a];
+            }
+        }
+        (d2, n2)
+    }
+
+    /// One projected Gauss-Seidel sweep: pair by pair, each from the latest forces.
+    fn gauss_seidel_sweep(&mut self, m: usize) -> (f64, f64) {
+        let (mut d2, mut n2) = (0.0, 0.0);
+        for k in 0..m / 3 {
+            let b = 3 * k;
+            let mut trial = [0.0; 3];
+            for (a, t) in trial.iter_mut().enumerate() {
+                let i = b + a;
+                let g = self.c_act[i] + dot(&self.w_act[i * m..(i + 1) * m], &self.lam[..m]);
+                *t = self.lam[i] - self.eps[i] * g;
+            }
+            let (p, _) = project_pair(self.mu_act[k], trial);
+            for a in 0..3 {
+                let d = p[a] - self.lam[b + a];
+                d2 += d * d;
+                n2 += p[a] * p[a];
+                self.lam[b + a] = p[a];
+            }
+        }
+        (d2, n2)
+    }
+
+    /// Copies the active rows and columns of W into the contiguous block `w_act`.
+    fn gather_block(&mut self) {
+        let dim = 3 * self.n_pairs;
+        let m = 3 * self.active.len();
+        for (ra, &p) in self.active.iter().enumerate() {
+            self.mu_act[ra] = self.mu[p];
+            for a in 0..3 {
+                let src = &self.w[(3 * p + a) * dim..(3 * p + a + 1) * dim];
+                let dst = &mut self.w_act[(3 * ra + a) * m..(3 * ra + a + 1) * m];
+                for (cb, &q) in self.active.iter().enumerate() {
+                    dst[3 * cb..3 * cb + 3].copy_from_slice(&src[3 * q..3 * q + 3]);
+                }
+            }
+        }
+    }
+
+    /// Step sizes `eps` of the active components for the configured method and rule.
+    fn compute_step_sizes(&mut self) {
+        let m = 3 * self.active.len();
+        let r = self.params.relaxation;
+        let w = &self.w_act[..m * m];
+        // Per component: the scale that eps divides, before sharing it within a pair's
+        // tangential components.
+        let scale = &mut self.scratch[..m];
+        match self.params.method {
+            SweepMethod::GaussSeidel => {
+                // NOTE: a Gauss-Seidel update moves one pair with the others fixed, so only the
+                // pair's own 3x3 block matters: its row sums bound the block's largest
+                // eigenvalue and make each update a convergent projected step.
+                for (i, s) in scale.iter_mut().enumerate() {
+                    let b = 3 * (i / 3);
+                    *s = w[i * m + b..i * m + b + 3].iter().map(|x| x.abs()).sum();
+                }
+            }
+            SweepMethod::Jacobi => {
+                // NOTE (DESIGN.md step 4): eps = r / W_ii converges when the active block is
+                // diagonally dominant; a contact patch's G_res / dt is not (neighbouring nodes
+                // are strongly coupled), and then the diagonal rule diverges. Row sums of |W|
+                // bound the largest eigenvalue of D^-1 W by 1 (Gershgorin), which keeps the
+                // Jacobi step a contraction at the price of many sweeps; the spectral rule
+                // uses the actual largest eigenvalue instead.
+                let mut dominant = true;
+                for (i, s) in scale.iter_mut().enumerate() {
+                    let row = &w[i * m..(i + 1) * m];
+                    let diag = row[i];
+                    let abs_sum: f64 = row.iter().map(|x| x.abs()).sum();
+                    if abs_sum - diag >= diag {
+                        dominant = false;
+                    }
+                    *s = match self.params.step_rule {
+                        StepRule::RowSum => abs_sum,
+                        _ => diag,
+                    };
+                }
+                if self.params.step_rule == StepRule::Auto && !dominant {
+                    for (i, s) in scale.iter_mut().enumerate() {
+                        *s = w[i * m..(i + 1) * m].iter().map(|x| x.abs()).sum();
+                    }
+                }
+            }
+        }
+        for k in 0..m / 3 {
+            let t = scale[3 * k + 1].max(scale[3 * k + 2]);
+            scale[3 * k + 1] = t;
+            scale[3 * k + 2] = t;
+        }
+        let rho = if self.params.method == SweepMethod::Jacobi
+            && self.params.step_rule == StepRule::Spectral
+        {
+            let inv_sqrt_d = &mut self.scratch2[..m];
+            for (q, s) in inv_sqrt_d.iter_mut().zip(&self.scratch[..m]) {
+                *q = 1.0 / s.sqrt();
+            }
+            spectral_radius_scaled(w, inv_sqrt_d, &mut self.y[..m], &mut self.lam[..m])
+        } else {
+            1.0
+        };
+        for (e, s) in self.eps[..m].iter_mut().zip(&self.scratch[..m]) {
+            *e = r / (s * rho);
+        }
+    }
+}
+
+/// Largest eigenvalue of `D^-1/2 W D^-1/2`, given `inv_sqrt_d = D^-1/2` (m entries), estimated
+/// by power iteration, with a small safety factor. `v` and `z` are scratch of length m.
+fn spectral_radius_scaled(w: &[f64], inv_sqrt_d: &[f64], v: &mut [f64], z: &mut [f64]) -> f64 {
+    let m = inv_sqrt_d.len();
+    // NOTE: the start vector D^1/2 * ones is close to the dominant eigenvector of a smooth,
+    // positive flexibility kernel, so a few dozen iterations give the Rayleigh quotient to a
+    // few per mille. The quotient never overestimates; 5 % margin (and r < 2) keeps the
+    // Jacobi step a contraction even when the estimate is somewhat low.
+    let norm = (m as f64).sqrt();
+    for vi in v.iter_mut() {
+        *vi = 1.0 / norm;
+    }
+    let mut rho = 0.0;
+    for _ in 0..50 {
+        // z = D^-1/2 W D^-1/2 v, with v scaled in place and restored.
+        for (vi, q) in v.iter_mut().zip(inv_sqrt_d.iter()) {
+            *vi *= q;
+        }
+        for (i, zi) in z.iter_mut().enumerate() {
+            *zi = dot(&w[i * m..(i + 1) * m], v) * inv_sqrt_d[i];
+        }
+        for (vi, q) in v.iter_mut().zip(inv_sqrt_d.iter()) {
+            *vi /= q;
+        }
+        let quotient: f64 = v.iter().zip(z.iter()).map(|(a, b)| a * b).sum();
+        let zn = z.iter().map(|x| x * x).sum::<f64>().sqrt();
+        if !(zn > 0.0 && zn.is_finite()) {
+            break;
+        }
+        for (vi, zi) in v.iter_mut().zip(z.iter()) {
+            *vi = zi / zn;
+        }
+        let done = (quotient - rho).abs() <= 1e-4 * quotient;
+        rho = quotient;
+        if done {
+            break;
+        }
+    }
+    1.05 * rho.max(f64::MIN_POSITIVE)
+}
+
+/// `y = W x + c` for a row-major square block.
+#[inline]
+fn matvec(w: &[f64], x: &[f64], c: &[f64], y: &mut [f64]) {
+    let m = x.len();
+    for (i, yi) in y.iter_mut().enumerate() {
+        *yi = c[i] + dot(&w[i * m..(i + 1) * m], x);
+    }
+}
+
+/// Dot product with eight independent lanes (vectorisable without reassociation; the lane
+/// order is fixed, so the result does not depend on the SIMD width).
+#[inline]
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    let mut acc = [0.0f64; 8];
+    let ca = a.chunks_exact(8);
+    let cb = b.chunks_exact(8);
+    let (ta, tb) = (ca.remainder(), cb.remainder());
+    for (x, y) in ca.zip(cb) {
+        for l in 0..8 {
+            acc[l] += x[l] * y[l];
+        }
+    }
+    let mut tail = 0.0;
+    for (x, y) in ta.iter().zip(tb) {
+        tail += x * y;
+    }
+    ((acc[0] + acc[4]) + (acc[1] + acc[5])) + ((acc[2] + acc[6]) + (acc[3] + acc[7])) + tail
+}
+
+/// `y += f x`.
+#[inline]
+fn axpy(f: f64, x: &[f64], y: &mut [f64]) {
+    for (yi, xi) in y.iter_mut().zip(x) {
+        *yi += f * xi;
+    }
+}

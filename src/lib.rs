@@ -15,3 +15,4 @@ pub mod contact;
 pub mod fe;
 pub mod rom;
 pub mod signal;
+pub mod sim;

@@ -133,6 +133,18 @@ pub fn cantilever(l: f64, b: f64, t: f64, n: usize) -> Cantilever {
 /// (axial) flexibility. Modes sorted by frequency; the reference mode is 1FU. Outputs:
 /// "lower_tip", "upper_tip".
 pub fn two_cantilevers(n: usize, clearance: f64, friction: f64, zeta: f64) -> Rom {
+    two_cantilevers_with_layer(n, clearance, friction, zeta, 0.0)
+}
+
+/// [`two_cantilevers`] with an elastic layer of normal flexibility `layer` (m/N) between the
+/// tips, added to the residual flexibility of the normal gap.
+pub fn two_cantilevers_with_layer(
+    n: usize,
+    clearance: f64,
+    friction: f64,
+    zeta: f64,
+    layer: f64,
+) -> Rom {
     let l = 0.3;
     let lower = cantilever(l, 0.02, 0.006, n);
     let upper = cantilever(l, 0.02, 0.0065, n);
@@ -158,7 +170,7 @@ pub fn two_cantilevers(n: usize, clearance: f64, friction: f64, zeta: f64) -> Ro
     let axial = l / (e * 0.02 * 0.006) + l / (e * 0.02 * 0.0065);
     let phi_g = Mat::from_fn(3, m, |r, i| if r == 0 { modes[i].1 } else { 0.0 });
     let g_res = Mat::from_fn(3, 3, |r, s| match (r, s) {
-        (0, 0) => res_l + res_u,
+        (0, 0) => res_l + res_u + layer,
         (1, 1) | (2, 2) => axial,
         _ => 0.0,
     });

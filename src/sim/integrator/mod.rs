@@ -832,10 +832,11 @@ fn check_rom(rom: &Rom) -> Result<(usize, usize), SimError> {
     dim("g_res rows (3 x pairs)".into(), rom.g_res.nrows(), nb)?;
     dim("g_res columns (3 x pairs)".into(), rom.g_res.ncols(), nb)?;
     if rom.meta.reference_mode >= m {
-        return Err(SimError::RomDimension {
-            what: "meta.reference_mode (index into the modes)".into(),
-            found: rom.meta.reference_mode,
-            expected: m,
+        return Err(SimError::RomValue {
+            what: "meta.reference_mode",
+            index: 0,
+            value: rom.meta.reference_mode as f64,
+            expected: "the index of the 1FU mode, below the number of modes",
         });
     }
     for (o, out) in rom.outputs.iter().enumerate() {

@@ -18,3 +18,4 @@ pub mod plan;
 pub mod report;
 pub mod rom;
 pub mod signal;
+pub mod sim;

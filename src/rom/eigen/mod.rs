@@ -39,6 +39,10 @@ use lanczos::{LanczosRun, LANCZOS_PAR};
 /// forward error, about eps cond(K - sigma M), which reaches 1e-9..1e-8 on fine solid meshes.
 const EXPLICIT_TOLERANCE: f64 = 1e-7;
 
+/// Pivot magnitude ratio (smallest / largest) of the factorisation of K below which K is
+/// taken as singular.
+const SINGULAR_PIVOT_RATIO: f64 = 1e-13;
+
 /// Tuning of the eigen solver. The defaults suit FE models of 1e3-1e5 DOFs.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct EigenOptions {
@@ -271,7 +275,9 @@ impl<'a> EigenSolver<'a> {
         let mut shifted = Shifted::new(k, m)?;
         let f = match shifted.factor(k.val(), m.val(), 0.0) {
             Ok(f) => f,
-            Err(RomError::Factorisation { detail, .. }) if detail.contains("zero pivot") => {
+            Err(RomError::Factorisation { detail, .. })
+                if detail.contains("zero pivot") || detail.contains("ZeroPivot") =>
+            {
                 return Err(RomError::StiffnessNotPositiveDefinite {
                     negative: 0,
                     zero: 1,
@@ -279,10 +285,13 @@ impl<'a> EigenSolver<'a> {
             }
             Err(e) => return Err(e),
         };
-        if f.negative > 0 {
+        // NOTE: a rigid-body motion (an unclamped part) leaves a pivot at roundoff level,
+        // about eps times the largest; a clamped model's smallest pivot is 1 / cond(K), far
+        // above that even for stiff interface layers.
+        if f.negative > 0 || f.pivot_ratio < SINGULAR_PIVOT_RATIO {
             return Err(RomError::StiffnessNotPositiveDefinite {
                 negative: f.negative,
-                zero: 0,
+                zero: usize::from(f.pivot_ratio < SINGULAR_PIVOT_RATIO),
             });
         }
         let stats = EigenStats {

@@ -676,8 +676,11 @@ fn all_modes_retained_is_rejected() {
     assert!(reduce(&model, ModeSelection::Count { count: 3 }, &mut |_| {}).is_ok());
 }
 
-/// Size and speed on a model of rig size (about 20k DOFs, 16 x 13 = 208 pairs): run with
-/// `cargo test --release --test macneal_properties -- --ignored --nocapture`.
+/// Size and speed on hex8 cantilevers of rig size (default 150 x 12 x 3 cells per beam,
+/// 46800 DOFs, 16 x 13 = 208 pairs): run with
+/// `cargo test --release --test macneal_properties -- --ignored --nocapture`; the environment
+/// variables RIG_SIZE (nx,ny,nz,pair stations), RATIO (cutoff / f(1FU)) and BLOCK (Lanczos
+/// block size) vary the case, RUST_LOG=rigtwin=debug shows the Lanczos runs.
 #[test]
 #[ignore = "takes tens of seconds in a debug build; a speed measurement"]
 fn rig_sized_model_builds() {

@@ -38,9 +38,9 @@ pub enum RomError {
     },
     /// The stiffness matrix is not positive definite (a part is not clamped or tied).
     #[error(
-        "stiffness matrix is not positive definite: {negative} negative and {zero} zero pivots \
-         in its LDL^T factorisation; check that every part is clamped or tied to a clamped part \
-         by an interface layer"
+        "stiffness matrix is not positive definite: {negative} negative and {zero} zero (or \
+         roundoff-level) pivots in its LDL^T factorisation; check that every part is clamped or \
+         tied to a clamped part by an interface layer"
     )]
     StiffnessNotPositiveDefinite {
         /// Negative pivots.

@@ -19,6 +19,8 @@ pub(crate) struct Factor {
     pub(crate) sigma: f64,
     values: Vec<f64>,
     pub(crate) negative: usize,
+    /// Smallest over largest pivot magnitude.
+    pub(crate) pivot_ratio: f64,
 }
 
 /// The union pattern of K and M (lower triangle), the value maps and the symbolic analysis,
@@ -148,7 +150,10 @@ impl Shifted {
             )
             .map_err(|e| fail(format!("{e:?}")))?;
         let (mut negative, mut zero, mut non_finite) = (0usize, 0usize, false);
+        let (mut min_abs, mut max_abs) = (f64::INFINITY, 0.0f64);
         let mut count = |d: f64| {
+            min_abs = min_abs.min(d.abs());
+            max_abs = max_abs.max(d.abs());
             if !d.is_finite() {
                 non_finite = true;
             } else if d < 0.0 {
@@ -185,6 +190,7 @@ impl Shifted {
             sigma,
             values,
             negative,
+            pivot_ratio: min_abs / max_abs,
         })
     }
 

@@ -23,13 +23,15 @@ use faer::{Accum, Mat, MatMut, MatRef};
 
 use crate::rom::error::RomError;
 
+mod convergence;
 mod dense;
 mod factor;
 mod lanczos;
+mod slicing;
 
 pub use dense::symmetric_eigen;
-use factor::{shift_hz, Factor, Shifted, SplitMix};
-use lanczos::{LanczosRun, LANCZOS_PAR};
+use factor::{Factor, Shifted, SplitMix};
+use lanczos::LanczosRun;
 
 /// Acceptance of a Ritz pair by its explicitly computed residual `||S y - theta y||_M`,
 /// relative to |theta|.
@@ -38,6 +40,10 @@ use lanczos::{LanczosRun, LANCZOS_PAR};
 /// accuracy comes from the Lanczos tolerance. The explicit residual cannot go below the solve's
 /// forward error, about eps cond(K - sigma M), which reaches 1e-9..1e-8 on fine solid meshes.
 const EXPLICIT_TOLERANCE: f64 = 1e-7;
+
+/// Pivot magnitude ratio (smallest / largest) of the factorisation of K below which K is
+/// taken as singular.
+const SINGULAR_PIVOT_RATIO: f64 = 1e-13;
 
 /// Tuning of the eigen solver. The defaults suit FE models of 1e3-1e5 DOFs.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -271,7 +277,9 @@ impl<'a> EigenSolver<'a> {
         let mut shifted = Shifted::new(k, m)?;
         let f = match shifted.factor(k.val(), m.val(), 0.0) {
             Ok(f) => f,
-            Err(RomError::Factorisation { detail, .. }) if detail.contains("zero pivot") => {
+            Err(RomError::Factorisation { detail, .. })
+                if detail.contains("zero pivot") || detail.contains("ZeroPivot") =>
+            {
                 return Err(RomError::StiffnessNotPositiveDefinite {
                     negative: 0,
                     zero: 1,
@@ -279,10 +287,13 @@ impl<'a> EigenSolver<'a> {
             }
             Err(e) => return Err(e),
         };
-        if f.negative > 0 {
+        // NOTE: a rigid-body motion (an unclamped part) leaves a pivot at roundoff level,
+        // about eps times the largest; a clamped model's smallest pivot is 1 / cond(K), far
+        // above that even for stiff interface layers.
+        if f.negative > 0 || f.pivot_ratio < SINGULAR_PIVOT_RATIO {
             return Err(RomError::StiffnessNotPositiveDefinite {
                 negative: f.negative,
-                zero: 0,
+                zero: usize::from(f.pivot_ratio < SINGULAR_PIVOT_RATIO),
             });
         }
         let stats = EigenStats {
@@ -435,336 +446,6 @@ impl<'a> EigenSolver<'a> {
         Ok(())
     }
 
-    /// Starts or resumes the run at sigma = 0; returns the number of new pairs.
-    fn run_at_zero(
-        &mut self,
-        f: &Factor,
-        target: EigenTarget,
-        progress: &mut dyn FnMut(EigenProgress),
-    ) -> Result<usize, RomError> {
-        let (mut run, id) = match self.active.take() {
-            Some(a) => a,
-            None => {
-                let id = self.stats.runs;
-                self.stats.runs += 1;
-                let (run, cols) = LanczosRun::start(
-                    &self.shifted,
-                    f,
-                    self.m,
-                    Mat::zeros(self.n_dof(), 0),
-                    self.options.max_basis,
-                    self.options.block_size,
-                    &mut self.rng,
-                );
-                self.stats.operator_columns += cols;
-                (run, id)
-            }
-        };
-        let result = self.drive(&mut run, id, f, 0, target, progress)?;
-        let before = self.pairs.len();
-        self.merge(result, id);
-        self.last_shift = 0.0;
-        let new = self.pairs.len().saturating_sub(before);
-        tracing::debug!(
-            basis = run.len(),
-            pairs = self.pairs.len(),
-            "Lanczos run at zero"
-        );
-        if !run.is_full() {
-            self.active = Some((run, id));
-        }
-        Ok(new)
-    }
-
-    /// Replaces the unverified pairs of run `id` by the run's current converged pairs.
-    fn merge(&mut self, result: RunResult, id: usize) {
-        let v = self.verified_lambda;
-        self.pairs.retain(|p| p.run != id || p.lambda <= v);
-        for p in result.pairs {
-            if p.lambda <= v {
-                continue;
-            }
-            let at = self.pairs.partition_point(|q| q.lambda < p.lambda);
-            self.pairs.insert(at, p);
-        }
-        self.estimates = result.estimates;
-    }
-
-    /// Chooses and factorises the next shift. Extension shifts are pulled back toward the
-    /// converged range while their inertia count says that more eigenvalues are missing below
-    /// them than one Lanczos run converges comfortably.
-    fn place_shift(&mut self, target: EigenTarget, cap: Option<f64>) -> Result<Factor, RomError> {
-        let v = self.verified_lambda;
-        let (mut sigma, extension) = self.next_shift(target);
-        if let Some(c) = cap {
-            sigma = sigma.min(v + 0.5 * (c - v));
-        }
-        let budget = (self.options.max_basis / 3).max(self.options.block_size);
-        for _ in 0..8 {
-            if sigma.partial_cmp(&v) != Some(std::cmp::Ordering::Greater)
-                || (sigma - v) <= 1e-9 * sigma.abs()
-            {
-                return Err(self
-                    .not_converged(target, format!("no progress beyond {:.6e} Hz", shift_hz(v))));
-            }
-            let f = self.factor_checked(sigma)?;
-            let known = self.pairs.iter().filter(|p| p.lambda < f.sigma).count();
-            let need = f.negative.saturating_sub(known);
-            if !extension || need <= budget {
-                return Ok(f);
-            }
-            let u = self
-                .pairs
-                .iter()
-                .map(|p| p.lambda)
-                .filter(|&l| l < f.sigma)
-                .fold(v, f64::max);
-            sigma = u + (f.sigma - u) * (budget as f64 / need as f64).clamp(0.1, 0.7);
-        }
-        self.factor_checked(sigma)
-    }
-
-    /// Lanczos runs at the shift of `f` until every eigenvalue between the verified bound and
-    /// the shift is found (the count comes from the inertia of `f`) and the target looks
-    /// reached or the basis is full.
-    fn runs_at_shift(
-        &mut self,
-        f: &Factor,
-        target: EigenTarget,
-        progress: &mut dyn FnMut(EigenProgress),
-    ) -> Result<ShiftOutcome, RomError> {
-        let (sigma, negative) = (f.sigma, f.negative);
-        let known_below = self.pairs.iter().filter(|p| p.lambda < sigma).count();
-        if known_below > negative {
-            return Err(self.not_converged(
-                target,
-                format!(
-                    "inertia count {negative} below {:.6e} Hz is less than the {known_below} \
-                     eigenpairs found there",
-                    shift_hz(sigma)
-                ),
-            ));
-        }
-        let need = negative - known_below;
-        let within = match target {
-            EigenTarget::Count(c) => negative >= c,
-            EigenTarget::BelowOmega(w) => sigma > w * w,
-        };
-        if need == 0 && within {
-            return Ok(ShiftOutcome::Verified { sigma, negative });
-        }
-        // A run at another shift: the run at sigma = 0 can no longer be resumed.
-        self.active = None;
-        let mut found_below = 0usize;
-        let mut runs = 0usize;
-        loop {
-            let v = self.verified_lambda;
-            // Deflation: the known pairs near the shift.
-            let window_lo = v - (sigma - v).max(0.0);
-            let defl_idx: Vec<usize> = (0..self.pairs.len())
-                .filter(|&i| self.pairs[i].lambda >= window_lo)
-                .collect();
-            let defl = Mat::<f64>::from_fn(self.n_dof(), defl_idx.len(), |i, j| {
-                self.pairs[defl_idx[j]].vector[i]
-            });
-            let id = self.stats.runs;
-            self.stats.runs += 1;
-            runs += 1;
-            let (mut run, cols) = LanczosRun::start(
-                &self.shifted,
-                f,
-                self.m,
-                defl,
-                self.options.max_basis,
-                self.options.block_size,
-                &mut self.rng,
-            );
-            self.stats.operator_columns += cols;
-            let result = self.drive(&mut run, id, f, need - found_below, target, progress)?;
-            let new_below = result
-                .pairs
-                .iter()
-                .filter(|p| p.lambda < sigma && p.lambda > v)
-                .count();
-            let new_total = result.pairs.len();
-            found_below += new_below;
-            self.merge(result, id);
-            self.last_shift = sigma;
-            tracing::debug!(
-                shift_hz = shift_hz(sigma),
-                need,
-                found_below,
-                new_total,
-                basis = run.len(),
-                "Lanczos run"
-            );
-            if found_below > need {
-                return Err(self.not_converged(
-                    target,
-                    format!(
-                        "more eigenpairs converged below {:.6e} Hz than its inertia count \
-                         allows ({found_below} > {need})",
-                        shift_hz(sigma)
-                    ),
-                ));
-            }
-            if found_below == need {
-                return Ok(ShiftOutcome::Verified { sigma, negative });
-            }
-            // Missing eigenvalues below the shift: run again (deflated against what was found)
-            // while that makes progress, otherwise try a shift nearer the verified bound.
-            if runs > self.options.max_restarts || new_total == 0 {
-                return Ok(ShiftOutcome::Incomplete { sigma });
-            }
-        }
-    }
-
-    fn not_converged(&self, target: EigenTarget, detail: String) -> RomError {
-        RomError::EigenNotConverged {
-            found: self.verified_count,
-            wanted: target.describe(),
-            detail,
-        }
-    }
-
-    fn report(&self, target: EigenTarget, progress: &mut dyn FnMut(EigenProgress), extra: usize) {
-        let lmax = self.pairs.last().map_or(0.0, |p| p.lambda);
-        progress(EigenProgress {
-            converged: self.pairs.len() + extra,
-            ritz_max_hz: shift_hz(lmax),
-            wanted: match target {
-                EigenTarget::Count(n) => Some(n),
-                EigenTarget::BelowOmega(_) => None,
-            },
-            target_hz: match target {
-                EigenTarget::Count(_) => None,
-                EigenTarget::BelowOmega(w) => Some(w / (2.0 * std::f64::consts::PI)),
-            },
-            shifts: self.stats.factorisations,
-        });
-    }
-
-    /// Factorises `K - sigma M`, nudging sigma upward when the factorisation fails or is
-    /// inaccurate (sigma too close to an eigenvalue of a leading submatrix).
-    fn factor_checked(&mut self, sigma: f64) -> Result<Factor, RomError> {
-        let mut sigma = sigma;
-        let mut last_err = None;
-        for _ in 0..4 {
-            let t0 = Instant::now();
-            let res = self.shifted.factor(self.k.val(), self.m.val(), sigma);
-            self.stats.factorisations += 1;
-            self.stats.factorisation_seconds += t0.elapsed().as_secs_f64();
-            match res {
-                Ok(f) => {
-                    let err = self.backward_error(&f);
-                    // NOTE: LDL^T without pivoting of the indefinite K - sigma M is stable as
-                    // long as no pivot is tiny; a random solve's backward error detects the rare
-                    // bad shift, which is then moved.
-                    if err < 1e-10 {
-                        return Ok(f);
-                    }
-                    last_err = Some(RomError::Factorisation {
-                        shift_hz: shift_hz(sigma),
-                        detail: format!("backward error {err:.2e} of a test solve"),
-                    });
-                }
-                Err(e) => last_err = Some(e),
-            }
-            sigma *= 1.0 + 1e-3;
-        }
-        Err(last_err.unwrap_or(RomError::Factorisation {
-            shift_hz: shift_hz(sigma),
-            detail: "failed".into(),
-        }))
-    }
-
-    /// Normwise backward error of a solve with `f` on a random right-hand side.
-    fn backward_error(&mut self, f: &Factor) -> f64 {
-        let n = self.n_dof();
-        let par = LANCZOS_PAR;
-        let b = Mat::<f64>::from_fn(n, 1, |_, _| self.rng.next_f64());
-        let mut x = b.clone();
-        let mut mem = self.shifted.solve_scratch(1, par);
-        self.shifted.solve(f, x.as_mut(), &mut mem, par);
-        let mut r = b.clone();
-        sparse_dense_matmul(r.as_mut(), Accum::Add, self.k, x.as_ref(), -1.0, par);
-        sparse_dense_matmul(r.as_mut(), Accum::Add, self.m, x.as_ref(), f.sigma, par);
-        let norm1 = |a: SparseColMatRef<'_, usize, f64>| {
-            (0..a.ncols())
-                .map(|j| a.val_of_col(j).iter().map(|v| v.abs()).sum::<f64>())
-                .fold(0.0, f64::max)
-        };
-        let anorm = norm1(self.k) + f.sigma.abs() * norm1(self.m);
-        let xn = x.col(0).iter().map(|v| v.abs()).sum::<f64>();
-        let bn = b.col(0).iter().map(|v| v.abs()).sum::<f64>();
-        let rn = r.col(0).iter().map(|v| v.abs()).sum::<f64>();
-        rn / (anorm * xn + bn)
-    }
-
-    /// The next shift: an inertia check point in a gap above the wanted pairs when the known
-    /// pairs reach the target, otherwise a point beyond the converged range.
-    fn next_shift(&self, target: EigenTarget) -> (f64, bool) {
-        let lam: Vec<f64> = self.pairs.iter().map(|p| p.lambda).collect();
-        let gap_ok = |a: f64, b: f64| b - a > 1e-6 * b.abs().max(f64::MIN_POSITIVE);
-        match target {
-            EigenTarget::Count(n) => {
-                for j in n.max(1)..lam.len() {
-                    if lam[j] > self.verified_lambda && gap_ok(lam[j - 1], lam[j]) {
-                        let lo = lam[j - 1].max(self.verified_lambda);
-                        return (0.5 * (lo + lam[j]), false);
-                    }
-                }
-            }
-            EigenTarget::BelowOmega(w) => {
-                let lc = w * w;
-                let j = lam.partition_point(|&l| l <= lc);
-                if j < lam.len() {
-                    let lo = lc.max(self.verified_lambda);
-                    return (0.5 * (lo + lam[j]), false);
-                }
-            }
-        }
-        // Extend beyond the converged range: a shift in the widest relative gap among the
-        // Ritz estimates around the q-th one above the converged range.
-        // NOTE: a shift next to an eigenvalue makes the factorisation ill-conditioned and the
-        // Ritz values far from it inaccurate; gaps keep it away from (estimated) eigenvalues.
-        let u = lam.last().copied().unwrap_or(0.0).max(self.verified_lambda);
-        let mut pts = vec![u];
-        pts.extend(
-            self.estimates
-                .iter()
-                .copied()
-                .filter(|&e| e > u * (1.0 + 1e-8)),
-        );
-        if let EigenTarget::BelowOmega(w) = target {
-            let lc = w * w;
-            if lc > u && pts.last().is_some_and(|&l| l > lc) {
-                let j = pts.partition_point(|&l| l <= lc);
-                return (0.5 * (lc.max(pts[j - 1]) + pts[j]), true);
-            }
-        }
-        let q = (self.options.max_basis / 8).max(self.options.block_size);
-        let sigma = if pts.len() > 1 {
-            let lo = (q / 2).max(1).min(pts.len() - 1);
-            let hi = (2 * q).min(pts.len() - 1);
-            let j = (lo..=hi)
-                .max_by(|&a, &b| {
-                    let ga = (pts[a] - pts[a - 1]) / pts[a];
-                    let gb = (pts[b] - pts[b - 1]) / pts[b];
-                    ga.total_cmp(&gb)
-                })
-                .unwrap_or(lo);
-            0.5 * (pts[j - 1] + pts[j])
-        } else {
-            u + 0.5 * (u - self.last_shift).max(1e-3 * u.abs())
-        };
-        if sigma > u {
-            (sigma, true)
-        } else {
-            (u * (1.0 + 1e-3) + f64::MIN_POSITIVE, true)
-        }
-    }
-
     /// The selected verified eigenpairs (ascending) for `target`.
     pub fn modes(&self, target: EigenTarget) -> Modes {
         let verified = &self.pairs[..self.verified_count.min(self.pairs.len())];
@@ -779,228 +460,6 @@ impl<'a> EigenSolver<'a> {
             vectors: Mat::from_fn(n, take, |i, j| sel[j].vector[i]),
             residuals: sel.iter().map(|p| p.residual).collect(),
         }
-    }
-
-    /// Drives `run` (id `id`) until it may stop or its basis is full; returns its converged
-    /// pairs beyond the verified bound.
-    fn drive(
-        &mut self,
-        run: &mut LanczosRun,
-        id: usize,
-        f: &Factor,
-        need_below: usize,
-        target: EigenTarget,
-        progress: &mut dyn FnMut(EigenProgress),
-    ) -> Result<RunResult, RomError> {
-        let v = self.verified_lambda;
-        let sigma = f.sigma;
-        loop {
-            if run.len() == 0 && run.is_full() {
-                return Ok(RunResult {
-                    pairs: Vec::new(),
-                    estimates: Vec::new(),
-                });
-            }
-            if !run.is_full() {
-                self.stats.operator_columns += run.step(&self.shifted, f, self.m, &mut self.rng);
-            }
-            let k = run.len();
-            if k < run.next_check && !run.is_full() {
-                continue;
-            }
-            run.next_check = k + (k / 6).max(run.block());
-            let ritz = run.ritz()?;
-            let theta_max = ritz.theta.iter().fold(0.0f64, |a, t| a.max(t.abs()));
-            let lam: Vec<f64> = ritz
-                .theta
-                .iter()
-                .map(|&t| if t == 0.0 { f64::NAN } else { sigma + 1.0 / t })
-                .collect();
-            // NOTE: roundoff limits the attainable residual to about eps x theta_max; Ritz
-            // values far from the shift (|theta| < 1e-6 theta_max) are left to a later shift.
-            let conv: Vec<bool> = (0..k)
-                .map(|i| {
-                    ritz.theta[i] != 0.0
-                        && ritz.est[i] <= self.options.tolerance * ritz.theta[i].abs()
-                        && ritz.theta[i].abs() >= 1e-6 * theta_max
-                })
-                .collect();
-            let new_conv = (0..k).filter(|&i| conv[i] && lam[i] > v).count();
-            let own = self
-                .pairs
-                .iter()
-                .filter(|p| p.run == id && p.lambda > v)
-                .count();
-            self.report(target, progress, new_conv.saturating_sub(own));
-            if !(self.run_may_stop(target, f, id, need_below, &lam, &conv) || run.is_full()) {
-                continue;
-            }
-            // Ritz vectors of the converged pairs beyond the verified bound, checked by an
-            // explicit operator application.
-            let sel: Vec<usize> = (0..k).filter(|&i| conv[i] && lam[i] > v).collect();
-            let (vecs, mvecs) = run.vectors(ritz.y.as_ref(), &sel);
-            // Pairs near the shift carry at most eps theta_max / |theta| < 1e-13 roundoff;
-            // only those far from it are checked.
-            let far: Vec<usize> = (0..sel.len())
-                .filter(|&c| ritz.theta[sel[c]].abs() < 1e-3 * theta_max)
-                .collect();
-            let far_theta: Vec<f64> = far.iter().map(|&c| ritz.theta[sel[c]]).collect();
-            let n = self.n_dof();
-            let far_v = Mat::from_fn(n, far.len(), |r, c| vecs[(r, far[c])]);
-            let far_mv = Mat::from_fn(n, far.len(), |r, c| mvecs[(r, far[c])]);
-            let far_ok = self.explicit_check(f, far_v.as_ref(), far_mv.as_ref(), &far_theta);
-            let mut ok = vec![true; sel.len()];
-            for (i, &c) in far.iter().enumerate() {
-                ok[c] = far_ok[i];
-            }
-            let mut conv2 = conv.clone();
-            for (c, &i) in sel.iter().enumerate() {
-                conv2[i] = ok[c];
-            }
-            if !(self.run_may_stop(target, f, id, need_below, &lam, &conv2) || run.is_full()) {
-                continue;
-            }
-            let keep: Vec<usize> = (0..sel.len()).filter(|&c| ok[c]).collect();
-            let v_keep = Mat::from_fn(n, keep.len(), |r, c| vecs[(r, keep[c])]);
-            let mv_keep = Mat::from_fn(n, keep.len(), |r, c| mvecs[(r, keep[c])]);
-            let l_keep: Vec<f64> = keep.iter().map(|&c| lam[sel[c]]).collect();
-            let pairs = self.make_pairs(v_keep, mv_keep, &l_keep, id)?;
-            let mut estimates: Vec<f64> = (0..k)
-                .filter(|&i| !conv2[i] && lam[i] > sigma)
-                .map(|i| lam[i])
-                .collect();
-            estimates.sort_by(f64::total_cmp);
-            return Ok(RunResult { pairs, estimates });
-        }
-    }
-
-    /// Whether a Lanczos run may stop: every missing eigenvalue below the shift converged,
-    /// and the target looks reached (no unconverged Ritz value below the wanted range).
-    fn run_may_stop(
-        &self,
-        target: EigenTarget,
-        f: &Factor,
-        id: usize,
-        need_below: usize,
-        lam: &[f64],
-        conv: &[bool],
-    ) -> bool {
-        let (sigma, v) = (f.sigma, self.verified_lambda);
-        let k = lam.len();
-        let below = (0..k)
-            .filter(|&i| conv[i] && lam[i] < sigma && lam[i] > v)
-            .count();
-        if below < need_below {
-            return false;
-        }
-        // Plausible coverage: up to the first unconverged Ritz value above v.
-        let first_unconv = (0..k)
-            .filter(|&i| !conv[i] && lam[i] > v)
-            .map(|i| lam[i])
-            .fold(f64::INFINITY, f64::min);
-        // Known pairs in (lo, hi): stored ones (except this run's unverified ones, which its
-        // converged Ritz pairs replace) and this run's converged ones.
-        let known = |lo: f64, hi: f64| {
-            self.pairs
-                .iter()
-                .filter(|p| !(p.run == id && p.lambda > v))
-                .filter(|p| p.lambda > lo && p.lambda < hi)
-                .count()
-                + (0..k)
-                    .filter(|&i| conv[i] && lam[i] > v.max(lo) && lam[i] < hi)
-                    .count()
-        };
-        match target {
-            EigenTarget::Count(c) => f.negative >= c || known(f64::NEG_INFINITY, first_unconv) > c,
-            EigenTarget::BelowOmega(wc) => {
-                let lc = wc * wc;
-                sigma > lc || (first_unconv > lc && known(lc, first_unconv) > 0)
-            }
-        }
-    }
-
-    /// Explicit convergence check of Ritz vectors `y` (M-normalised columns, `my = M y`) with
-    /// Ritz values `theta` of the operator of `f`.
-    fn explicit_check(
-        &mut self,
-        f: &Factor,
-        y: MatRef<'_, f64>,
-        my: MatRef<'_, f64>,
-        theta: &[f64],
-    ) -> Vec<bool> {
-        let par = LANCZOS_PAR;
-        let (n, s) = (y.nrows(), y.ncols());
-        if s == 0 {
-            return Vec::new();
-        }
-        let mut sy = my.to_owned();
-        let mut mem = self.shifted.solve_scratch(s.min(64), par);
-        let mut c = 0;
-        while c < s {
-            let w = 64.min(s - c);
-            self.shifted
-                .solve(f, sy.as_mut().subcols_mut(c, w), &mut mem, par);
-            c += w;
-        }
-        self.stats.operator_columns += s;
-        for c in 0..s {
-            for i in 0..n {
-                sy[(i, c)] -= theta[c] * y[(i, c)];
-            }
-        }
-        let mut mr = Mat::<f64>::zeros(n, s);
-        sparse_dense_matmul(mr.as_mut(), Accum::Replace, self.m, sy.as_ref(), 1.0, par);
-        (0..s)
-            .map(|c| {
-                let r2: f64 = (0..n).map(|i| sy[(i, c)] * mr[(i, c)]).sum();
-                r2.max(0.0).sqrt() <= EXPLICIT_TOLERANCE * theta[c].abs()
-            })
-            .collect()
-    }
-
-    /// Converged Ritz pairs (M-normalised) with their residuals.
-    ///
-    /// NOTE: the eigenvalue is the Ritz value `sigma + 1 / theta`, not the Rayleigh quotient
-    /// `phi^T K phi`: the latter sums terms of size lambda_max |phi|^2 and loses about
-    /// eps lambda_max / lambda relative accuracy (1e-8 for the lowest mode of a fine solid
-    /// mesh), while theta comes from the smooth operator S.
-    fn make_pairs(
-        &self,
-        vecs: Mat<f64>,
-        mvecs: Mat<f64>,
-        lambda: &[f64],
-        run: usize,
-    ) -> Result<Vec<Pair>, RomError> {
-        let par = LANCZOS_PAR;
-        let (n, s) = (vecs.nrows(), vecs.ncols());
-        let mut kv = Mat::<f64>::zeros(n, s);
-        sparse_dense_matmul(kv.as_mut(), Accum::Replace, self.k, vecs.as_ref(), 1.0, par);
-        let mut out = Vec::with_capacity(s);
-        for j in 0..s {
-            let vmv: f64 = (0..n).map(|i| vecs[(i, j)] * mvecs[(i, j)]).sum();
-            let lambda = lambda[j];
-            if vmv.is_nan() || vmv <= 0.0 || !lambda.is_finite() {
-                return Err(RomError::NonFinite {
-                    what: "a Ritz vector (zero mass or non-finite)".into(),
-                });
-            }
-            let (mut r2, mut m2) = (0.0, 0.0);
-            for i in 0..n {
-                let r = kv[(i, j)] - lambda * mvecs[(i, j)];
-                r2 += r * r;
-                m2 += mvecs[(i, j)] * mvecs[(i, j)];
-            }
-            // The relative residual is scale invariant.
-            let residual = r2.sqrt() / (lambda.abs() * m2.sqrt()).max(f64::MIN_POSITIVE);
-            let scale = 1.0 / vmv.sqrt();
-            out.push(Pair {
-                lambda,
-                vector: (0..n).map(|i| vecs[(i, j)] * scale).collect(),
-                residual,
-                run,
-            });
-        }
-        Ok(out)
     }
 }
 

@@ -159,3 +159,40 @@ fn below_target_and_resume() {
     }
     eprintln!("stats {:?}", solver.stats());
 }
+
+#[test]
+fn unclamped_stiffness_is_rejected() {
+    // A free spring chain: a rigid-body mode, K singular.
+    let n = 40;
+    let mut kt = Vec::new();
+    for i in 0..n - 1 {
+        kt.push(Triplet::new(i, i, 1e6));
+        kt.push(Triplet::new(i + 1, i + 1, 1e6));
+        kt.push(Triplet::new(i, i + 1, -1e6));
+        kt.push(Triplet::new(i + 1, i, -1e6));
+    }
+    let mt: Vec<_> = (0..n).map(|i| Triplet::new(i, i, 1.0)).collect();
+    let k = SparseColMat::try_new_from_triplets(n, n, &kt).unwrap();
+    let m = SparseColMat::try_new_from_triplets(n, n, &mt).unwrap();
+    let err = EigenSolver::new(k.as_ref(), m.as_ref(), EigenOptions::default())
+        .err()
+        .expect("singular K is rejected");
+    assert!(
+        matches!(err, RomError::StiffnessNotPositiveDefinite { .. }),
+        "{err}"
+    );
+    // Indefinite K: a negative spring to ground.
+    let mut kt2 = kt.clone();
+    kt2.push(Triplet::new(0, 0, -5e5));
+    let k2 = SparseColMat::try_new_from_triplets(n, n, &kt2).unwrap();
+    let err = EigenSolver::new(k2.as_ref(), m.as_ref(), EigenOptions::default())
+        .err()
+        .expect("indefinite K is rejected");
+    assert!(
+        matches!(
+            err,
+            RomError::StiffnessNotPositiveDefinite { negative: 1, .. }
+        ),
+        "{err}"
+    );
+}

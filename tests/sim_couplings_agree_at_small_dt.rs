@@ -70,12 +70,18 @@ fn explicit_and_end_of_step_couplings_converge_to_the_same_response() {
     let limits = rigtwin::sim::stability_limits(&rom).unwrap();
     assert!(limits.steps_per_period_closed() < 1000.0);
     let d: Vec<f64> = STEPS.iter().map(|&s| difference(s)).collect();
-    println!("explicit vs end of step, relative RMS difference at {STEPS:?} steps per period: {d:?}");
+    println!(
+        "explicit vs end of step, relative RMS difference at {STEPS:?} steps per period: {d:?}"
+    );
     for w in d.windows(2) {
         let ratio = w[0] / w[1];
         assert!((1.5..3.0).contains(&ratio), "not first order: {d:?}");
     }
-    assert!(d[4] < 0.006, "couplings differ by {} at the smallest step", d[4]);
+    assert!(
+        d[4] < 0.006,
+        "couplings differ by {} at the smallest step",
+        d[4]
+    );
 }
 
 /// Relative RMS change of one coupling's history when dt halves, for each step of `STEPS`
@@ -114,4 +120,3 @@ fn explicit_coupling_is_second_order_and_end_of_step_first_order() {
         }
     }
 }
-

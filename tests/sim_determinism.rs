@@ -79,10 +79,18 @@ const STEPS: u64 = 30_000;
 fn same_inputs_give_bit_identical_outputs() {
     let a = run(IntegratorParameters::default(), false, STEPS);
     let b = run(IntegratorParameters::default(), false, STEPS);
-    assert!(a.closed_steps > 100, "the test needs contact ({} closed steps)", a.closed_steps);
+    assert!(
+        a.closed_steps > 100,
+        "the test needs contact ({} closed steps)",
+        a.closed_steps
+    );
     assert_eq!(a.words.len(), b.words.len());
     assert!(a.words == b.words, "two runs differ");
-    println!("{} words compared, {} closed steps", a.words.len(), a.closed_steps);
+    println!(
+        "{} words compared, {} closed steps",
+        a.words.len(),
+        a.closed_steps
+    );
 }
 
 #[test]
@@ -102,7 +110,10 @@ fn bounded_open_prediction_gives_the_exact_prediction_trajectory() {
     let a = run(IntegratorParameters::default(), false, STEPS);
     let b = run(exact, false, STEPS);
     assert!(a.closed_steps > 100);
-    assert!(a.words == b.words, "bound-based and exact prediction differ");
+    assert!(
+        a.words == b.words,
+        "bound-based and exact prediction differ"
+    );
 }
 
 #[test]
@@ -131,7 +142,9 @@ fn stepped_sine_with_a_carried_state_is_deterministic() {
                 phase,
             };
             let mut sink = |o: &StepOutput<'_>| bits.push(o);
-            integ.run(&mut state, &excitation, 8_000, &mut sink).unwrap();
+            integ
+                .run(&mut state, &excitation, 8_000, &mut sink)
+                .unwrap();
         }
         (bits, state)
     };

@@ -46,7 +46,9 @@ fn open_contact_energy_does_not_drift_over_1000_periods() {
         accel: vec![0.0; 2],
         dt_sample: 1e4,
     };
-    let report = integ.run(&mut state, &excitation, total, &mut sink).unwrap();
+    let report = integ
+        .run(&mut state, &excitation, total, &mut sink)
+        .unwrap();
     assert_eq!(report.steps, total);
     assert_eq!(closed, 0, "the contact must stay open in this test");
     println!(
@@ -54,7 +56,10 @@ fn open_contact_energy_does_not_drift_over_1000_periods() {
          periods {band_first:.3e}, last 10 periods {band_last:.3e}"
     );
     assert!(lf_dev < 1e-10, "leapfrog energy drifts by {lf_dev:e}");
-    assert!(band_first > 1e-6, "the plain energy should oscillate (O((w dt)^2))");
+    assert!(
+        band_first > 1e-6,
+        "the plain energy should oscillate (O((w dt)^2))"
+    );
     assert!(
         band_last <= 1.05 * band_first,
         "mechanical energy band grew from {band_first:e} to {band_last:e}"

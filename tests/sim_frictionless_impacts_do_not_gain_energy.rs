@@ -7,7 +7,9 @@
 
 mod sim_support;
 
-use rigtwin::sim::{Coupling, Excitation, Integrator, IntegratorParameters, State, StepOutput, TimeStep};
+use rigtwin::sim::{
+    Coupling, Excitation, Integrator, IntegratorParameters, State, StepOutput, TimeStep,
+};
 
 /// Total energy before each impact over `periods` free periods.
 fn energies_before_impacts(coupling: Coupling, steps: f64, periods: f64) -> Vec<f64> {

@@ -103,7 +103,10 @@ fn non_finite_excitation_is_refused() {
             &mut NullSink,
         )
         .unwrap_err();
-    assert!(matches!(err, SimError::ExcitationSample { index: 42, .. }), "{err}");
+    assert!(
+        matches!(err, SimError::ExcitationSample { index: 42, .. }),
+        "{err}"
+    );
     let err = integ
         .run(
             &mut state,
@@ -134,7 +137,9 @@ fn excitation_that_does_not_cover_the_run_is_refused() {
         dt_sample: 10.0 * dt,
     };
     // 100 dt of samples: 101 steps (t = 0 ..= 100 dt) fit, 102 do not.
-    assert!(integ.run(&mut state, &excitation, 101, &mut NullSink).is_ok());
+    assert!(integ
+        .run(&mut state, &excitation, 101, &mut NullSink)
+        .is_ok());
     let mut state = integ.state_at_rest();
     let err = integ
         .run(&mut state, &excitation, 102, &mut NullSink)
@@ -200,7 +205,11 @@ fn invalid_rom_values_are_refused() {
     r.omega[3] = -1.0;
     assert!(matches!(
         Integrator::new(&r, IntegratorParameters::default()),
-        Err(SimError::RomValue { what: "omega", index: 3, .. })
+        Err(SimError::RomValue {
+            what: "omega",
+            index: 3,
+            ..
+        })
     ));
     let mut r = base.clone();
     r.phi_g[(0, 2)] = f64::NAN;
@@ -212,13 +221,19 @@ fn invalid_rom_values_are_refused() {
     r.meta.reference_mode = r.omega.len();
     assert!(matches!(
         Integrator::new(&r, IntegratorParameters::default()),
-        Err(SimError::RomValue { what: "meta.reference_mode", .. })
+        Err(SimError::RomValue {
+            what: "meta.reference_mode",
+            ..
+        })
     ));
     let mut r = base.clone();
     r.friction = -0.1;
     assert!(matches!(
         Integrator::new(&r, IntegratorParameters::default()),
-        Err(SimError::RomValue { what: "friction", .. })
+        Err(SimError::RomValue {
+            what: "friction",
+            ..
+        })
     ));
     let mut r = base.clone();
     r.g_res[(0, 1)] = 1e-3;

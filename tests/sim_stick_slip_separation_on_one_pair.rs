@@ -86,7 +86,11 @@ fn check_sticking(coupling: Coupling) {
         if s.a > 1.05 * a_c() {
             assert_eq!(s.state, PairState::Stick, "stuck at a = {}", s.a);
             let ln = normal_force(s.a);
-            assert!((s.lambda[0] - ln).abs() < 0.01 * f_max, "{} vs {ln}", s.lambda[0]);
+            assert!(
+                (s.lambda[0] - ln).abs() < 0.01 * f_max,
+                "{} vs {ln}",
+                s.lambda[0]
+            );
             assert!((s.lambda[1] - beta_t * ln).abs() < 0.01 * f_max);
             assert!(s.lambda[2].abs() < 1e-9 * f_max);
         }
@@ -97,7 +101,10 @@ fn check_sticking(coupling: Coupling) {
         .position(|s| s.state == PairState::Open)
         .map(|i| steps[top + i].a)
         .expect("the pair separates on unloading");
-    println!("{coupling:?}: separation at a / a_c = {:.5}", open_at / a_c());
+    println!(
+        "{coupling:?}: separation at a / a_c = {:.5}",
+        open_at / a_c()
+    );
     assert!(
         (open_at - a_c()).abs() < 0.03 * a_c(),
         "separation at a = {open_at}, expected {}",

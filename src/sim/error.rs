@@ -70,7 +70,9 @@ pub enum SimError {
         detail: String,
     },
     /// A sampled excitation contains a non-finite sample.
-    #[error("excitation: sample {index} of the base acceleration is {value} (samples must be finite)")]
+    #[error(
+        "excitation: sample {index} of the base acceleration is {value} (samples must be finite)"
+    )]
     ExcitationSample {
         /// Index of the first bad sample.
         index: usize,

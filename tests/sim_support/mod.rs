@@ -151,7 +151,13 @@ pub fn two_cantilevers_with_layer(
     // (omega, tip participation in the gap, beta, beam: 0 lower / 1 upper, tip value)
     let mut modes: Vec<(f64, f64, f64, usize, f64)> = vec![];
     for r in 0..n {
-        modes.push((lower.omega[r], -lower.tip[r], lower.beta[r], 0, lower.tip[r]));
+        modes.push((
+            lower.omega[r],
+            -lower.tip[r],
+            lower.beta[r],
+            0,
+            lower.tip[r],
+        ));
         modes.push((upper.omega[r], upper.tip[r], upper.beta[r], 1, upper.tip[r]));
     }
     modes.sort_by(|a, b| a.0.partial_cmp(&b.0).unwrap());

@@ -100,6 +100,10 @@ mod tests {
         }
         assert_eq!(dot(&a, &b).to_bits(), expected.to_bits());
         let naive: f64 = a.iter().sum();
-        assert_ne!(naive.to_bits(), expected.to_bits(), "test entries must be order-sensitive");
+        assert_ne!(
+            naive.to_bits(),
+            expected.to_bits(),
+            "test entries must be order-sensitive"
+        );
     }
 }

@@ -72,11 +72,9 @@ pub fn stability_limits(rom: &Rom) -> Result<StabilityLimits, SimError> {
         });
     }
     let g = Mat::<f64>::from_fn(nb, nb, |i, j| 0.5 * (rom.g_res[(i, j)] + rom.g_res[(j, i)]));
-    let llt = g
-        .llt(Side::Lower)
-        .map_err(|e| SimError::RomFlexibility {
-            detail: format!("Cholesky factorisation of the {nb} x {nb} matrix failed ({e:?})"),
-        })?;
+    let llt = g.llt(Side::Lower).map_err(|e| SimError::RomFlexibility {
+        detail: format!("Cholesky factorisation of the {nb} x {nb} matrix failed ({e:?})"),
+    })?;
     let mut z = rom.phi_g.clone();
     solve_lower_triangular_in_place(llt.L(), z.as_mut(), Par::Seq);
     let a = Mat::<f64>::from_fn(m, m, |i, j| {

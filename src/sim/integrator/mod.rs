@@ -469,7 +469,12 @@ impl Integrator {
         params.time_step = time_step;
         params.validate()?;
         let dt = resolve_dt(&time_step, self.limits.omega_ref);
-        check_time_step(dt, &self.limits, params.coupling, params.enforce_closed_bound)?;
+        check_time_step(
+            dt,
+            &self.limits,
+            params.coupling,
+            params.enforce_closed_bound,
+        )?;
         self.solver = self.model.set_dt(dt, &params.contact)?;
         self.params = params;
         Ok(())
@@ -717,11 +722,7 @@ impl Integrator {
 impl Model {
     /// Sets the time step: the damped leapfrog coefficients and the Delassus matrix, and
     /// returns a contact solver for it.
-    fn set_dt(
-        &mut self,
-        dt: f64,
-        contact: &ContactParameters,
-    ) -> Result<ContactSolver, SimError> {
+    fn set_dt(&mut self, dt: f64, contact: &ContactParameters) -> Result<ContactSolver, SimError> {
         let (m, nb) = (self.m, 3 * self.n_pairs);
         self.dt = dt;
         for i in 0..m {
@@ -840,7 +841,11 @@ fn check_rom(rom: &Rom) -> Result<(usize, usize), SimError> {
         });
     }
     for (o, out) in rom.outputs.iter().enumerate() {
-        dim(format!("outputs[{o}] ({}).c_eta", out.name), out.c_eta.len(), m)?;
+        dim(
+            format!("outputs[{o}] ({}).c_eta", out.name),
+            out.c_eta.len(),
+            m,
+        )?;
         dim(
             format!("outputs[{o}] ({}).c_lambda", out.name),
             out.c_lambda.len(),

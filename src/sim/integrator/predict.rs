@@ -160,12 +160,7 @@ impl Predictor {
             }
         }
         let (mut e_p, mut e_q) = (0.0, 0.0);
-        for ((&w, &xp), &xq) in self
-            .omega_high
-            .iter()
-            .zip(&x_p[low..])
-            .zip(&x_q[low..])
-        {
+        for ((&w, &xp), &xq) in self.omega_high.iter().zip(&x_p[low..]).zip(&x_q[low..]) {
             e_p += (w * xp) * (w * xp);
             e_q += (w * xq) * (w * xq);
         }

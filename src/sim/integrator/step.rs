@@ -228,7 +228,12 @@ impl Integrator {
                     }
                 }
             }
-            let (vf, fc, inv_a, v_new) = (&ws.vf[..m], &ws.f_c[..m], &md.inv_a[..m], &mut ws.v_new[..m]);
+            let (vf, fc, inv_a, v_new) = (
+                &ws.vf[..m],
+                &ws.f_c[..m],
+                &md.inv_a[..m],
+                &mut ws.v_new[..m],
+            );
             for i in 0..m {
                 v_new[i] = vf[i] + fc[i] * inv_a[i];
             }
@@ -308,7 +313,11 @@ impl Integrator {
                 for (a, &la) in l.iter().enumerate() {
                     if la != 0.0 {
                         let row = 3 * k + a;
-                        axpy(la, &md.g_res[row * nb..(row + 1) * nb], &mut ws.g_lambda_new);
+                        axpy(
+                            la,
+                            &md.g_res[row * nb..(row + 1) * nb],
+                            &mut ws.g_lambda_new,
+                        );
                     }
                 }
             }

@@ -2,12 +2,11 @@
 //! the cache) the default ROM and reports it; the stepped sine on the simulated rig joins it as
 //! the simulation and rig service land.
 
-use anyhow::Context;
 use clap::Args;
 use std::path::PathBuf;
 
 use super::progress::BuildProgress;
-use crate::rom::build::{build_hash, build_native, BuildOptions};
+use crate::rom::build::BuildOptions;
 use crate::rom::info::RomInfo;
 
 /// `rigtwin demo`
@@ -24,29 +23,27 @@ pub struct DemoArgs {
     pub quiet: bool,
 }
 
-/// Returns the cached default ROM, building it if the cache has none for the current rig
+/// Returns the cached ROM of `cfg`, building it if the cache has none for the current rig
 /// description (the cache key is the ROM's build hash).
 pub(crate) fn cached_rom(
     cfg: &crate::config::RigConfig,
     rebuild: bool,
     quiet: bool,
 ) -> anyhow::Result<(crate::rom::Rom, PathBuf, bool)> {
-    let selection = cfg.reduction.selection();
-    let hash = build_hash(cfg, &selection, "native");
-    let path = super::cache_dir().join(format!("{}-{}.rom", cfg.rig.name, &hash[..16]));
-    if !rebuild && path.exists() {
-        match crate::rom::file::read(&path) {
-            Ok(rom) if rom.meta.config_hash == hash => return Ok((rom, path, true)),
-            Ok(_) => tracing::warn!("cached ROM {} has another hash; rebuilding", path.display()),
-            Err(e) => tracing::warn!("cached ROM unreadable ({e}); rebuilding"),
-        }
-    }
     let progress = BuildProgress::new(quiet);
-    let rom = build_native(cfg, &BuildOptions::default(), &mut |e| progress.event(&e))?;
+    let (rom, path, outcome) = crate::rom::cache::load_or_build(
+        cfg,
+        &BuildOptions::default(),
+        &super::cache_dir(),
+        rebuild,
+        &mut |e| progress.event(&e),
+    )?;
     progress.finish();
-    crate::rom::file::write(&rom, &path)
-        .with_context(|| format!("caching the ROM in {}", path.display()))?;
-    Ok((rom, path, false))
+    Ok((
+        rom,
+        path,
+        outcome == crate::rom::cache::CacheOutcome::Reused,
+    ))
 }
 
 pub(crate) fn run(a: DemoArgs) -> anyhow::Result<()> {

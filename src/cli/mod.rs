@@ -7,6 +7,7 @@ mod demo;
 mod fe;
 mod progress;
 mod rom;
+mod simulate;
 
 use clap::{Parser, Subcommand};
 use std::path::PathBuf;
@@ -34,6 +35,8 @@ pub enum Command {
     /// The FE parent model: export to CalculiX.
     #[command(subcommand)]
     Fe(fe::FeCommand),
+    /// Virtual stepped sine of a test plan on the ROM, or a convergence study.
+    Simulate(simulate::SimulateArgs),
 }
 
 /// Entry point of the binary.
@@ -49,6 +52,7 @@ pub fn main() -> std::process::ExitCode {
         Command::Demo(a) => demo::run(a),
         Command::Rom(c) => rom::run(c),
         Command::Fe(c) => fe::run(c),
+        Command::Simulate(a) => simulate::run(a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

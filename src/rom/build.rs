@@ -225,6 +225,7 @@ fn finish(
     rom.meta.config_hash = build_hash(cfg, &selection, &source);
     rom.meta.source = source;
     rom.meta.rig_name = cfg.rig.name.clone();
+    rom.meta.beam_length = cfg.rig.beam_length;
     rom.meta.build_seconds = t0.elapsed().as_secs_f64();
     Ok(rom)
 }

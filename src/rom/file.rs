@@ -22,8 +22,8 @@ use std::path::{Path, PathBuf};
 
 /// Magic bytes at the start of every ROM file.
 pub const MAGIC: &[u8; 12] = b"RIGTWIN-ROM\n";
-/// Current format version. Bump on any incompatible change.
-pub const FORMAT_VERSION: u32 = 1;
+/// Current format version. Bump on any incompatible change (2: `meta.beam_length`).
+pub const FORMAT_VERSION: u32 = 2;
 
 /// Errors reading or writing a ROM file.
 #[derive(Debug, thiserror::Error)]
@@ -203,7 +203,11 @@ pub fn write(rom: &Rom, path: &Path) -> Result<(), RomFileError> {
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).map_err(io)?;
     }
-    let tmp = path.with_extension("rom.partial");
+    // NOTE: the temporary name is unique per process and thread, so concurrent writers of the
+    // same ROM (test binaries sharing a cache) never interleave inside one file.
+    static SEQ: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let seq = SEQ.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let tmp = path.with_extension(format!("rom.{}-{seq}.partial", std::process::id()));
     let mut f = std::fs::File::create(&tmp).map_err(io)?;
     f.write_all(&to_bytes(rom)).map_err(io)?;
     f.sync_all().map_err(io)?;
@@ -430,9 +434,9 @@ pub(crate) mod tests {
         let last = flipped.len() - 1;
         flipped[last] ^= 0x40;
         assert!(msg(&flipped).contains("checksum"));
-        let mut v2 = bytes.clone();
-        v2[12] = 2;
-        assert!(msg(&v2).contains("version 2"));
+        let mut v1 = bytes.clone();
+        v1[12] = 1;
+        assert!(msg(&v1).contains("version 1"));
         let mut extra = bytes;
         extra.push(0);
         assert!(msg(&extra).contains("trailing"));

@@ -182,6 +182,7 @@ pub fn reduce_with(
         config_hash: String::new(),
         source: String::new(),
         rig_name: String::new(),
+        beam_length: 0.0,
         n_dof: n,
         n_nodes: model.n_nodes(),
         n_elements: model.n_elements,
@@ -431,7 +432,7 @@ fn symmetrise(a: &mut Mat<f64>) {
 }
 
 /// Inverse of the residual flexibility by a dense Cholesky factorisation.
-fn invert_spd(g_res: &Mat<f64>, n_modes: usize) -> Result<Mat<f64>, RomError> {
+pub(crate) fn invert_spd(g_res: &Mat<f64>, n_modes: usize) -> Result<Mat<f64>, RomError> {
     use faer::linalg::solvers::DenseSolveCore;
     let c3 = g_res.nrows();
     let fail = |detail: String| RomError::ResidualFlexibilityNotPositive {

@@ -9,6 +9,7 @@
 //! `K_eta_eta = Omega^2 + Phi_g^T K_gg Phi_g`.
 
 pub mod build;
+pub mod cache;
 pub mod eigen;
 pub mod error;
 pub mod file;
@@ -16,6 +17,7 @@ pub mod info;
 pub mod labels;
 pub mod macneal;
 pub mod stability;
+mod truncate;
 
 pub use error::RomError;
 
@@ -114,6 +116,10 @@ pub struct RomMeta {
     pub source: String,
     /// Rig name from the description.
     pub rig_name: String,
+    /// Free length l of the beams (the length unit of test plans: levels and clearances are
+    /// given as fractions of l), m. 0 when unknown (synthetic ROMs).
+    #[serde(default)]
+    pub beam_length: f64,
     /// Free DOFs of the parent model.
     pub n_dof: usize,
     /// Mesh nodes and solid elements of the parent model.

@@ -1,6 +1,7 @@
 //! Time integration of the ROM: the leapfrog integrator with an implicit contact boundary
 //! ([`integrator`]), base excitation ([`excitation`]), energy terms ([`energy`]), per-step
-//! outputs and sinks ([`output`]) and the error type ([`error`]).
+//! outputs and sinks ([`output`]), the virtual stepped sine ([`stepped`]), the convergence
+//! studies ([`convergence`]) and the error type ([`error`]).
 //!
 //! Numerics only: no I/O, no clock, no threads inside a run; the hot loop does not allocate.
 //! A run is deterministic: the same ROM, parameters, state and excitation give bit-identical
@@ -10,11 +11,13 @@
 // NaN together with out-of-range values.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod convergence;
 pub mod energy;
 pub mod error;
 pub mod excitation;
 pub mod integrator;
 pub mod output;
+pub mod stepped;
 
 pub use energy::{Energy, EnergyAccounts};
 pub use error::SimError;

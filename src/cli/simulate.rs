@@ -1,0 +1,697 @@
+//! `rigtwin simulate`: the virtual stepped sine of a plan on a ROM (tests in parallel, one
+//! progress bar per test, JSON results and paper-style figures), and
+//! `rigtwin simulate convergence`: the time-step and mode convergence studies.
+
+use anyhow::{bail, Context};
+use clap::{Args, Subcommand, ValueEnum};
+use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use crate::contact::SweepMethod;
+use crate::plan::Plan;
+use crate::report::{
+    self, Beam, Convergence, ConvergenceKind, ConvergenceSignal, FigureOptions, FrequencyResponse,
+    ScalogramOptions, Source, TestCurve, TimeHistory, TimeWindow,
+};
+use crate::rom::Rom;
+use crate::sim::convergence::{dt_study, modes_study, ConvergenceSetup, ConvergenceStudy};
+use crate::sim::stepped::{run_plan, StepTrace, SteppedSineOptions, TestProgress, TestResult};
+use crate::sim::{Coupling, IntegratorParameters};
+
+/// `rigtwin simulate`
+#[derive(Args, Debug)]
+#[command(args_conflicts_with_subcommands = true)]
+pub struct SimulateArgs {
+    /// A study instead of a plan.
+    #[command(subcommand)]
+    pub command: Option<SimulateCommand>,
+    /// The stepped sine of a plan.
+    #[command(flatten)]
+    pub run: RunArgs,
+}
+
+/// Subcommands of `simulate`.
+#[derive(Subcommand, Debug)]
+pub enum SimulateCommand {
+    /// Convergence study (reference section 4.3): relative RMS error of the upper tip velocity
+    /// over the first periods against the finest run.
+    Convergence(ConvergenceArgs),
+}
+
+/// Where the ROM comes from.
+#[derive(Args, Debug, Clone)]
+pub struct RomSource {
+    /// ROM file (from `rigtwin rom build`).
+    #[arg(long, conflicts_with = "config")]
+    pub rom: Option<PathBuf>,
+    /// Rig description to build the ROM from (cached by build hash). Without --rom and
+    /// --config: the embedded default rig.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+}
+
+/// Contact coupling on the command line.
+#[derive(Clone, Copy, Debug, ValueEnum)]
+pub enum CouplingArg {
+    /// Contact imposed at the end of the step (stable through persistent contact).
+    EndOfStep,
+    /// The reference's coupling (stable only below the closed-contact bound).
+    Explicit,
+}
+
+/// Contact sweep method on the command line.
+#[derive(Clone, Copy, Debug, ValueEnum)]
+pub enum MethodArg {
+    /// Projected Gauss-Seidel.
+    GaussSeidel,
+    /// Projected Jacobi (the reference's).
+    Jacobi,
+    /// Projected Jacobi with Nesterov acceleration.
+    AcceleratedJacobi,
+}
+
+/// Integrator flags shared by the plan run and the studies.
+#[derive(Args, Debug, Clone)]
+pub struct IntegratorArgs {
+    /// Contact coupling.
+    #[arg(long, value_enum, default_value = "end-of-step")]
+    pub coupling: CouplingArg,
+    /// Contact solver sweep.
+    #[arg(long, value_enum, default_value = "gauss-seidel")]
+    pub contact_method: MethodArg,
+}
+
+impl IntegratorArgs {
+    fn parameters(&self) -> IntegratorParameters {
+        let mut p = IntegratorParameters {
+            coupling: match self.coupling {
+                CouplingArg::EndOfStep => Coupling::EndOfStep,
+                CouplingArg::Explicit => Coupling::Explicit,
+            },
+            ..Default::default()
+        };
+        p.contact.method = match self.contact_method {
+            MethodArg::GaussSeidel => SweepMethod::GaussSeidel,
+            MethodArg::Jacobi => SweepMethod::Jacobi,
+            MethodArg::AcceleratedJacobi => SweepMethod::AcceleratedJacobi,
+        };
+        p
+    }
+}
+
+/// `rigtwin simulate --plan PLAN ...`
+#[derive(Args, Debug)]
+pub struct RunArgs {
+    #[command(flatten)]
+    pub source: RomSource,
+    /// Test plan (TOML), e.g. rig-config/plans/paper-table2.toml.
+    #[arg(long)]
+    pub plan: Option<PathBuf>,
+    /// Write the results (per test and step) as JSON here.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+    /// Write the figures (PNG) into this folder.
+    #[arg(long)]
+    pub figures: Option<PathBuf>,
+    /// Worker threads (tests run in parallel). Default: the available cores.
+    #[arg(long)]
+    pub jobs: Option<usize>,
+    /// No progress display.
+    #[arg(long)]
+    pub quiet: bool,
+    #[command(flatten)]
+    pub integrator: IntegratorArgs,
+}
+
+/// What a study varies.
+#[derive(Clone, Copy, Debug, ValueEnum)]
+pub enum KindArg {
+    /// Time steps per excitation period.
+    Dt,
+    /// Number of modes (the ROM truncated exactly).
+    Modes,
+}
+
+/// `rigtwin simulate convergence`
+#[derive(Args, Debug)]
+pub struct ConvergenceArgs {
+    #[command(flatten)]
+    pub source: RomSource,
+    /// What to vary.
+    #[arg(long, value_enum)]
+    pub kind: KindArg,
+    /// Write the study as JSON here.
+    #[arg(long)]
+    pub json: PathBuf,
+    /// Write the figure (PNG) into this folder.
+    #[arg(long)]
+    pub figures: Option<PathBuf>,
+    /// Steps per excitation period of the runs (kind dt; the largest is the reference).
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "1000,2000,4000,8000,16000,32000,64000,128000"
+    )]
+    pub steps: Vec<u32>,
+    /// Mode counts (kind modes; the largest is the reference). Default: 10, 20, 40, ... and
+    /// all modes of the ROM.
+    #[arg(long, value_delimiter = ',')]
+    pub modes: Vec<usize>,
+    /// Steps per period of the mode runs. Default: 1000, or the smallest multiple of 1000
+    /// stable for the ROM's highest mode.
+    #[arg(long)]
+    pub modes_steps: Option<u32>,
+    /// Excitation periods compared.
+    #[arg(long, default_value_t = 5)]
+    pub periods: u32,
+    /// Base displacement level / l.
+    #[arg(long, default_value_t = 6e-5)]
+    pub level: f64,
+    /// Clearance / l.
+    #[arg(long, default_value_t = 2.78e-3)]
+    pub clearance: f64,
+    /// Omega / omega_2.
+    #[arg(long, default_value_t = 1.0)]
+    pub omega: f64,
+    /// No progress display.
+    #[arg(long)]
+    pub quiet: bool,
+    #[command(flatten)]
+    pub integrator: IntegratorArgs,
+}
+
+pub(crate) fn run(a: SimulateArgs) -> anyhow::Result<()> {
+    match a.command {
+        Some(SimulateCommand::Convergence(c)) => convergence(c),
+        None => stepped_sine(a.run),
+    }
+}
+
+/// Loads the ROM from a file, or builds/caches it from a rig description (default: embedded).
+pub(crate) fn load_rom(source: &RomSource, quiet: bool) -> anyhow::Result<(Rom, String)> {
+    if let Some(p) = &source.rom {
+        let rom = crate::rom::file::read(p).context("reading the ROM")?;
+        return Ok((rom, p.display().to_string()));
+    }
+    let cfg = super::rom::load_config(source.config.as_deref())?;
+    let (rom, path, _) = super::demo::cached_rom(&cfg, false, quiet)?;
+    Ok((rom, path.display().to_string()))
+}
+
+/// The JSON of `rigtwin simulate`.
+#[derive(serde::Serialize)]
+struct SimulateReport<'a> {
+    plan: Option<&'a str>,
+    plan_source: &'a str,
+    rom: RomSummary,
+    integrator: &'a IntegratorParameters,
+    jobs: usize,
+    tests: &'a [TestResult],
+    time_steps: u64,
+    wall_seconds: f64,
+    /// Time steps integrated per wall-clock second, all workers together.
+    steps_per_second: f64,
+    /// Per worker: `steps_per_second / jobs` (the single-core speed when the tests keep every
+    /// worker busy).
+    steps_per_second_per_worker: f64,
+    solver_failures: u64,
+}
+
+#[derive(serde::Serialize)]
+struct RomSummary {
+    path: String,
+    config_hash: String,
+    n_modes: usize,
+    n_pairs: usize,
+    f_1fu_hz: f64,
+    beam_length: f64,
+}
+
+impl RomSummary {
+    fn new(rom: &Rom, path: &str) -> RomSummary {
+        RomSummary {
+            path: path.into(),
+            config_hash: rom.meta.config_hash.clone(),
+            n_modes: rom.n_modes(),
+            n_pairs: rom.n_pairs(),
+            f_1fu_hz: rom.omega_ref() / (2.0 * std::f64::consts::PI),
+            beam_length: rom.meta.beam_length,
+        }
+    }
+}
+
+/// What [`run_plan_to_outputs`] writes and how it runs.
+#[derive(Clone, Copy)]
+pub(crate) struct PlanOutputs<'a> {
+    /// Worker threads (default: the available cores).
+    pub jobs: Option<usize>,
+    /// JSON results file.
+    pub json: Option<&'a Path>,
+    /// Figures folder.
+    pub figures: Option<&'a Path>,
+    /// No progress display.
+    pub quiet: bool,
+}
+
+/// Runs a plan and writes what was asked for. Returns the results (for `demo`).
+pub(crate) fn run_plan_to_outputs(
+    rom: &Rom,
+    rom_path: &str,
+    plan: &Plan,
+    params: IntegratorParameters,
+    out: &PlanOutputs<'_>,
+) -> anyhow::Result<Vec<TestResult>> {
+    let PlanOutputs {
+        jobs,
+        json,
+        figures,
+        quiet,
+    } = *out;
+    let jobs = jobs
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
+        .max(1);
+    let opts = SteppedSineOptions {
+        integrator: params,
+        ..Default::default()
+    };
+    let multi = MultiProgress::with_draw_target(if quiet {
+        ProgressDrawTarget::hidden()
+    } else {
+        ProgressDrawTarget::stderr()
+    });
+    let style = ProgressStyle::with_template(
+        "{prefix:>14} [{bar:30}] {percent:>3}% {msg} ({elapsed}, eta {eta})",
+    )
+    .expect("template")
+    .progress_chars("=> ");
+    let bars: Vec<ProgressBar> = plan
+        .tests
+        .iter()
+        .map(|t| {
+            let b = multi.add(ProgressBar::new(t.total_periods()));
+            b.set_style(style.clone());
+            b.set_prefix(t.name.clone());
+            b
+        })
+        .collect();
+    let on_progress = |p: &TestProgress<'_>| {
+        let b = &bars[p.test];
+        b.set_position(p.periods_done);
+        if p.finished {
+            b.finish_with_message("done");
+        } else {
+            b.set_message(format!(
+                "step {}/{} Omega/omega_2 = {:.4}",
+                p.step + 1,
+                p.steps,
+                p.omega_ratio
+            ));
+        }
+    };
+    let t0 = Instant::now();
+    let results = run_plan(rom, plan, &opts, jobs, &on_progress)?;
+    let wall = t0.elapsed().as_secs_f64();
+    let time_steps: u64 = results.iter().map(|r| r.time_steps).sum();
+    let failures: u64 = results.iter().map(|r| r.solver_failures).sum();
+    let workers = jobs.min(plan.tests.len()).max(1);
+
+    println!(
+        "{} tests, {} frequency steps, {:.3e} time steps in {:.1} s: {:.0} steps/s ({} workers)",
+        results.len(),
+        results.iter().map(|r| r.steps.len()).sum::<usize>(),
+        time_steps as f64,
+        wall,
+        time_steps as f64 / wall,
+        workers
+    );
+    for r in &results {
+        let band: Vec<f64> = r
+            .steps
+            .iter()
+            .filter(|s| s.metrics.contact_fraction > 0.0)
+            .map(|s| s.omega_ratio)
+            .collect();
+        let band = match (
+            band.iter().copied().reduce(f64::min),
+            band.iter().copied().reduce(f64::max),
+        ) {
+            (Some(lo), Some(hi)) => format!("impacts at Omega/omega_2 {lo:.3}..{hi:.3}"),
+            _ => "no impacts".into(),
+        };
+        let peak = r
+            .steps
+            .iter()
+            .max_by(|a, b| a.metrics.rms_upper.total_cmp(&b.metrics.rms_upper));
+        println!(
+            "  {:>14}: {} steps, {band}, peak RMS upper {:.1} at {:.3}, {} solver failures{}",
+            r.spec.name,
+            r.steps.len(),
+            peak.map_or(f64::NAN, |s| s.metrics.rms_upper),
+            peak.map_or(f64::NAN, |s| s.omega_ratio),
+            r.solver_failures,
+            r.stopped
+                .as_deref()
+                .map(|s| format!("; STOPPED: {s}"))
+                .unwrap_or_default()
+        );
+    }
+    if let Some(path) = json {
+        let report = SimulateReport {
+            plan: plan.name.as_deref(),
+            plan_source: &plan.source,
+            rom: RomSummary::new(rom, rom_path),
+            integrator: &opts.integrator,
+            jobs: workers,
+            tests: &results,
+            time_steps,
+            wall_seconds: wall,
+            steps_per_second: time_steps as f64 / wall,
+            steps_per_second_per_worker: time_steps as f64 / wall / workers as f64,
+            solver_failures: failures,
+        };
+        super::write_json(path, &report)?;
+        println!("results: {}", path.display());
+    }
+    if let Some(dir) = figures {
+        let written = stepped_sine_figures(&results, rom, dir)?;
+        println!("figures: {} files in {}", written.len(), dir.display());
+    }
+    Ok(results)
+}
+
+fn stepped_sine(a: RunArgs) -> anyhow::Result<()> {
+    let Some(plan_path) = &a.plan else {
+        bail!("--plan PLAN is required (e.g. rig-config/plans/paper-table2.toml)");
+    };
+    let plan = Plan::from_path(plan_path)?;
+    let (rom, rom_path) = load_rom(&a.source, a.quiet)?;
+    run_plan_to_outputs(
+        &rom,
+        &rom_path,
+        &plan,
+        a.integrator.parameters(),
+        &PlanOutputs {
+            jobs: a.jobs,
+            json: a.json.as_deref(),
+            figures: a.figures.as_deref(),
+            quiet: a.quiet,
+        },
+    )?;
+    Ok(())
+}
+
+fn curve(r: &TestResult) -> TestCurve {
+    let col = |f: fn(&crate::signal::StepMetrics) -> f64| -> Vec<f64> {
+        r.steps.iter().map(|s| f(&s.metrics)).collect()
+    };
+    TestCurve {
+        name: r.spec.name.clone(),
+        level: r.spec.level,
+        direction: r.spec.direction,
+        source: Source::Simulation,
+        omega_ratio: r.steps.iter().map(|s| s.omega_ratio).collect(),
+        rms_upper: col(|m| m.rms_upper),
+        rms_lower: col(|m| m.rms_lower),
+        amp_min_upper: col(|m| m.amp_min_upper),
+        amp_mean_upper: col(|m| m.amp_mean_upper),
+        amp_max_upper: col(|m| m.amp_max_upper),
+        amp_min_lower: col(|m| m.amp_min_lower),
+        amp_mean_lower: col(|m| m.amp_mean_lower),
+        amp_max_lower: col(|m| m.amp_max_lower),
+    }
+}
+
+/// A trace as a time history u/(Omega l), time from the start of the record window.
+fn history(name: &str, tr: &StepTrace, l: f64) -> TimeHistory {
+    let s = 1.0 / (tr.omega * l);
+    let t0 = tr.time.first().copied().unwrap_or(0.0);
+    TimeHistory {
+        name: name.into(),
+        source: Source::Simulation,
+        omega_ratio: tr.omega_ratio,
+        t: tr.time.iter().map(|t| t - t0).collect(),
+        upper: tr.velocity_upper.iter().map(|v| v * s).collect(),
+        lower: tr.velocity_lower.iter().map(|v| v * s).collect(),
+        contact_closed: tr.any_closed.clone(),
+        normal_force: tr.normal_force.clone(),
+        tangential_force: tr.tangential_force.clone(),
+    }
+}
+
+/// The figures of a stepped sine; returns the files written.
+pub(crate) fn stepped_sine_figures(
+    results: &[TestResult],
+    rom: &Rom,
+    dir: &Path,
+) -> anyhow::Result<Vec<PathBuf>> {
+    let fig = FigureOptions::default();
+    let mut written = Vec::new();
+    let data = FrequencyResponse {
+        tests: results
+            .iter()
+            .filter(|r| !r.steps.is_empty())
+            .map(curve)
+            .collect(),
+    };
+    let p = dir.join("rms_response.png");
+    report::rms_response(&data, &p, &fig)?;
+    written.push(p);
+    for (beam, file) in [
+        (Beam::Upper, "amplitude_upper.png"),
+        (Beam::Lower, "amplitude_lower.png"),
+    ] {
+        let p = dir.join(file);
+        report::amplitude_range(&data, beam, &p, &fig)?;
+        written.push(p);
+    }
+    let l = rom.meta.beam_length;
+    let histories: Vec<TimeHistory> = results
+        .iter()
+        .filter_map(|r| r.trace.as_ref().map(|tr| history(&r.spec.name, tr, l)))
+        .collect();
+    if !histories.is_empty() {
+        // Zoom: the last five excitation periods of the shortest trace.
+        let end = histories
+            .iter()
+            .filter_map(|h| h.t.last().copied())
+            .fold(f64::INFINITY, f64::min);
+        let period = results
+            .iter()
+            .filter_map(|r| r.trace.as_ref())
+            .map(|t| 2.0 * std::f64::consts::PI / t.omega)
+            .fold(0.0, f64::max);
+        let zoom = TimeWindow {
+            start: (end - 5.0 * period).max(0.0),
+            end,
+        };
+        for (file, window) in [
+            ("time_histories.png", None),
+            ("time_histories_zoom.png", Some(zoom)),
+        ] {
+            let p = dir.join(file);
+            report::time_histories(&histories, window, &p, &fig)?;
+            written.push(p);
+        }
+        for (file, window) in [
+            ("contact_activity.png", None),
+            ("contact_activity_zoom.png", Some(zoom)),
+        ] {
+            let p = dir.join(file);
+            match report::contact_activity(&histories, window, &p, &fig) {
+                Ok(()) => written.push(p),
+                // No contact in any trace: nothing to draw, which is a result, not an error.
+                Err(report::ReportError::NothingToPlot { .. }) => {}
+                Err(e) => return Err(e.into()),
+            }
+        }
+    }
+    for r in results {
+        let Some(tr) = &r.trace else { continue };
+        let p = dir.join(format!("scalogram_{}.png", sanitize(&r.spec.name)));
+        scalogram_figure(tr, l, &r.spec.name, &p)?;
+        written.push(p);
+    }
+    Ok(written)
+}
+
+fn sanitize(name: &str) -> String {
+    name.chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect()
+}
+
+/// Morlet scalogram of the upper tip velocity u/(Omega l) over the trace (decimated to about
+/// 100 samples per excitation period; analysis frequencies 0.2 to 12 x the excitation).
+fn scalogram_figure(tr: &StepTrace, l: f64, name: &str, out: &Path) -> anyhow::Result<()> {
+    let f_exc = tr.omega / (2.0 * std::f64::consts::PI);
+    let per_period = (2.0 * std::f64::consts::PI / tr.omega / tr.dt)
+        .round()
+        .max(1.0);
+    let decim = ((per_period / 100.0).floor() as usize).max(1);
+    let s = 1.0 / (tr.omega * l);
+    let x: Vec<f64> = tr
+        .velocity_upper
+        .iter()
+        .step_by(decim)
+        .map(|v| v * s)
+        .collect();
+    let dt = tr.dt * decim as f64;
+    let freqs = crate::signal::log_spaced(0.2 * f_exc, 12.0 * f_exc, 120)?;
+    let sc = crate::signal::morlet_scalogram(&x, dt, &freqs, &Default::default())?;
+    report::scalogram(
+        &sc,
+        f_exc,
+        &ScalogramOptions {
+            t0: 0.0,
+            decades: 4.0,
+            label: format!(
+                "simulation, {name}, upper beam, Omega/omega_2 = {:.3}",
+                tr.omega_ratio
+            ),
+        },
+        out,
+        &FigureOptions::default(),
+    )?;
+    Ok(())
+}
+
+fn convergence(a: ConvergenceArgs) -> anyhow::Result<()> {
+    let (rom, _) = load_rom(&a.source, a.quiet)?;
+    let setup = ConvergenceSetup {
+        omega_ratio: a.omega,
+        level: a.level,
+        clearance: a.clearance,
+        periods: a.periods,
+        integrator: a.integrator.parameters(),
+        ..Default::default()
+    };
+    if !(a.omega > 0.0 && a.omega < 10.0) {
+        bail!("--omega = {}: expected Omega/omega_2 in (0, 10)", a.omega);
+    }
+    if !(a.level > 0.0 && a.level <= 1e-2 && a.clearance > 0.0 && a.clearance <= 0.1) {
+        bail!(
+            "--level = {} / --clearance = {}: expected a level in (0, 1e-2] and a clearance in (0, 0.1] (fractions of l)",
+            a.level,
+            a.clearance
+        );
+    }
+    if a.periods == 0 {
+        bail!("--periods must be at least 1");
+    }
+    let bar = if a.quiet {
+        ProgressBar::hidden()
+    } else {
+        ProgressBar::with_draw_target(None, ProgressDrawTarget::stderr())
+    };
+    bar.set_style(
+        ProgressStyle::with_template("{spinner} [{elapsed_precise}] {pos}/{len} runs {msg}")
+            .expect("template"),
+    );
+    bar.enable_steady_tick(std::time::Duration::from_millis(150));
+    let t0 = Instant::now();
+    let study = match a.kind {
+        KindArg::Dt => {
+            if a.steps.contains(&0) {
+                bail!("--steps: steps per period must be at least 1");
+            }
+            bar.set_length(a.steps.len() as u64);
+            dt_study(&rom, &setup, &a.steps, &mut |x| {
+                bar.inc(1);
+                bar.set_message(format!("done: {x} steps/period"));
+            })?
+        }
+        KindArg::Modes => {
+            let m = rom.n_modes();
+            let modes: Vec<usize> = if a.modes.is_empty() {
+                let mut v: Vec<usize> = [5, 10, 20, 40, 60, 80, 100, 120, 160, 200]
+                    .into_iter()
+                    .filter(|&k| k < m && k > rom.meta.reference_mode)
+                    .collect();
+                v.push(m);
+                v
+            } else {
+                a.modes.clone()
+            };
+            let needed = rom.meta.stable_steps_per_period_open * setup.omega_ratio;
+            let spp = a.modes_steps.unwrap_or_else(|| {
+                let mut s = 1000u32;
+                while f64::from(s) <= 1.05 * needed {
+                    s *= 2;
+                }
+                s
+            });
+            bar.set_length(modes.len() as u64);
+            modes_study(&rom, &setup, &modes, spp, &mut |x| {
+                bar.inc(1);
+                bar.set_message(format!("done: {x} modes"));
+            })?
+        }
+    };
+    bar.finish_and_clear();
+    let wall = t0.elapsed().as_secs_f64();
+    println!(
+        "{} convergence, {} runs in {:.1} s (reference x = {}):",
+        study.kind,
+        study.runs.len(),
+        wall,
+        study.reference
+    );
+    for r in &study.runs {
+        println!(
+            "  x = {:>8}  dt = {:.3e} s  relative RMS error {:.3e}  closed steps {}  solver failures {}",
+            r.x, r.dt, r.error, r.closed_steps, r.solver_failures
+        );
+    }
+    #[derive(serde::Serialize)]
+    struct Out<'a> {
+        #[serde(flatten)]
+        study: &'a ConvergenceStudy,
+        wall_seconds: f64,
+    }
+    super::write_json(
+        &a.json,
+        &Out {
+            study: &study,
+            wall_seconds: wall,
+        },
+    )?;
+    println!("results: {}", a.json.display());
+    if let Some(dir) = &a.figures {
+        let p = dir.join(format!("convergence_{}.png", study.kind));
+        convergence_figure(&study, &p)?;
+        println!("figure: {}", p.display());
+    }
+    Ok(())
+}
+
+fn convergence_figure(study: &ConvergenceStudy, out: &Path) -> anyhow::Result<()> {
+    let kind = if study.kind == "dt" {
+        ConvergenceKind::Dt
+    } else {
+        ConvergenceKind::Modes
+    };
+    let data = Convergence {
+        kind,
+        x: study.runs.iter().map(|r| r.x).collect(),
+        error: study.runs.iter().map(|r| r.error).collect(),
+        reference: Some(study.reference),
+        signals: study
+            .runs
+            .iter()
+            .map(|r| ConvergenceSignal {
+                x: r.x,
+                t: (0..r.u.len()).map(|k| (k as f64 + 0.5) * r.dt).collect(),
+                u: r.u.clone(),
+            })
+            .collect(),
+    };
+    report::convergence(&data, out, &FigureOptions::default())?;
+    Ok(())
+}

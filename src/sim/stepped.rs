@@ -1,0 +1,656 @@
+//! The virtual stepped sine (reference section 4, DESIGN.md "The model" 5): the ROM driven by a
+//! prescribed base sine that steps through the frequencies of a test plan, the state carried
+//! from step to step as on the rig; per step a settle window and a record window, and the step
+//! metrics of [`crate::signal`] over the record window.
+//!
+//! Per test ([`run_test`]): one [`Integrator`] at the test's clearance; per frequency step the
+//! time step is `2 pi / (Omega steps_per_period)` and the base displacement is
+//! `q sin(Omega t + phi)` with the phase chosen so that the displacement is continuous at the
+//! frequency change ([`continuous_phase`]). Independent tests run on worker threads
+//! ([`run_plan`]); each test is sequential and deterministic, so the results do not depend on
+//! the number of workers. No clock and no I/O here: the caller times the run and renders
+//! progress from the [`TestProgress`] callbacks.
+
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Mutex;
+
+use crate::contact::{ContactProblem, ContactSolution};
+use crate::plan::{Plan, TestSpec};
+use crate::rom::Rom;
+use crate::signal::{step_metrics, MetricsParams, SignalError, StepMetrics, StepRecord};
+
+use super::error::SimError;
+use super::excitation::{continuous_phase, Excitation};
+use super::integrator::{
+    stability_limits, Integrator, IntegratorParameters, RunStop, SolverCounters, State, TimeStep,
+};
+use super::output::{StepOutput, StepSink};
+
+/// Sensor (ROM output) names the metrics are computed from: the vertical tip velocities.
+pub const UPPER_TIP: &str = "upper_tip";
+/// See [`UPPER_TIP`].
+pub const LOWER_TIP: &str = "lower_tip";
+
+/// Options of a virtual stepped sine beyond the plan.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SteppedSineOptions {
+    /// Integrator parameters. The time step is replaced per frequency step by the test's
+    /// `steps_per_period`; coupling and contact solver are used as given.
+    pub integrator: IntegratorParameters,
+    /// Metrics tuning.
+    pub metrics: MetricsParams,
+    /// Keep the record window of the step whose Omega / omega_2 is nearest to this value as a
+    /// [`StepTrace`] (for time histories, contact activity and the scalogram). `None`: none.
+    pub trace_at: Option<f64>,
+    /// Capture contact problems from the traced step (see [`CaptureOptions`]). Needs `trace_at`.
+    pub capture: Option<CaptureOptions>,
+    /// Progress granularity: a [`TestProgress`] callback at least every this many excitation
+    /// periods (>= 1).
+    pub progress_periods: u32,
+}
+
+impl Default for SteppedSineOptions {
+    fn default() -> Self {
+        SteppedSineOptions {
+            integrator: IntegratorParameters::default(),
+            metrics: MetricsParams::default(),
+            trace_at: Some(1.0),
+            capture: None,
+            progress_periods: 10,
+        }
+    }
+}
+
+/// Capture of real contact problems (the sub-problem on the active pairs, as solved) from the
+/// traced step's record window, for cross-checks against other solvers. The capture re-runs
+/// the window's first periods from a copy of the state, so it does not change the results.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CaptureOptions {
+    /// Stop after this many problems.
+    pub max_problems: usize,
+    /// Only solves with at least this many pairs in the sweep.
+    pub min_active_pairs: usize,
+    /// Keep every `stride`-th qualifying solve (>= 1), so the problems spread over impacts.
+    pub stride: usize,
+    /// Search at most this many excitation periods.
+    pub max_periods: u32,
+}
+
+/// Where a test is, for progress displays.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TestProgress<'a> {
+    /// Index of the test in the plan.
+    pub test: usize,
+    /// Its name.
+    pub name: &'a str,
+    /// Frequency step being run (0-based) and the number of steps.
+    pub step: usize,
+    /// Number of frequency steps of the test.
+    pub steps: usize,
+    /// Omega / omega_2 of the step.
+    pub omega_ratio: f64,
+    /// Excitation periods done in the test so far and in total.
+    pub periods_done: u64,
+    /// Excitation periods of the whole test.
+    pub periods_total: u64,
+    /// Set once, when the test has ended.
+    pub finished: bool,
+}
+
+/// Result of one frequency step.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct StepResult {
+    /// Index of the step in the test.
+    pub index: usize,
+    /// Omega / omega_2.
+    pub omega_ratio: f64,
+    /// Excitation frequency, Hz.
+    pub frequency_hz: f64,
+    /// Time step, s.
+    pub dt: f64,
+    /// The metrics over the record window.
+    #[serde(flatten)]
+    pub metrics: StepMetrics,
+    /// Contact solves of the step (settle and record) that did not converge (sweep limit
+    /// reached or diverged).
+    pub solver_failures: u64,
+    /// Contact-solver counters of the step (settle and record).
+    pub solver: SolverCounters,
+}
+
+/// Result of one test.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct TestResult {
+    /// The test as planned.
+    pub spec: TestSpec,
+    /// Base displacement amplitude q = level l, m.
+    pub base_level_m: f64,
+    /// Clearance = clearance l, m.
+    pub clearance_m: f64,
+    /// The completed frequency steps, in run order.
+    pub steps: Vec<StepResult>,
+    /// Time steps integrated.
+    pub time_steps: u64,
+    /// Sum of the steps' solver failures.
+    pub solver_failures: u64,
+    /// Why the test ended early, if it did (the completed steps are kept).
+    pub stopped: Option<String>,
+    /// The traced step's record window.
+    #[serde(skip)]
+    pub trace: Option<StepTrace>,
+    /// Captured contact problems with rigtwin's solutions.
+    #[serde(skip)]
+    pub captured: Vec<(ContactProblem, ContactSolution)>,
+}
+
+/// The record window of one step, sample by sample (contact time level of each step; the
+/// velocities are at the half step before, see [`StepOutput`]).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct StepTrace {
+    /// Omega / omega_2 of the step.
+    pub omega_ratio: f64,
+    /// Excitation circular frequency, rad/s.
+    pub omega: f64,
+    /// Base displacement amplitude, m.
+    pub base_level_m: f64,
+    /// Sample interval (= the time step), s.
+    pub dt: f64,
+    /// Times, s.
+    pub time: Vec<f64>,
+    /// Tip displacements relative to the base, m.
+    pub displacement_upper: Vec<f64>,
+    /// See `displacement_upper`.
+    pub displacement_lower: Vec<f64>,
+    /// Tip velocities relative to the base, m/s.
+    pub velocity_upper: Vec<f64>,
+    /// See `velocity_upper`.
+    pub velocity_lower: Vec<f64>,
+    /// Base displacement, m.
+    pub base_displacement: Vec<f64>,
+    /// Whether any pair was closed.
+    pub any_closed: Vec<bool>,
+    /// Integrated normal contact force, N.
+    pub normal_force: Vec<f64>,
+    /// Integrated tangential contact force, N.
+    pub tangential_force: Vec<f64>,
+}
+
+/// Why a stepped sine could not run. Problems during a run (non-convergence, a state that
+/// became non-finite) are data in the [`TestResult`], not errors.
+#[derive(Debug, thiserror::Error)]
+pub enum SteppedSineError {
+    /// The ROM lacks something the stepped sine needs.
+    #[error("ROM: {0}")]
+    Rom(String),
+    /// A test's settings do not work with this ROM.
+    #[error("plan {source_name}, test {index} ({name}): {key}: {detail}")]
+    Test {
+        /// The plan's source (file).
+        source_name: String,
+        /// Test number in the plan (1-based).
+        index: usize,
+        /// Test name.
+        name: String,
+        /// The plan key at fault.
+        key: &'static str,
+        /// What is wrong.
+        detail: String,
+    },
+    /// The integrator rejected its setup.
+    #[error("test {name}: {source}")]
+    Sim {
+        /// Test name.
+        name: String,
+        /// The integrator's error.
+        source: SimError,
+    },
+    /// The metrics of a step could not be computed.
+    #[error("test {name}, step {step} (Omega/omega_2 = {omega_ratio}): metrics: {source}")]
+    Metrics {
+        /// Test name.
+        name: String,
+        /// Step index.
+        step: usize,
+        /// Omega / omega_2.
+        omega_ratio: f64,
+        /// The signal error.
+        source: SignalError,
+    },
+}
+
+/// Indices of the upper and lower tip outputs of a ROM.
+fn tip_outputs(rom: &Rom) -> Result<(usize, usize), SteppedSineError> {
+    let find = |name: &str| {
+        rom.outputs
+            .iter()
+            .position(|o| o.name == name)
+            .ok_or_else(|| {
+                SteppedSineError::Rom(format!(
+                    "no sensor output named \"{name}\" (outputs: {}); the rig description must \
+                 define sensors \"{UPPER_TIP}\" and \"{LOWER_TIP}\"",
+                    rom.outputs
+                        .iter()
+                        .map(|o| o.name.as_str())
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ))
+            })
+    };
+    Ok((find(UPPER_TIP)?, find(LOWER_TIP)?))
+}
+
+fn beam_length(rom: &Rom) -> Result<f64, SteppedSineError> {
+    let l = rom.meta.beam_length;
+    if l.is_finite() && l > 0.0 {
+        Ok(l)
+    } else {
+        Err(SteppedSineError::Rom(format!(
+            "meta.beam_length = {l} (the length unit of plan levels and clearances) is not a \
+             length > 0; rebuild the ROM with `rigtwin rom build`"
+        )))
+    }
+}
+
+/// Checks a plan against a ROM before anything runs: the ROM has the tip outputs and the beam
+/// length, and every step's time step is below the stability limit the coupling needs.
+pub fn check_plan(
+    rom: &Rom,
+    plan: &Plan,
+    opts: &SteppedSineOptions,
+) -> Result<(), SteppedSineError> {
+    tip_outputs(rom)?;
+    beam_length(rom)?;
+    opts.integrator
+        .validate()
+        .map_err(|source| SteppedSineError::Sim {
+            name: "(all)".into(),
+            source,
+        })?;
+    let limits = stability_limits(rom).map_err(|source| SteppedSineError::Sim {
+        name: "(all)".into(),
+        source,
+    })?;
+    let needs_closed = opts.integrator.coupling == super::Coupling::Explicit
+        && opts.integrator.enforce_closed_bound;
+    let (steps_needed_ref, which) = if needs_closed {
+        (
+            limits.steps_per_period_closed(),
+            "all pairs closed, explicit coupling",
+        )
+    } else {
+        (limits.steps_per_period_open(), "all pairs open")
+    };
+    for (i, t) in plan.tests.iter().enumerate() {
+        let fastest = t.omega_start.max(t.omega_end);
+        // Steps per excitation period needed at Omega = r omega_2: steps_needed_ref * r.
+        let needed = steps_needed_ref * fastest;
+        if !(f64::from(t.steps_per_period) > needed) {
+            return Err(SteppedSineError::Test {
+                source_name: plan.source.clone(),
+                index: i + 1,
+                name: t.name.clone(),
+                key: "steps_per_period",
+                detail: format!(
+                    "{} steps per excitation period is beyond the explicit stability limit of \
+                     this ROM ({which}) at Omega/omega_2 = {fastest}: at least {:.0} are needed",
+                    t.steps_per_period,
+                    needed.floor() + 1.0
+                ),
+            });
+        }
+    }
+    Ok(())
+}
+
+/// Collects the channels of the record window (and optionally the full trace).
+struct Recorder<'a> {
+    iu: usize,
+    il: usize,
+    vu: Vec<f64>,
+    vl: Vec<f64>,
+    closed: Vec<bool>,
+    normal: Vec<f64>,
+    trace: Option<(&'a mut StepTrace, &'a Excitation)>,
+}
+
+impl StepSink for Recorder<'_> {
+    fn record(&mut self, out: &StepOutput<'_>) {
+        self.vu.push(out.velocity[self.iu]);
+        self.vl.push(out.velocity[self.il]);
+        self.closed.push(out.contact.any_closed);
+        self.normal.push(out.contact.normal_force);
+        if let Some((tr, exc)) = &mut self.trace {
+            tr.time.push(out.time);
+            tr.displacement_upper.push(out.displacement[self.iu]);
+            tr.displacement_lower.push(out.displacement[self.il]);
+            tr.velocity_upper.push(out.velocity[self.iu]);
+            tr.velocity_lower.push(out.velocity[self.il]);
+            tr.base_displacement
+                .push(exc.displacement_at(out.time).unwrap_or(f64::NAN));
+            tr.any_closed.push(out.contact.any_closed);
+            tr.normal_force.push(out.contact.normal_force);
+            tr.tangential_force.push(out.contact.tangential_force);
+        }
+    }
+}
+
+/// Index of the step whose ratio is nearest to `target` (first on ties).
+fn nearest_step(ratios: &[f64], target: f64) -> usize {
+    let mut best = 0;
+    for (i, r) in ratios.iter().enumerate() {
+        if (r - target).abs() < (ratios[best] - target).abs() {
+            best = i;
+        }
+    }
+    best
+}
+
+/// Runs one test of a plan from rest. `test_index` only labels the progress callbacks.
+pub fn run_test(
+    rom: &Rom,
+    spec: &TestSpec,
+    test_index: usize,
+    opts: &SteppedSineOptions,
+    progress: &mut dyn FnMut(&TestProgress<'_>),
+) -> Result<TestResult, SteppedSineError> {
+    let (iu, il) = tip_outputs(rom)?;
+    let l = beam_length(rom)?;
+    let sim_err = |source| SteppedSineError::Sim {
+        name: spec.name.clone(),
+        source,
+    };
+    let w2 = rom.omega_ref();
+    let q = spec.level * l;
+    let clearance = spec.clearance * l;
+    let ratios = spec.omega_ratios();
+    let spp = f64::from(spec.steps_per_period);
+    let chunk = u64::from(opts.progress_periods.max(1));
+    let trace_step = opts.trace_at.map(|r| nearest_step(&ratios, r));
+
+    let mut params = opts.integrator.clone();
+    params.time_step = TimeStep::StepsPerPeriod {
+        steps: spp,
+        omega: ratios[0] * w2,
+    };
+    let mut integ = Integrator::new(rom, params).map_err(sim_err)?;
+    integ.set_clearance(clearance).map_err(sim_err)?;
+    let mut state: State = integ.state_at_rest();
+
+    let mut result = TestResult {
+        spec: spec.clone(),
+        base_level_m: q,
+        clearance_m: clearance,
+        steps: Vec::with_capacity(ratios.len()),
+        time_steps: 0,
+        solver_failures: 0,
+        stopped: None,
+        trace: None,
+        captured: Vec::new(),
+    };
+    let periods_total = spec.total_periods();
+    let mut periods_done = 0u64;
+    let mut phase = 0.0;
+    let mut omega_prev = ratios[0] * w2;
+    let n_rec = u64::from(spec.record_periods) * u64::from(spec.steps_per_period);
+    let report = |step: usize, ratio: f64, done: u64, finished: bool| TestProgress {
+        test: test_index,
+        name: &spec.name,
+        step,
+        steps: ratios.len(),
+        omega_ratio: ratio,
+        periods_done: done,
+        periods_total,
+        finished,
+    };
+
+    'steps: for (s, &ratio) in ratios.iter().enumerate() {
+        let omega = ratio * w2;
+        integ
+            .set_time_step(TimeStep::StepsPerPeriod { steps: spp, omega })
+            .map_err(sim_err)?;
+        phase = continuous_phase(omega_prev, phase, omega, state.time());
+        omega_prev = omega;
+        let exc = Excitation::Sine {
+            amplitude_m: q,
+            omega,
+            phase,
+        };
+        let before = state.counters();
+        let mut stop: Option<RunStop> = None;
+
+        // Settle.
+        let mut left = u64::from(spec.settle_periods);
+        while left > 0 && stop.is_none() {
+            let p = left.min(chunk);
+            let rep = integ
+                .run(
+                    &mut state,
+                    &exc,
+                    p * u64::from(spec.steps_per_period),
+                    &mut super::NullSink,
+                )
+                .map_err(sim_err)?;
+            result.time_steps += rep.steps;
+            stop = rep.stop;
+            left -= p;
+            periods_done += p;
+            progress(&report(s, ratio, periods_done, false));
+        }
+
+        // Record.
+        let traced = trace_step == Some(s);
+        let mut trace = StepTrace {
+            omega_ratio: ratio,
+            omega,
+            base_level_m: q,
+            dt: integ.dt(),
+            ..Default::default()
+        };
+        let capture_from = (traced && opts.capture.is_some() && stop.is_none())
+            .then(|| (integ.clone(), state.clone()));
+        let cap = n_rec as usize;
+        if traced {
+            for v in [
+                &mut trace.time,
+                &mut trace.displacement_upper,
+                &mut trace.displacement_lower,
+                &mut trace.velocity_upper,
+                &mut trace.velocity_lower,
+                &mut trace.base_displacement,
+                &mut trace.normal_force,
+                &mut trace.tangential_force,
+            ] {
+                v.reserve_exact(cap);
+            }
+            trace.any_closed.reserve_exact(cap);
+        }
+        let mut rec = Recorder {
+            iu,
+            il,
+            vu: Vec::with_capacity(cap),
+            vl: Vec::with_capacity(cap),
+            closed: Vec::with_capacity(cap),
+            normal: Vec::with_capacity(cap),
+            trace: traced.then_some((&mut trace, &exc)),
+        };
+        let mut left = u64::from(spec.record_periods);
+        while left > 0 && stop.is_none() {
+            let p = left.min(chunk);
+            let rep = integ
+                .run(
+                    &mut state,
+                    &exc,
+                    p * u64::from(spec.steps_per_period),
+                    &mut rec,
+                )
+                .map_err(sim_err)?;
+            result.time_steps += rep.steps;
+            stop = rep.stop;
+            left -= p;
+            periods_done += p;
+            progress(&report(s, ratio, periods_done, false));
+        }
+        let counters = state.counters();
+        let step_counters = SolverCounters {
+            solves: counters.solves - before.solves,
+            closed_steps: counters.closed_steps - before.closed_steps,
+            iterations: counters.iterations - before.iterations,
+            max_iterations: counters.max_iterations - before.max_iterations,
+            diverged: counters.diverged - before.diverged,
+            worst_relative_residual: counters.worst_relative_residual,
+        };
+        let failures = step_counters.max_iterations + step_counters.diverged;
+        result.solver_failures += failures;
+        if let Some(RunStop::NonFinite { step, time }) = stop {
+            result.stopped = Some(format!(
+                "the state became non-finite at time step {step} (t = {time:.6} s) in frequency \
+                 step {s} (Omega/omega_2 = {ratio}); {} contact solves had failed before",
+                result.solver_failures
+            ));
+            break 'steps;
+        }
+        let Recorder {
+            vu,
+            vl,
+            closed,
+            normal,
+            ..
+        } = rec;
+        let metrics = step_metrics(
+            &StepRecord {
+                dt: integ.dt(),
+                omega,
+                base_level: q,
+                tip_velocity_upper: &vu,
+                tip_velocity_lower: &vl,
+                contact_closed: &closed,
+                normal_force: &normal,
+            },
+            &opts.metrics,
+        )
+        .map_err(|source| SteppedSineError::Metrics {
+            name: spec.name.clone(),
+            step: s,
+            omega_ratio: ratio,
+            source,
+        })?;
+        result.steps.push(StepResult {
+            index: s,
+            omega_ratio: ratio,
+            frequency_hz: omega / (2.0 * std::f64::consts::PI),
+            dt: integ.dt(),
+            metrics,
+            solver_failures: failures,
+            solver: step_counters,
+        });
+        if traced {
+            result.trace = Some(trace);
+        }
+        if let (Some((mut ci, mut cs)), Some(copt)) = (capture_from, opts.capture) {
+            result.captured = capture_problems(
+                &mut ci,
+                &mut cs,
+                &exc,
+                &copt,
+                spec,
+                ratio,
+                u64::from(spec.steps_per_period),
+            )
+            .map_err(sim_err)?;
+        }
+    }
+    progress(&report(
+        result.steps.len().saturating_sub(1),
+        result.steps.last().map_or(ratios[0], |s| s.omega_ratio),
+        periods_done,
+        true,
+    ));
+    Ok(result)
+}
+
+/// Re-runs steps one at a time and keeps the contact problems of qualifying solves.
+fn capture_problems(
+    integ: &mut Integrator,
+    state: &mut State,
+    exc: &Excitation,
+    opt: &CaptureOptions,
+    spec: &TestSpec,
+    ratio: f64,
+    steps_per_period: u64,
+) -> Result<Vec<(ContactProblem, ContactSolution)>, SimError> {
+    let mut out = Vec::new();
+    let mut qualifying = 0usize;
+    let stride = opt.stride.max(1);
+    for _ in 0..u64::from(opt.max_periods) * steps_per_period {
+        if out.len() >= opt.max_problems {
+            break;
+        }
+        let mut last_active = 0usize;
+        let rep = integ.run(state, exc, 1, &mut |o: &StepOutput<'_>| {
+            last_active = o.solve.map_or(0, |s| s.active_pairs);
+        })?;
+        if rep.stop.is_some() {
+            break;
+        }
+        if rep.counters.solves == 1 && last_active >= opt.min_active_pairs.max(1) {
+            if qualifying % stride == 0 {
+                let label = format!(
+                    "{} Omega/omega_2={ratio} step {} active {last_active}",
+                    spec.name,
+                    state.step() - 1
+                );
+                out.push(integ.contact_solver().last_active_problem(&label));
+            }
+            qualifying += 1;
+        }
+    }
+    Ok(out)
+}
+
+/// Runs every test of a plan on up to `jobs` worker threads (tests are independent; each runs
+/// from rest). Results are in plan order. `progress` is called from the workers.
+pub fn run_plan(
+    rom: &Rom,
+    plan: &Plan,
+    opts: &SteppedSineOptions,
+    jobs: usize,
+    progress: &(dyn Fn(&TestProgress<'_>) + Sync),
+) -> Result<Vec<TestResult>, SteppedSineError> {
+    check_plan(rom, plan, opts)?;
+    let n = plan.tests.len();
+    let next = AtomicUsize::new(0);
+    let results: Mutex<Vec<Option<Result<TestResult, SteppedSineError>>>> =
+        Mutex::new((0..n).map(|_| None).collect());
+    let workers = jobs.clamp(1, n.max(1));
+    std::thread::scope(|scope| {
+        for _ in 0..workers {
+            scope.spawn(|| loop {
+                let i = next.fetch_add(1, Ordering::Relaxed);
+                if i >= n {
+                    break;
+                }
+                let r = run_test(rom, &plan.tests[i], i, opts, &mut |p| progress(p));
+                results.lock().unwrap_or_else(|e| e.into_inner())[i] = Some(r);
+            });
+        }
+    });
+    results
+        .into_inner()
+        .unwrap_or_else(|e| e.into_inner())
+        .into_iter()
+        .map(|r| r.expect("every test index is taken by exactly one worker"))
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn nearest_step_picks_the_closest_ratio() {
+        let r = [1.06, 1.03, 1.0, 0.97];
+        assert_eq!(nearest_step(&r, 1.0), 2);
+        assert_eq!(nearest_step(&r, 1.1), 0);
+        assert_eq!(nearest_step(&r, 0.5), 3);
+    }
+}

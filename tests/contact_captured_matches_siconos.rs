@@ -1,0 +1,157 @@
+//! Real contact problems of the default rig, cross-checked against Siconos: the ROM is run at
+//! Omega = omega_2 at the high level (6e-5 l, clearance 2.78e-3 l) into sustained impacts, at
+//! least 20 contact problems with several active pairs are captured from the integrator's steps
+//! (the sub-problem on the pairs in the sweep, exactly as solved), exported in the `.rtcp`
+//! format (`src/contact/problem_io.rs`), solved by Siconos' fc3d NSGS
+//! (`tests/siconos/solve_fc3d.py` under `/usr/bin/python3` or `$RIGTWIN_SICONOS_PYTHON`), and
+//! forces and gap velocities must agree with rigtwin's to 1e-6 relative.
+//!
+//! Without siconos the test says why and passes, unless `RIGTWIN_REQUIRE_SICONOS` is set (CI).
+//! With `--nocapture` it prints the sizes and the solve times of both solvers.
+
+mod default_rom;
+
+use std::path::Path;
+use std::process::Command;
+use std::time::Instant;
+
+use rigtwin::contact::{write_problem, ContactParameters, ContactSolver, SweepMethod};
+use rigtwin::plan::Plan;
+use rigtwin::sim::stepped::{run_plan, CaptureOptions, SteppedSineOptions};
+
+fn python() -> String {
+    std::env::var("RIGTWIN_SICONOS_PYTHON").unwrap_or_else(|_| "/usr/bin/python3".to_string())
+}
+
+#[test]
+fn captured_impact_problems_match_siconos() {
+    let rom = default_rom::default_rom();
+    let plan = Plan::from_str(
+        r#"
+        [[test]]
+        name = "capture"
+        level = 6.0e-5
+        clearance = 2.78e-3
+        direction = "down"
+        omega_start = 1.0
+        omega_end = 1.0
+        steps = 1
+        settle_periods = 100
+        record_periods = 20
+        "#,
+        "capture plan",
+    )
+    .unwrap();
+    let mut opts = SteppedSineOptions {
+        capture: Some(CaptureOptions {
+            max_problems: 24,
+            min_active_pairs: 4,
+            stride: 3,
+            max_periods: 20,
+        }),
+        ..Default::default()
+    };
+    // Tight tolerance so that the stored solutions are rigtwin's converged answers.
+    opts.integrator.contact.tolerance = 1e-12;
+    opts.integrator.contact.max_iterations = 100_000;
+    let results = run_plan(rom, &plan, &opts, 1, &|_| {}).unwrap();
+    let captured = &results[0].captured;
+    assert!(
+        captured.len() >= 20,
+        "only {} problems with >= 4 active pairs captured in 20 periods",
+        captured.len()
+    );
+
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("captured.rtcp");
+    let mut out = std::io::BufWriter::new(std::fs::File::create(&file).unwrap());
+    let mut rigtwin_times = Vec::new();
+    for (problem, solution) in captured {
+        problem.validate().unwrap();
+        write_problem(&mut out, problem, Some(solution)).unwrap();
+        // Time rigtwin's Gauss-Seidel on the same problem from a cold start (best of 3).
+        let d = problem.c.len();
+        let params = ContactParameters {
+            method: SweepMethod::GaussSeidel,
+            tolerance: 1e-12,
+            max_iterations: 100_000,
+            ..Default::default()
+        };
+        let mut best = f64::INFINITY;
+        for _ in 0..3 {
+            let mut solver = ContactSolver::new(&problem.w, &problem.mu, params.clone()).unwrap();
+            let (mut lambda, mut gamma) = (vec![0.0; d], vec![0.0; d]);
+            let t0 = Instant::now();
+            let stats = solver
+                .solve(&problem.c, None, &mut lambda, &mut gamma)
+                .unwrap();
+            best = best.min(t0.elapsed().as_secs_f64());
+            assert!(stats.converged, "{}: {stats:?}", problem.label);
+        }
+        rigtwin_times.push(best);
+    }
+    drop(out);
+
+    let python = python();
+    let available = Command::new(&python)
+        .args(["-c", "import siconos.numerics"])
+        .output()
+        .map(|o| o.status.success())
+        .unwrap_or(false);
+    if !available {
+        if std::env::var_os("RIGTWIN_REQUIRE_SICONOS").is_some() {
+            panic!("RIGTWIN_REQUIRE_SICONOS is set but {python} cannot import siconos.numerics");
+        }
+        eprintln!("SKIPPED captured_impact_problems_match_siconos: no siconos under {python}");
+        return;
+    }
+    let json = dir.path().join("siconos.json");
+    let run = Command::new(&python)
+        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/siconos/solve_fc3d.py"))
+        .arg(&file)
+        .arg("--json")
+        .arg(&json)
+        .args(["--tol", "1e-12", "--max-iter", "100000", "--repeat", "3"])
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "solve_fc3d.py failed ({}): {}",
+        run.status,
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let problems = report["problems"].as_array().unwrap();
+    assert_eq!(problems.len(), captured.len());
+    let (mut t_ours, mut t_sic, mut worst) = (0.0, 0.0, 0.0f64);
+    for (((problem, _), entry), t) in captured.iter().zip(problems).zip(&rigtwin_times) {
+        let d_lambda = entry["rel_diff_lambda"].as_f64().unwrap();
+        let d_gamma = entry["rel_diff_gamma"].as_f64().unwrap();
+        assert_eq!(entry["siconos_info"].as_i64(), Some(0), "{}", problem.label);
+        assert!(
+            d_lambda < 1e-6 && d_gamma < 1e-6,
+            "{}: rigtwin and Siconos differ: lambda {d_lambda:e}, gamma {d_gamma:e}",
+            problem.label
+        );
+        worst = worst.max(d_lambda).max(d_gamma);
+        let ts = entry["siconos_time_s"].as_f64().unwrap();
+        t_ours += t;
+        t_sic += ts;
+        println!(
+            "{:>3} pairs  rigtwin GS {:8.3} ms  Siconos NSGS {:8.3} ms  d lambda {d_lambda:.1e}  d gamma {d_gamma:.1e}  ({})",
+            problem.n_pairs(),
+            1e3 * t,
+            1e3 * ts,
+            problem.label
+        );
+    }
+    println!(
+        "{} captured problems: worst relative difference {worst:.1e}; total solve time rigtwin \
+         Gauss-Seidel {:.3} ms, Siconos NSGS {:.3} ms (ratio Siconos/rigtwin {:.2})",
+        captured.len(),
+        1e3 * t_ours,
+        1e3 * t_sic,
+        t_sic / t_ours
+    );
+}

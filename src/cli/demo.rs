@@ -1,6 +1,7 @@
-//! `rigtwin demo`: the main job on the embedded default rig. Today it builds (or reuses from
-//! the cache) the default ROM and reports it; the stepped sine on the simulated rig joins it as
-//! the simulation and rig service land.
+//! `rigtwin demo`: the main job on the embedded default rig. It builds (or reuses from the
+//! cache) the default ROM, reports it, and runs the demo plan (`rig-config/plans/demo.toml`,
+//! embedded) as a virtual stepped sine with figures. The stepped sine on the simulated rig
+//! with the live twin replaces the virtual one when the rig service lands.
 
 use clap::Args;
 use std::path::PathBuf;
@@ -8,6 +9,9 @@ use std::path::PathBuf;
 use super::progress::BuildProgress;
 use crate::rom::build::BuildOptions;
 use crate::rom::info::RomInfo;
+
+/// The demo plan, embedded so that the demo runs from any folder.
+const DEMO_PLAN: &str = include_str!("../../rig-config/plans/demo.toml");
 
 /// `rigtwin demo`
 #[derive(Args, Debug)]
@@ -62,6 +66,25 @@ pub(crate) fn run(a: DemoArgs) -> anyhow::Result<()> {
     );
     let json = a.out.join("rom-info.json");
     super::write_json(&json, &info)?;
-    println!("summary: {}", json.display());
+    println!("ROM summary: {}", json.display());
+
+    let plan = crate::plan::Plan::from_str(DEMO_PLAN, "rig-config/plans/demo.toml (embedded)")?;
+    println!(
+        "virtual stepped sine: plan \"{}\", {} tests",
+        plan.name.as_deref().unwrap_or("demo"),
+        plan.tests.len()
+    );
+    super::simulate::run_plan_to_outputs(
+        &rom,
+        &path.display().to_string(),
+        &plan,
+        crate::sim::IntegratorParameters::default(),
+        &super::simulate::PlanOutputs {
+            jobs: None,
+            json: Some(&a.out.join("stepped-sine.json")),
+            figures: Some(&a.out.join("figures")),
+            quiet: a.quiet,
+        },
+    )?;
     Ok(())
 }

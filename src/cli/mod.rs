@@ -27,7 +27,8 @@ pub struct Cli {
 /// Top-level commands.
 #[derive(Subcommand, Debug)]
 pub enum Command {
-    /// The main job on the embedded default rig: build (or reuse) the default ROM and report it.
+    /// The main job on the embedded default rig: build (or reuse) the default ROM, report it and
+    /// run a short virtual stepped sine through the impact band with figures.
     Demo(demo::DemoArgs),
     /// Reduced-order models: build and inspect.
     #[command(subcommand)]

@@ -3,7 +3,7 @@
 //! of mode counts, and the relative RMS error of each run against the finest one.
 //!
 //! Initial conditions: the modal state reached after `prerun_periods` at 1000 steps per
-//! period, continued to a period start with every pair open that is followed by impacts; the
+//! period (more if the ROM's highest mode needs it), continued to a period start with every pair open that is followed by impacts; the
 //! same displacement and velocity for every run, no contact force. Without it, five periods
 //! from rest would not reach the impacts the study is about. The mode study truncates one ROM exactly ([`Rom::truncated`]); its initial
 //! modal state is the prerun state of the full ROM restricted to the kept modes.
@@ -83,7 +83,7 @@ pub struct ConvergenceStudy {
 #[derive(Debug, thiserror::Error)]
 pub enum ConvergenceError {
     /// Bad setup or a rejected time step.
-    #[error("{0}")]
+    #[error(transparent)]
     Sim(#[from] SimError),
     /// The ROM cannot be used or truncated.
     #[error("{0}")]
@@ -137,7 +137,7 @@ fn initial_conditions(
 ) -> Result<(Vec<f64>, Vec<f64>, f64), ConvergenceError> {
     let (exc, omega) = excitation(rom, setup)?;
     let mut params = setup.integrator.clone();
-    let spp = 1000u64;
+    let spp = prerun_steps_per_period(rom, setup)?;
     params.time_step = TimeStep::StepsPerPeriod {
         steps: spp as f64,
         omega,
@@ -174,6 +174,18 @@ fn initial_conditions(
     let t0 = st.time();
     let v0 = consistent_velocity(rom, &st, integ.dt(), exc.accel_at(t0), 0.5);
     Ok((st.eta().to_vec(), v0, t0))
+}
+
+/// Steps per period of the prerun: 1000, doubled until stable for the ROM's highest mode
+/// (e.g. 4000 for a ROM covering 800 x f(1FU)).
+fn prerun_steps_per_period(rom: &Rom, setup: &ConvergenceSetup) -> Result<u64, ConvergenceError> {
+    let limits = super::integrator::stability_limits(rom)?;
+    let needed = limits.steps_per_period_open() * setup.omega_ratio;
+    let mut spp = 1000u64;
+    while spp as f64 <= 1.05 * needed {
+        spp *= 2;
+    }
+    Ok(spp)
 }
 
 /// `v + s dt a_free` with the free modal acceleration `a_free = -D v - Omega^2 eta - beta a_base`

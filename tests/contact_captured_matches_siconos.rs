@@ -9,19 +9,15 @@
 //! Without siconos the test says why and passes, unless `RIGTWIN_REQUIRE_SICONOS` is set (CI).
 //! With `--nocapture` it prints the sizes and the solve times of both solvers.
 
+mod contact_support;
 mod default_rom;
 
-use std::path::Path;
 use std::process::Command;
 use std::time::Instant;
 
 use rigtwin::contact::{write_problem, ContactParameters, ContactSolver, SweepMethod};
 use rigtwin::plan::Plan;
 use rigtwin::sim::stepped::{run_plan, CaptureOptions, SteppedSineOptions};
-
-fn python() -> String {
-    std::env::var("RIGTWIN_SICONOS_PYTHON").unwrap_or_else(|_| "/usr/bin/python3".to_string())
-}
 
 #[test]
 fn captured_impact_problems_match_siconos() {
@@ -92,22 +88,13 @@ fn captured_impact_problems_match_siconos() {
     }
     drop(out);
 
-    let python = python();
-    let available = Command::new(&python)
-        .args(["-c", "import siconos.numerics"])
-        .output()
-        .map(|o| o.status.success())
-        .unwrap_or(false);
-    if !available {
-        if std::env::var_os("RIGTWIN_REQUIRE_SICONOS").is_some() {
-            panic!("RIGTWIN_REQUIRE_SICONOS is set but {python} cannot import siconos.numerics");
-        }
-        eprintln!("SKIPPED captured_impact_problems_match_siconos: no siconos under {python}");
+    let Some(python) = contact_support::siconos_or_skip("captured_impact_problems_match_siconos")
+    else {
         return;
-    }
+    };
     let json = dir.path().join("siconos.json");
     let run = Command::new(&python)
-        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/siconos/solve_fc3d.py"))
+        .arg(contact_support::siconos_script())
         .arg(&file)
         .arg("--json")
         .arg(&json)

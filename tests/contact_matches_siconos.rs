@@ -11,11 +11,10 @@
 
 mod contact_support;
 
-use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Instant;
 
-use contact_support::{law_violation, physical_problem};
+use contact_support::{law_violation, physical_problem, siconos_or_skip, siconos_script};
 use rigtwin::contact::{
     write_problem, ContactParameters, ContactProblem, ContactSolution, ContactSolver, SolveStats,
     StepRule, SweepMethod,
@@ -25,33 +24,6 @@ const SIZES: [usize; 24] = [
     1, 2, 3, 4, 6, 8, 10, 12, 16, 20, 24, 30, 36, 42, 48, 60, 72, 90, 100, 120, 144, 160, 180, 192,
 ];
 const REPEAT: usize = 3;
-
-fn python() -> String {
-    std::env::var("RIGTWIN_SICONOS_PYTHON").unwrap_or_else(|_| "/usr/bin/python3".to_string())
-}
-
-/// Whether siconos is importable; the reason when not.
-fn siconos_available(python: &str) -> Result<(), String> {
-    match Command::new(python)
-        .args(["-c", "import siconos.numerics"])
-        .output()
-    {
-        Ok(out) if out.status.success() => Ok(()),
-        Ok(out) => Err(format!(
-            "{python} cannot import siconos.numerics: {}",
-            String::from_utf8_lossy(&out.stderr)
-                .lines()
-                .rev()
-                .find(|l| !l.trim().is_empty())
-                .unwrap_or("no message")
-        )),
-        Err(e) => Err(format!("cannot run {python}: {e}")),
-    }
-}
-
-fn script() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/siconos/solve_fc3d.py")
-}
 
 /// Solves with a fresh solver (so the timed solve includes gathering W and the step sizes),
 /// best wall time of `REPEAT` cold solves.
@@ -130,17 +102,12 @@ fn contact_solutions_match_siconos_fc3d() {
     }
     drop(out);
 
-    let python = python();
-    if let Err(why) = siconos_available(&python) {
-        if std::env::var_os("RIGTWIN_REQUIRE_SICONOS").is_some() {
-            panic!("RIGTWIN_REQUIRE_SICONOS is set but {why}");
-        }
-        eprintln!("SKIPPED contact_solutions_match_siconos_fc3d: {why}");
+    let Some(python) = siconos_or_skip("contact_solutions_match_siconos_fc3d") else {
         return;
-    }
+    };
     let json = dir.path().join("siconos.json");
     let run = Command::new(&python)
-        .arg(script())
+        .arg(siconos_script())
         .arg(&file)
         .arg("--json")
         .arg(&json)

@@ -15,7 +15,9 @@ use crate::report::{
     ScalogramOptions, Source, TestCurve, TimeHistory, TimeWindow,
 };
 use crate::rom::Rom;
-use crate::sim::convergence::{dt_study, modes_study, ConvergenceSetup, ConvergenceStudy};
+use crate::sim::convergence::{
+    dt_study, modes_study, stable_steps_per_period, ConvergenceSetup, ConvergenceStudy,
+};
 use crate::sim::stepped::{run_plan, StepTrace, SteppedSineOptions, TestProgress, TestResult};
 use crate::sim::{Coupling, IntegratorParameters};
 
@@ -563,15 +565,6 @@ fn scalogram_figure(tr: &StepTrace, l: f64, name: &str, out: &Path) -> anyhow::R
 }
 
 fn convergence(a: ConvergenceArgs) -> anyhow::Result<()> {
-    let (rom, _) = load_rom(&a.source, a.quiet)?;
-    let setup = ConvergenceSetup {
-        omega_ratio: a.omega,
-        level: a.level,
-        clearance: a.clearance,
-        periods: a.periods,
-        integrator: a.integrator.parameters(),
-        ..Default::default()
-    };
     if !(a.omega > 0.0 && a.omega < 10.0) {
         bail!("--omega = {}: expected Omega/omega_2 in (0, 10)", a.omega);
     }
@@ -585,6 +578,15 @@ fn convergence(a: ConvergenceArgs) -> anyhow::Result<()> {
     if a.periods == 0 {
         bail!("--periods must be at least 1");
     }
+    let (rom, _) = load_rom(&a.source, a.quiet)?;
+    let setup = ConvergenceSetup {
+        omega_ratio: a.omega,
+        level: a.level,
+        clearance: a.clearance,
+        periods: a.periods,
+        integrator: a.integrator.parameters(),
+        ..Default::default()
+    };
     let bar = if a.quiet {
         ProgressBar::hidden()
     } else {
@@ -619,14 +621,10 @@ fn convergence(a: ConvergenceArgs) -> anyhow::Result<()> {
             } else {
                 a.modes.clone()
             };
-            let needed = rom.meta.stable_steps_per_period_open * setup.omega_ratio;
-            let spp = a.modes_steps.unwrap_or_else(|| {
-                let mut s = 1000u32;
-                while f64::from(s) <= 1.05 * needed {
-                    s *= 2;
-                }
-                s
-            });
+            let spp = match a.modes_steps {
+                Some(spp) => spp,
+                None => stable_steps_per_period(&rom, setup.omega_ratio)?,
+            };
             bar.set_length(modes.len() as u64);
             modes_study(&rom, &setup, &modes, spp, &mut |x| {
                 bar.inc(1);

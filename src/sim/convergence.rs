@@ -15,7 +15,7 @@ use super::error::SimError;
 use super::excitation::Excitation;
 use super::integrator::{Integrator, IntegratorParameters, State, TimeStep};
 use super::output::StepOutput;
-use super::stepped::UPPER_TIP;
+use super::stepped::{beam_length, output_index, UPPER_TIP};
 
 /// The operating point and window of a convergence study.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -102,19 +102,11 @@ pub enum ConvergenceError {
 }
 
 fn tip_index(rom: &Rom) -> Result<usize, ConvergenceError> {
-    rom.outputs
-        .iter()
-        .position(|o| o.name == UPPER_TIP)
-        .ok_or_else(|| ConvergenceError::Rom(format!("no sensor output named \"{UPPER_TIP}\"")))
+    output_index(rom, UPPER_TIP).map_err(|e| ConvergenceError::Rom(e.to_string()))
 }
 
 fn excitation(rom: &Rom, setup: &ConvergenceSetup) -> Result<(Excitation, f64), ConvergenceError> {
-    let l = rom.meta.beam_length;
-    if !(l.is_finite() && l > 0.0) {
-        return Err(ConvergenceError::Rom(
-            "meta.beam_length is unknown; rebuild the ROM with `rigtwin rom build`".into(),
-        ));
-    }
+    let l = beam_length(rom).map_err(|e| ConvergenceError::Rom(e.to_string()))?;
     let omega = setup.omega_ratio * rom.omega_ref();
     Ok((
         Excitation::Sine {
@@ -137,7 +129,7 @@ fn initial_conditions(
 ) -> Result<(Vec<f64>, Vec<f64>, f64), ConvergenceError> {
     let (exc, omega) = excitation(rom, setup)?;
     let mut params = setup.integrator.clone();
-    let spp = prerun_steps_per_period(rom, setup)?;
+    let spp = u64::from(stable_steps_per_period(rom, setup.omega_ratio)?);
     params.time_step = TimeStep::StepsPerPeriod {
         steps: spp as f64,
         omega,
@@ -176,13 +168,14 @@ fn initial_conditions(
     Ok((st.eta().to_vec(), v0, t0))
 }
 
-/// Steps per period of the prerun: 1000, doubled until stable for the ROM's highest mode
-/// (e.g. 4000 for a ROM covering 800 x f(1FU)).
-fn prerun_steps_per_period(rom: &Rom, setup: &ConvergenceSetup) -> Result<u64, ConvergenceError> {
+/// Steps per excitation period at `omega_ratio` x omega_2: 1000, doubled until stable (with 5 %
+/// margin) for the ROM's highest mode with all pairs open (e.g. 4000 for a ROM covering
+/// 800 x f(1FU)). Used by the prerun and as the mode study's default.
+pub fn stable_steps_per_period(rom: &Rom, omega_ratio: f64) -> Result<u32, ConvergenceError> {
     let limits = super::integrator::stability_limits(rom)?;
-    let needed = limits.steps_per_period_open() * setup.omega_ratio;
-    let mut spp = 1000u64;
-    while spp as f64 <= 1.05 * needed {
+    let needed = limits.steps_per_period_open() * omega_ratio;
+    let mut spp = 1000u32;
+    while f64::from(spp) <= 1.05 * needed {
         spp *= 2;
     }
     Ok(spp)

@@ -218,28 +218,31 @@ pub enum SteppedSineError {
     },
 }
 
-/// Indices of the upper and lower tip outputs of a ROM.
-fn tip_outputs(rom: &Rom) -> Result<(usize, usize), SteppedSineError> {
-    let find = |name: &str| {
-        rom.outputs
-            .iter()
-            .position(|o| o.name == name)
-            .ok_or_else(|| {
-                SteppedSineError::Rom(format!(
-                    "no sensor output named \"{name}\" (outputs: {}); the rig description must \
-                 define sensors \"{UPPER_TIP}\" and \"{LOWER_TIP}\"",
-                    rom.outputs
-                        .iter()
-                        .map(|o| o.name.as_str())
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                ))
-            })
-    };
-    Ok((find(UPPER_TIP)?, find(LOWER_TIP)?))
+/// Index of the ROM output (sensor) named `name`.
+pub(crate) fn output_index(rom: &Rom, name: &str) -> Result<usize, SteppedSineError> {
+    rom.outputs
+        .iter()
+        .position(|o| o.name == name)
+        .ok_or_else(|| {
+            SteppedSineError::Rom(format!(
+                "no sensor output named \"{name}\" (outputs: {}); the rig description must \
+             define sensors \"{UPPER_TIP}\" and \"{LOWER_TIP}\"",
+                rom.outputs
+                    .iter()
+                    .map(|o| o.name.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ))
+        })
 }
 
-fn beam_length(rom: &Rom) -> Result<f64, SteppedSineError> {
+/// Indices of the upper and lower tip outputs of a ROM.
+fn tip_outputs(rom: &Rom) -> Result<(usize, usize), SteppedSineError> {
+    Ok((output_index(rom, UPPER_TIP)?, output_index(rom, LOWER_TIP)?))
+}
+
+/// The ROM's beam length l, m (the unit of plan levels and clearances).
+pub(crate) fn beam_length(rom: &Rom) -> Result<f64, SteppedSineError> {
     let l = rom.meta.beam_length;
     if l.is_finite() && l > 0.0 {
         Ok(l)
@@ -334,6 +337,34 @@ impl StepSink for Recorder<'_> {
     }
 }
 
+/// Runs `periods` excitation periods in chunks of at most `chunk` periods, reporting after
+/// each chunk through `on_chunk(periods in the chunk)`. Stops early when the state becomes
+/// non-finite. Returns the time steps done and the stop, if any.
+#[allow(clippy::too_many_arguments)] // the run's context, each used once
+fn run_periods<S: StepSink>(
+    integ: &mut Integrator,
+    state: &mut State,
+    exc: &Excitation,
+    periods: u64,
+    steps_per_period: u64,
+    chunk: u64,
+    sink: &mut S,
+    on_chunk: &mut dyn FnMut(u64),
+) -> Result<(u64, Option<RunStop>), SimError> {
+    let (mut left, mut steps) = (periods, 0);
+    while left > 0 {
+        let p = left.min(chunk);
+        let rep = integ.run(state, exc, p * steps_per_period, sink)?;
+        steps += rep.steps;
+        left -= p;
+        on_chunk(p);
+        if rep.stop.is_some() {
+            return Ok((steps, rep.stop));
+        }
+    }
+    Ok((steps, None))
+}
+
 /// Index of the step whose ratio is nearest to `target` (first on ties).
 fn nearest_step(ratios: &[f64], target: f64) -> usize {
     let mut best = 0;
@@ -405,9 +436,12 @@ pub fn run_test(
 
     'steps: for (s, &ratio) in ratios.iter().enumerate() {
         let omega = ratio * w2;
-        integ
-            .set_time_step(TimeStep::StepsPerPeriod { steps: spp, omega })
-            .map_err(sim_err)?;
+        if s > 0 {
+            // The integrator was built at the first step's dt.
+            integ
+                .set_time_step(TimeStep::StepsPerPeriod { steps: spp, omega })
+                .map_err(sim_err)?;
+        }
         phase = continuous_phase(omega_prev, phase, omega, state.time());
         omega_prev = omega;
         let exc = Excitation::Sine {
@@ -416,26 +450,24 @@ pub fn run_test(
             phase,
         };
         let before = state.counters();
-        let mut stop: Option<RunStop> = None;
+        let spp_steps = u64::from(spec.steps_per_period);
 
         // Settle.
-        let mut left = u64::from(spec.settle_periods);
-        while left > 0 && stop.is_none() {
-            let p = left.min(chunk);
-            let rep = integ
-                .run(
-                    &mut state,
-                    &exc,
-                    p * u64::from(spec.steps_per_period),
-                    &mut super::NullSink,
-                )
-                .map_err(sim_err)?;
-            result.time_steps += rep.steps;
-            stop = rep.stop;
-            left -= p;
-            periods_done += p;
-            progress(&report(s, ratio, periods_done, false));
-        }
+        let (steps, mut stop) = run_periods(
+            &mut integ,
+            &mut state,
+            &exc,
+            u64::from(spec.settle_periods),
+            spp_steps,
+            chunk,
+            &mut super::NullSink,
+            &mut |p| {
+                periods_done += p;
+                progress(&report(s, ratio, periods_done, false));
+            },
+        )
+        .map_err(sim_err)?;
+        result.time_steps += steps;
 
         // Record.
         let traced = trace_step == Some(s);
@@ -473,32 +505,25 @@ pub fn run_test(
             normal: Vec::with_capacity(cap),
             trace: traced.then_some((&mut trace, &exc)),
         };
-        let mut left = u64::from(spec.record_periods);
-        while left > 0 && stop.is_none() {
-            let p = left.min(chunk);
-            let rep = integ
-                .run(
-                    &mut state,
-                    &exc,
-                    p * u64::from(spec.steps_per_period),
-                    &mut rec,
-                )
-                .map_err(sim_err)?;
-            result.time_steps += rep.steps;
-            stop = rep.stop;
-            left -= p;
-            periods_done += p;
-            progress(&report(s, ratio, periods_done, false));
+        if stop.is_none() {
+            let (steps, rec_stop) = run_periods(
+                &mut integ,
+                &mut state,
+                &exc,
+                u64::from(spec.record_periods),
+                spp_steps,
+                chunk,
+                &mut rec,
+                &mut |p| {
+                    periods_done += p;
+                    progress(&report(s, ratio, periods_done, false));
+                },
+            )
+            .map_err(sim_err)?;
+            result.time_steps += steps;
+            stop = rec_stop;
         }
-        let counters = state.counters();
-        let step_counters = SolverCounters {
-            solves: counters.solves - before.solves,
-            closed_steps: counters.closed_steps - before.closed_steps,
-            iterations: counters.iterations - before.iterations,
-            max_iterations: counters.max_iterations - before.max_iterations,
-            diverged: counters.diverged - before.diverged,
-            worst_relative_residual: counters.worst_relative_residual,
-        };
+        let step_counters = state.counters().since(&before);
         let failures = step_counters.max_iterations + step_counters.diverged;
         result.solver_failures += failures;
         if let Some(RunStop::NonFinite { step, time }) = stop {
@@ -547,16 +572,9 @@ pub fn run_test(
             result.trace = Some(trace);
         }
         if let (Some((mut ci, mut cs)), Some(copt)) = (capture_from, opts.capture) {
-            result.captured = capture_problems(
-                &mut ci,
-                &mut cs,
-                &exc,
-                &copt,
-                spec,
-                ratio,
-                u64::from(spec.steps_per_period),
-            )
-            .map_err(sim_err)?;
+            result.captured =
+                capture_problems(&mut ci, &mut cs, &exc, &copt, spec, ratio, spp_steps)
+                    .map_err(sim_err)?;
         }
     }
     progress(&report(

@@ -283,3 +283,49 @@ pub fn law_violation(problem: &ContactProblem, lambda: &[f64]) -> f64 {
     }
     worst
 }
+
+/// The Python that runs the Siconos peer script: `$RIGTWIN_SICONOS_PYTHON`, else
+/// `/usr/bin/python3` (Debian's python3-siconos loads there).
+pub fn siconos_python() -> String {
+    std::env::var("RIGTWIN_SICONOS_PYTHON").unwrap_or_else(|_| "/usr/bin/python3".to_string())
+}
+
+/// The Siconos fc3d NSGS peer script.
+pub fn siconos_script() -> std::path::PathBuf {
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/siconos/solve_fc3d.py")
+}
+
+/// Whether siconos is importable by `python`; the reason when not.
+pub fn siconos_available(python: &str) -> Result<(), String> {
+    match std::process::Command::new(python)
+        .args(["-c", "import siconos.numerics"])
+        .output()
+    {
+        Ok(out) if out.status.success() => Ok(()),
+        Ok(out) => Err(format!(
+            "{python} cannot import siconos.numerics: {}",
+            String::from_utf8_lossy(&out.stderr)
+                .lines()
+                .rev()
+                .find(|l| !l.trim().is_empty())
+                .unwrap_or("no message")
+        )),
+        Err(e) => Err(format!("cannot run {python}: {e}")),
+    }
+}
+
+/// The Python to run the peer with, or `None` after printing why test `name` is skipped.
+/// Panics instead of skipping when `RIGTWIN_REQUIRE_SICONOS` is set (CI).
+pub fn siconos_or_skip(name: &str) -> Option<String> {
+    let python = siconos_python();
+    match siconos_available(&python) {
+        Ok(()) => Some(python),
+        Err(why) if std::env::var_os("RIGTWIN_REQUIRE_SICONOS").is_some() => {
+            panic!("RIGTWIN_REQUIRE_SICONOS is set but {why}")
+        }
+        Err(why) => {
+            eprintln!("SKIPPED {name}: {why}");
+            None
+        }
+    }
+}

@@ -176,7 +176,9 @@ pub struct SolverCounters {
 }
 
 impl SolverCounters {
-    fn since(&self, before: &SolverCounters) -> SolverCounters {
+    /// The counts since `before` (an earlier copy of the same cumulative counters); the worst
+    /// residual stays the cumulative one.
+    pub(crate) fn since(&self, before: &SolverCounters) -> SolverCounters {
         SolverCounters {
             solves: self.solves - before.solves,
             closed_steps: self.closed_steps - before.closed_steps,

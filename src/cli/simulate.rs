@@ -16,7 +16,8 @@ use crate::report::{
 };
 use crate::rom::Rom;
 use crate::sim::convergence::{
-    dt_study, modes_study, stable_steps_per_period, ConvergenceSetup, ConvergenceStudy,
+    dt_study, modes_study, stable_steps_per_period, ConvergenceSetup, ConvergenceStart,
+    ConvergenceStudy,
 };
 use crate::sim::stepped::{run_plan, StepTrace, SteppedSineOptions, TestProgress, TestResult};
 use crate::sim::{Coupling, IntegratorParameters};
@@ -135,6 +136,15 @@ pub enum KindArg {
     Modes,
 }
 
+/// Initial conditions of a study.
+#[derive(Clone, Copy, Debug, ValueEnum)]
+pub enum StartArg {
+    /// After a prerun, at a period start followed by impacts.
+    Impacts,
+    /// Zero relative to the base at t = 0.
+    Rest,
+}
+
 /// `rigtwin simulate convergence`
 #[derive(Args, Debug)]
 pub struct ConvergenceArgs {
@@ -176,6 +186,10 @@ pub struct ConvergenceArgs {
     /// Omega / omega_2.
     #[arg(long, default_value_t = 1.0)]
     pub omega: f64,
+    /// Initial conditions of every run: `impacts` (after a prerun, at a period start followed
+    /// by impacts) or `rest` (zero relative to the base at t = 0).
+    #[arg(long, value_enum, default_value = "impacts")]
+    pub start: StartArg,
     /// No progress display.
     #[arg(long)]
     pub quiet: bool,
@@ -584,6 +598,10 @@ fn convergence(a: ConvergenceArgs) -> anyhow::Result<()> {
         level: a.level,
         clearance: a.clearance,
         periods: a.periods,
+        start: match a.start {
+            StartArg::Impacts => ConvergenceStart::Impacts,
+            StartArg::Rest => ConvergenceStart::Rest,
+        },
         integrator: a.integrator.parameters(),
         ..Default::default()
     };
@@ -643,8 +661,8 @@ fn convergence(a: ConvergenceArgs) -> anyhow::Result<()> {
     );
     for r in &study.runs {
         println!(
-            "  x = {:>8}  dt = {:.3e} s  relative RMS error {:.3e}  closed steps {}  solver failures {}",
-            r.x, r.dt, r.error, r.closed_steps, r.solver_failures
+            "  x = {:>8}  dt = {:.3e} s  relative RMS error {:.3e}  RMS change {:.2e}  closed steps {}  solver failures {}",
+            r.x, r.dt, r.error, r.rms_change, r.closed_steps, r.solver_failures
         );
     }
     #[derive(serde::Serialize)]
@@ -685,7 +703,7 @@ fn convergence_figure(study: &ConvergenceStudy, out: &Path) -> anyhow::Result<()
             .iter()
             .map(|r| ConvergenceSignal {
                 x: r.x,
-                t: (0..r.u.len()).map(|k| (k as f64 + 0.5) * r.dt).collect(),
+                t: (0..r.u.len()).map(|k| k as f64 * r.dt).collect(),
                 u: r.u.clone(),
             })
             .collect(),

@@ -16,6 +16,7 @@ pub mod contact;
 pub mod fe;
 pub mod plan;
 pub mod report;
+pub mod rig;
 pub mod rom;
 pub mod signal;
 pub mod sim;

@@ -1,0 +1,210 @@
+//! What a rig backend streams and accepts: the DAQ channel layout, timestamped DAQ blocks of
+//! raw ADC counts with sequence numbers, drive commands, rig status and faults. Hardware and
+//! simulated backends produce exactly these types, so control, logging and replay never know
+//! which backend they talk to.
+//!
+//! Samples travel as integer ADC counts (what a DAQ delivers); the physical value of count `c`
+//! on channel `k` is `c * channels[k].scale` in the channel's unit. Keeping counts makes the
+//! log exact and replay bit-for-bit: every consumer converts with the same scale.
+
+use serde::{Deserialize, Serialize};
+
+/// What a DAQ channel measures.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ChannelKind {
+    /// Accelerometer on the shaker platform (vertical, absolute), m/s^2.
+    PlatformAcceleration,
+    /// Accelerometer on a beam (vertical, absolute), m/s^2.
+    BeamAcceleration,
+    /// Laser vibrometer velocity at the upper tip (vertical, absolute), m/s.
+    Vibrometer,
+    /// Voltage across the beam-to-beam contact-resistance circuit, V (high = open, low = closed).
+    ContactVoltage,
+    /// Amplifier output voltage at the shaker coil, V.
+    DriveVoltage,
+    /// Shaker coil current, A.
+    DriveCurrent,
+}
+
+impl ChannelKind {
+    /// SI unit of the physical value.
+    pub fn unit(self) -> &'static str {
+        match self {
+            ChannelKind::PlatformAcceleration | ChannelKind::BeamAcceleration => "m/s^2",
+            ChannelKind::Vibrometer => "m/s",
+            ChannelKind::ContactVoltage | ChannelKind::DriveVoltage => "V",
+            ChannelKind::DriveCurrent => "A",
+        }
+    }
+}
+
+/// One DAQ channel.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ChannelSpec {
+    /// Channel name, unique in the layout (e.g. "platform_1", "upper_tip", "vibrometer").
+    pub name: String,
+    /// What it measures.
+    pub kind: ChannelKind,
+    /// Physical value per ADC count, in the unit of `kind` (full scale / 2^(bits-1)).
+    pub scale: f64,
+    /// Largest count magnitude the ADC delivers (2^(bits-1) - 1); counts at +-this are clipped.
+    pub full_scale_counts: i32,
+}
+
+impl ChannelSpec {
+    /// Physical value of a count.
+    #[inline]
+    pub fn value(&self, count: i32) -> f64 {
+        f64::from(count) * self.scale
+    }
+}
+
+/// The channel layout and sample rate of a DAQ stream (fixed for a session).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DaqLayout {
+    /// Samples per second per channel, Hz.
+    pub sample_rate: f64,
+    /// Samples per channel in every block.
+    pub block_size: usize,
+    /// The channels, in the order of [`DaqBlock::counts`].
+    pub channels: Vec<ChannelSpec>,
+}
+
+impl DaqLayout {
+    /// Index of the channel called `name`.
+    pub fn index(&self, name: &str) -> Option<usize> {
+        self.channels.iter().position(|c| c.name == name)
+    }
+
+    /// Indices of all channels of a kind, in layout order.
+    pub fn indices_of(&self, kind: ChannelKind) -> Vec<usize> {
+        self.channels
+            .iter()
+            .enumerate()
+            .filter(|(_, c)| c.kind == kind)
+            .map(|(i, _)| i)
+            .collect()
+    }
+
+    /// Sample interval, s.
+    pub fn dt(&self) -> f64 {
+        1.0 / self.sample_rate
+    }
+}
+
+/// One block of samples of every channel.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DaqBlock {
+    /// Block sequence number, 0 for the first block of a session, +1 per block. A gap means
+    /// lost data.
+    pub seq: u64,
+    /// Index of the block's first sample since the stream started (`seq * block_size` unless
+    /// blocks were lost).
+    pub first_sample: u64,
+    /// Rig time of the first sample, s (the DAQ's sample clock: `first_sample / sample_rate`).
+    pub time: f64,
+    /// Samples per channel in this block.
+    pub len: usize,
+    /// ADC counts, channel-major: `counts[k * len + i]` is sample `i` of channel `k`.
+    pub counts: Vec<i32>,
+}
+
+impl DaqBlock {
+    /// The counts of channel `k`.
+    pub fn channel(&self, k: usize) -> &[i32] {
+        &self.counts[k * self.len..(k + 1) * self.len]
+    }
+
+    /// Checks the block against a layout: length and count range. Returns a description of
+    /// the first problem (a block from hardware is external data).
+    pub fn check(&self, layout: &DaqLayout) -> Result<(), String> {
+        let n_ch = layout.channels.len();
+        if self.len == 0 {
+            return Err(format!("block {}: no samples", self.seq));
+        }
+        if self.counts.len() != n_ch * self.len {
+            return Err(format!(
+                "block {}: {} counts for {} channels x {} samples",
+                self.seq,
+                self.counts.len(),
+                n_ch,
+                self.len
+            ));
+        }
+        for (k, ch) in layout.channels.iter().enumerate() {
+            if let Some(c) = self
+                .channel(k)
+                .iter()
+                .find(|c| c.unsigned_abs() > ch.full_scale_counts.unsigned_abs())
+            {
+                return Err(format!(
+                    "block {}, channel {}: count {} beyond full scale {}",
+                    self.seq, ch.name, c, ch.full_scale_counts
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// A drive command: the shaker amplifier's input sine. The backend changes the frequency
+/// phase-continuously and ramps the amplitude linearly from its current value over `ramp_s`.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DriveCommand {
+    /// Drive frequency, Hz (> 0).
+    pub frequency_hz: f64,
+    /// Amplitude of the amplifier input, V (>= 0).
+    pub amplitude_v: f64,
+    /// Time over which the amplitude moves to the new value, s (>= 0; 0 = at the next sample).
+    pub ramp_s: f64,
+}
+
+/// The drive as the backend applies it.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct DriveState {
+    /// Current drive frequency, Hz.
+    pub frequency_hz: f64,
+    /// Current amplitude of the amplifier input, V.
+    pub amplitude_v: f64,
+    /// Amplitude the current ramp heads for, V.
+    pub target_amplitude_v: f64,
+    /// Phase of the drive sine, rad (wrapped to [0, 2 pi)).
+    pub phase: f64,
+}
+
+/// A fault reported by a backend (hardware or simulated). The controller aborts on any.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, thiserror::Error)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum RigFault {
+    /// The amplifier clipped its output (drive saturation).
+    #[error("amplifier output saturated at {limit_v} V")]
+    DriveSaturated {
+        /// The amplifier's output limit, V.
+        limit_v: f64,
+    },
+    /// A channel's ADC clipped.
+    #[error("channel {channel}: ADC over range")]
+    OverRange {
+        /// Channel name.
+        channel: String,
+    },
+    /// The backend reports a broken link or device.
+    #[error("{0}")]
+    Device(String),
+}
+
+/// Backend status.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct RigStatus {
+    /// Rig time of the last delivered sample, s.
+    pub time: f64,
+    /// Whether the stream is running.
+    pub running: bool,
+    /// The drive.
+    pub drive: DriveState,
+    /// Faults raised since the start (latched).
+    pub faults: Vec<RigFault>,
+    /// Blocks delivered later than the wall clock allowed (real-time pacing only).
+    pub overruns: u64,
+}

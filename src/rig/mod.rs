@@ -1,0 +1,60 @@
+//! The rig: the [`RigBackend`] trait every backend implements (the simulated rig here, the
+//! CAN/serial hardware later) and the data it streams ([`daq`]).
+//!
+//! Control code is generic over the backend and never knows which one it talks to. A backend
+//! delivers DAQ blocks with gap-free sequence numbers at a fixed sample rate, applies drive
+//! commands from the next block on, and reports faults in its status.
+
+pub mod daq;
+
+use std::future::Future;
+
+pub use daq::{
+    ChannelKind, ChannelSpec, DaqBlock, DaqLayout, DriveCommand, DriveState, RigFault, RigStatus,
+};
+
+/// Errors of a backend.
+#[derive(Debug, thiserror::Error)]
+pub enum RigError {
+    /// The backend cannot be used as configured.
+    #[error("rig backend configuration: {0}")]
+    Config(String),
+    /// A command was out of range.
+    #[error("drive command rejected: {0}")]
+    Command(String),
+    /// The link to the rig (or the simulation thread) is gone.
+    #[error("rig link lost: {0}")]
+    Link(String),
+    /// The backend was used out of order (e.g. a block requested before start).
+    #[error("rig backend: {0}")]
+    State(String),
+}
+
+/// A test rig: a shaker drive and a DAQ stream.
+///
+/// Async methods return `Send` futures so a session can run on a multi-threaded runtime.
+/// Timing: a drive command sent before [`RigBackend::next_block`] applies from the first
+/// sample of the block that call returns at the latest (hardware: as soon as it arrives).
+pub trait RigBackend: Send {
+    /// The DAQ channel layout and sample rate (fixed for the session).
+    fn layout(&self) -> &DaqLayout;
+
+    /// Starts the DAQ stream with the drive at zero amplitude.
+    fn start(&mut self) -> impl Future<Output = Result<(), RigError>> + Send;
+
+    /// Sets the drive (phase-continuous frequency change, amplitude ramp).
+    fn set_drive(
+        &mut self,
+        command: DriveCommand,
+    ) -> impl Future<Output = Result<(), RigError>> + Send;
+
+    /// The next DAQ block, `Ok(None)` once the stream has ended. It may wait indefinitely
+    /// (a stalled DAQ): callers apply their own watchdog timeout.
+    fn next_block(&mut self) -> impl Future<Output = Result<Option<DaqBlock>, RigError>> + Send;
+
+    /// Status: drive, latched faults, pacing overruns.
+    fn status(&self) -> RigStatus;
+
+    /// Stops the stream. The drive is switched off (callers ramp it down first).
+    fn stop(&mut self) -> impl Future<Output = Result<(), RigError>> + Send;
+}

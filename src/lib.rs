@@ -13,6 +13,7 @@
 pub mod cli;
 pub mod config;
 pub mod contact;
+pub mod control;
 pub mod fe;
 pub mod plan;
 pub mod report;

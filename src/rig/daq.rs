@@ -10,7 +10,7 @@
 use serde::{Deserialize, Serialize};
 
 /// What a DAQ channel measures.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum ChannelKind {
     /// Accelerometer on the shaker platform (vertical, absolute), m/s^2.
@@ -40,7 +40,7 @@ impl ChannelKind {
 }
 
 /// One DAQ channel.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct ChannelSpec {
     /// Channel name, unique in the layout (e.g. "platform_1", "upper_tip", "vibrometer").
     pub name: String,
@@ -61,7 +61,7 @@ impl ChannelSpec {
 }
 
 /// The channel layout and sample rate of a DAQ stream (fixed for a session).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct DaqLayout {
     /// Samples per second per channel, Hz.
     pub sample_rate: f64,
@@ -94,7 +94,7 @@ impl DaqLayout {
 }
 
 /// One block of samples of every channel.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct DaqBlock {
     /// Block sequence number, 0 for the first block of a session, +1 per block. A gap means
     /// lost data.
@@ -150,7 +150,7 @@ impl DaqBlock {
 
 /// A drive command: the shaker amplifier's input sine. The backend changes the frequency
 /// phase-continuously and ramps the amplitude linearly from its current value over `ramp_s`.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct DriveCommand {
     /// Drive frequency, Hz (> 0).
     pub frequency_hz: f64,
@@ -161,7 +161,7 @@ pub struct DriveCommand {
 }
 
 /// The drive as the backend applies it.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct DriveState {
     /// Current drive frequency, Hz.
     pub frequency_hz: f64,
@@ -174,7 +174,7 @@ pub struct DriveState {
 }
 
 /// A fault reported by a backend (hardware or simulated). The controller aborts on any.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, thiserror::Error)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema, thiserror::Error)]
 #[serde(tag = "kind", rename_all = "snake_case")]
 pub enum RigFault {
     /// The amplifier clipped its output (drive saturation).
@@ -195,7 +195,7 @@ pub enum RigFault {
 }
 
 /// Backend status.
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct RigStatus {
     /// Rig time of the last delivered sample, s.
     pub time: f64,

@@ -9,6 +9,8 @@ pub mod daq;
 
 use std::future::Future;
 
+use crate::plan::TestSpec;
+
 pub use daq::{
     ChannelKind, ChannelSpec, DaqBlock, DaqLayout, DriveCommand, DriveState, RigFault, RigStatus,
 };
@@ -51,6 +53,17 @@ pub trait RigBackend: Send {
     /// The next DAQ block, `Ok(None)` once the stream has ended. It may wait indefinitely
     /// (a stalled DAQ): callers apply their own watchdog timeout.
     fn next_block(&mut self) -> impl Future<Output = Result<Option<DaqBlock>, RigError>> + Send;
+
+    /// Called before a test of the plan starts. Hardware: nothing to do (the rig is what it
+    /// is). The simulated rig sets its truth clearance to the test's (the plan's clearance
+    /// stands for the physical rig's state at that test).
+    fn begin_test(
+        &mut self,
+        test: &TestSpec,
+    ) -> impl Future<Output = Result<(), RigError>> + Send {
+        let _ = test;
+        async { Ok(()) }
+    }
 
     /// Status: drive, latched faults, pacing overruns.
     fn status(&self) -> RigStatus;

@@ -26,8 +26,9 @@ pub struct StepRecord<'a> {
     pub tip_velocity_lower: &'a [f64],
     /// Per sample: true when at least one contact pair is closed.
     pub contact_closed: &'a [bool],
-    /// Integrated normal contact force over the interface, N (>= 0 by the contact law).
-    pub normal_force: &'a [f64],
+    /// Integrated normal contact force over the interface, N (>= 0 by the contact law);
+    /// `None` for measurements (a rig has no force channel).
+    pub normal_force: Option<&'a [f64]>,
 }
 
 /// Tuning of [`step_metrics`].
@@ -41,7 +42,7 @@ pub struct MetricsParams {
 
 /// Metrics of one step. Velocities are normalised by `Omega q` (the reference's
 /// `u_tip / (Omega q_base)`), so the linear response at resonance is the dynamic amplification.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
 pub struct StepMetrics {
     /// RMS of the upper tip velocity over the window / (Omega q).
     pub rms_upper: f64,
@@ -63,8 +64,9 @@ pub struct StepMetrics {
     pub contact_fraction: f64,
     /// Open->closed transitions in the window divided by the number of periods.
     pub impacts_per_period: f64,
-    /// Largest integrated normal contact force in the window, N.
-    pub peak_normal_force: f64,
+    /// Largest integrated normal contact force in the window, N; `None` without a force
+    /// channel (measurements).
+    pub peak_normal_force: Option<f64>,
     /// Number of whole excitation periods in the window.
     pub periods: usize,
 }
@@ -152,10 +154,12 @@ impl StepRecord<'_> {
             n,
         )?;
         require_len("contact_closed", self.contact_closed.len(), reference, n)?;
-        require_len("normal_force", self.normal_force.len(), reference, n)?;
+        if let Some(f) = self.normal_force {
+            require_len("normal_force", f.len(), reference, n)?;
+            require_finite("normal_force", f)?;
+        }
         require_finite("tip_velocity_upper", self.tip_velocity_upper)?;
         require_finite("tip_velocity_lower", self.tip_velocity_lower)?;
-        require_finite("normal_force", self.normal_force)?;
         PeriodGrid::new(n, self.dt, self.omega)
     }
 
@@ -190,10 +194,9 @@ pub fn step_metrics(
     }
     let used = grid.used_samples();
     let impacts = count_impacts(&closed[..used], params.impact_debounce);
-    let peak_normal_force = record.normal_force[..used]
-        .iter()
-        .copied()
-        .fold(f64::NEG_INFINITY, f64::max);
+    let peak_normal_force = record
+        .normal_force
+        .map(|f| f[..used].iter().copied().fold(f64::NEG_INFINITY, f64::max));
 
     Ok(StepMetrics {
         rms_upper: rms(upper, &grid)? * scale,
@@ -235,7 +238,7 @@ mod tests {
                 tip_velocity_upper: &self.up,
                 tip_velocity_lower: &self.lo,
                 contact_closed: &self.closed,
-                normal_force: &self.force,
+                normal_force: Some(&self.force),
             }
         }
     }
@@ -281,7 +284,7 @@ mod tests {
         }
         assert_eq!(m.contact_fraction, 0.0);
         assert_eq!(m.impacts_per_period, 0.0);
-        assert_eq!(m.peak_normal_force, 0.0);
+        assert_eq!(m.peak_normal_force, Some(0.0));
     }
 
     #[test]
@@ -371,7 +374,7 @@ mod tests {
         assert_eq!(m.periods, 4);
         assert_eq!(m.impacts_per_period, 6.0 / 4.0);
         assert!((m.contact_fraction - 42.0 / 400.0).abs() < 1e-15);
-        assert_eq!(m.peak_normal_force, 4.0);
+        assert_eq!(m.peak_normal_force, Some(4.0));
         // Debounce 1 merges 125/127 into one impact; debounce 5 also merges it with 10..20.
         let m1 = step_metrics(&r.view(), &MetricsParams { impact_debounce: 1 }).unwrap();
         assert_eq!(m1.impacts_per_period, 5.0 / 4.0);
@@ -392,7 +395,7 @@ mod tests {
         assert_eq!(m.periods, 3);
         assert_eq!(m.contact_fraction, 0.0);
         assert_eq!(m.impacts_per_period, 0.0);
-        assert_eq!(m.peak_normal_force, 0.0);
+        assert_eq!(m.peak_normal_force, Some(0.0));
         assert!((m.amp_max_upper * omega * r.q - 1.0).abs() < 1e-12);
     }
 
@@ -449,14 +452,14 @@ mod tests {
         v.tip_velocity_upper = up;
         v.tip_velocity_lower = lo;
         v.contact_closed = c;
-        v.normal_force = f;
+        v.normal_force = Some(f);
         assert!(matches!(v.metrics(), Err(SignalError::TooShort { .. })));
 
         let mut v = r.view();
         v.tip_velocity_upper = &[];
         v.tip_velocity_lower = &[];
         v.contact_closed = &[];
-        v.normal_force = &[];
+        v.normal_force = Some(&[]);
         assert!(matches!(v.metrics(), Err(SignalError::Empty { .. })));
 
         let mut bad = r.lo.clone();

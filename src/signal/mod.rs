@@ -2,7 +2,7 @@
 //! whole-period bookkeeping and quadrature ([`periods`]), the step metrics of the reference's
 //! frequency-response figures ([`metrics`]), synchronous demodulation of the fundamental in
 //! batch and streaming form ([`demod`]), contact intervals, impacts per period and impact
-//! clusters ([`mod@contact_activity`]), the analytic Morlet wavelet transform ([`wavelet`]) and
+//! clusters ([`mod@contact_activity`]), drift-free integration of measured accelerations ([`integrate`]), the analytic Morlet wavelet transform ([`wavelet`]) and
 //! the relative RMS error of the convergence studies ([`relative_error`]).
 //!
 //! Everything here is pure and deterministic: slices in, values out, no I/O, no clock; the
@@ -14,6 +14,7 @@ pub mod contact_activity;
 pub mod demod;
 mod error;
 mod fft;
+pub mod integrate;
 pub mod metrics;
 pub mod periods;
 pub mod relative_error;
@@ -25,6 +26,7 @@ pub use contact_activity::{
 };
 pub use demod::{demodulate, Demodulator, Harmonic, PeriodHarmonic};
 pub use error::SignalError;
+pub use integrate::integrate_periodic;
 pub use metrics::{step_metrics, MetricsParams, StepMetrics, StepRecord};
 pub use periods::PeriodGrid;
 pub use relative_error::relative_rms_error;

@@ -549,7 +549,7 @@ pub fn run_test(
                 tip_velocity_upper: &vu,
                 tip_velocity_lower: &vl,
                 contact_closed: &closed,
-                normal_force: &normal,
+                normal_force: Some(&normal),
             },
             &opts.metrics,
         )

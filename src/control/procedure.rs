@@ -1,0 +1,386 @@
+//! The stepped-sine procedure as a synchronous state machine over DAQ blocks: for every test of
+//! the plan and every frequency step, retune the amplitude controller, settle, record the
+//! window, summarise; the drive commands and log records it produces are carried out by the
+//! async session ([`super::session`]). Being synchronous and clock-free it is tested without a
+//! runtime, and replay never needs it.
+//!
+//! Timing: a drive command produced after a block applies from the next block; a step's
+//! frequency starts there, so the controller is retuned at that block's first sample and the
+//! rest of the block that ended a record window is ignored.
+
+use std::f64::consts::TAU;
+
+use crate::plan::{Plan, TestSpec};
+use crate::rig::{ChannelKind, DaqBlock, DaqLayout, DriveCommand};
+
+use super::amplitude::{AmplitudeController, ControlUpdate};
+use super::events::{ControlState, EventKind, Phase, SessionEvent};
+use super::safety::{AbortReason, SafetyMonitor};
+use super::settle::{Settle, SettleDetector};
+use super::spec::{ControlSpec, SafetySpec};
+use super::summary::{summarize, StepInfo, StepSummary};
+
+/// What a session runs: the plan, the controller and safety settings, and the frequency and
+/// length references of the plan's ratios.
+#[derive(Clone, Debug)]
+pub struct SessionSetup {
+    /// The stepped-sine plan.
+    pub plan: Plan,
+    /// `[control]`.
+    pub control: ControlSpec,
+    /// `[safety]`.
+    pub safety: SafetySpec,
+    /// omega_2, the 1FU angular frequency the plan's Omega ratios refer to, rad/s.
+    pub omega_ref: f64,
+    /// Beam length l, the unit of the plan's levels, m.
+    pub beam_length: f64,
+}
+
+/// What one block produced.
+#[derive(Debug, Default)]
+pub struct BlockOutcome {
+    /// Control state after the block (one log record per block).
+    pub control: Option<ControlState>,
+    /// Events, in order.
+    pub events: Vec<SessionEvent>,
+    /// Steps whose record window ended in this block.
+    pub steps: Vec<(StepInfo, StepSummary)>,
+    /// A drive command to send before the next block.
+    pub command: Option<DriveCommand>,
+    /// A test starts with the next block (the backend may prepare for it).
+    pub begin_test: Option<usize>,
+    /// The plan is complete.
+    pub done: bool,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Stage {
+    /// The step's frequency starts with the next block.
+    Pending,
+    Settle,
+    Record,
+    Done,
+}
+
+/// The stepped-sine state machine.
+#[derive(Debug)]
+pub struct Procedure {
+    setup: SessionSetup,
+    layout: DaqLayout,
+    platform: Vec<usize>,
+    vibrometer: Option<usize>,
+    test: usize,
+    step: usize,
+    ratios: Vec<f64>,
+    stage: Stage,
+    controller: Option<AmplitudeController>,
+    settle: Option<SettleDetector>,
+    step_start_sample: u64,
+    settle_seconds: f64,
+    settled: bool,
+    record_first: u64,
+    record_len: usize,
+    record: Vec<i32>,
+    recorded: usize,
+    last_update: Option<ControlUpdate>,
+    drive_v: f64,
+}
+
+impl Procedure {
+    /// Procedure for `setup` on a stream with `layout`. Errors name what is missing.
+    pub fn new(setup: &SessionSetup, layout: &DaqLayout) -> Result<Procedure, String> {
+        setup.plan.validate().map_err(|e| e.to_string())?;
+        setup.control.validate()?;
+        setup.safety.validate()?;
+        if setup.plan.tests.is_empty() {
+            return Err(format!("plan {}: no tests", setup.plan.source));
+        }
+        let platform = layout.indices_of(ChannelKind::PlatformAcceleration);
+        if platform.is_empty() {
+            return Err("the DAQ layout has no platform accelerometer".into());
+        }
+        if !(setup.omega_ref > 0.0 && setup.beam_length > 0.0) {
+            return Err("omega_ref and beam_length must be > 0".into());
+        }
+        let initial = if setup.control.initial_drive_v > 0.0 {
+            setup.control.initial_drive_v
+        } else {
+            0.01 * setup.safety.max_drive_v
+        };
+        Ok(Procedure {
+            setup: setup.clone(),
+            layout: layout.clone(),
+            platform,
+            vibrometer: layout.indices_of(ChannelKind::Vibrometer).first().copied(),
+            test: 0,
+            step: 0,
+            ratios: setup.plan.tests[0].omega_ratios(),
+            stage: Stage::Pending,
+            controller: None,
+            settle: None,
+            step_start_sample: 0,
+            settle_seconds: 0.0,
+            settled: false,
+            record_first: 0,
+            record_len: 0,
+            record: Vec::new(),
+            recorded: 0,
+            last_update: None,
+            drive_v: initial.min(setup.safety.max_drive_v),
+        })
+    }
+
+    fn spec(&self) -> &TestSpec {
+        &self.setup.plan.tests[self.test]
+    }
+
+    fn omega(&self) -> f64 {
+        self.ratios[self.step] * self.setup.omega_ref
+    }
+
+    fn target(&self) -> f64 {
+        self.spec().level * self.setup.beam_length
+    }
+
+    /// Index of the running test and step.
+    pub fn position(&self) -> (usize, usize) {
+        (self.test, self.step)
+    }
+
+    /// The command and events that start the session (first test, first step), at rig time
+    /// `time` and sample `sample`.
+    pub fn start(&mut self, time: f64, sample: u64) -> BlockOutcome {
+        let mut out = BlockOutcome {
+            begin_test: Some(0),
+            ..Default::default()
+        };
+        out.events.push(SessionEvent {
+            time,
+            sample,
+            kind: EventKind::SessionStart {
+                plan: self.setup.plan.name.clone().unwrap_or_default(),
+                tests: self.setup.plan.tests.iter().map(|t| t.name.clone()).collect(),
+            },
+        });
+        self.push_test_start(&mut out, time, sample);
+        self.push_step_start(&mut out, time, sample, 0.25);
+        out
+    }
+
+    fn push_test_start(&mut self, out: &mut BlockOutcome, time: f64, sample: u64) {
+        let t = self.spec().clone();
+        out.events.push(SessionEvent {
+            time,
+            sample,
+            kind: EventKind::TestStart {
+                test: t.name,
+                level: t.level,
+                direction: t.direction.as_str().to_string(),
+                clearance: t.clearance,
+            },
+        });
+    }
+
+    fn push_step_start(&mut self, out: &mut BlockOutcome, time: f64, sample: u64, ramp_s: f64) {
+        let omega = self.omega();
+        out.events.push(SessionEvent {
+            time,
+            sample,
+            kind: EventKind::StepStart {
+                test: self.spec().name.clone(),
+                step: self.step,
+                omega_ratio: self.ratios[self.step],
+                frequency_hz: omega / TAU,
+            },
+        });
+        out.command = Some(DriveCommand {
+            frequency_hz: omega / TAU,
+            amplitude_v: self.drive_v,
+            ramp_s,
+        });
+        self.stage = Stage::Pending;
+    }
+
+    /// Processes one block (already checked by the safety monitor for shape and sequence).
+    pub fn on_block(
+        &mut self,
+        block: &DaqBlock,
+        safety: &mut SafetyMonitor,
+    ) -> Result<BlockOutcome, AbortReason> {
+        let mut out = BlockOutcome::default();
+        let dt = self.layout.dt();
+        if self.stage == Stage::Done {
+            out.done = true;
+            return Ok(out);
+        }
+        if self.stage == Stage::Pending {
+            let (omega, target) = (self.omega(), self.target());
+            match &mut self.controller {
+                Some(c) => c.retune(target, omega, dt, block.time),
+                None => AmplitudeController::new(
+                    &self.setup.control,
+                    self.setup.safety.max_drive_v,
+                    target,
+                    omega,
+                    dt,
+                    block.time,
+                    self.drive_v,
+                )
+                .map(|c| self.controller = Some(c)),
+            }
+            .map_err(|e| AbortReason::Backend(format!("controller: {e}")))?;
+            self.settle = Some(SettleDetector::new(
+                &self.setup.control,
+                self.spec().settle_periods,
+            ));
+            self.step_start_sample = block.first_sample;
+            self.stage = Stage::Settle;
+        }
+        let inv = 1.0 / self.platform.len() as f64;
+        let mut drive_changed = false;
+        for i in 0..block.len {
+            if matches!(self.stage, Stage::Pending | Stage::Done) {
+                break; // the rest of the block belongs to the previous frequency
+            }
+            let sample = block.first_sample + i as u64;
+            let a_base: f64 = self
+                .platform
+                .iter()
+                .map(|&k| self.layout.channels[k].value(block.counts[k * block.len + i]))
+                .sum::<f64>()
+                * inv;
+            if let Some(k) = self.vibrometer {
+                let v = self.layout.channels[k].value(block.counts[k * block.len + i]);
+                self.settle.as_mut().expect("settling").push_response(v);
+            }
+            if self.stage == Stage::Record {
+                let n = self.record_len;
+                for k in 0..self.layout.channels.len() {
+                    self.record[k * n + self.recorded] = block.counts[k * block.len + i];
+                }
+                self.recorded += 1;
+            }
+            let controller = self.controller.as_mut().expect("retuned");
+            if let Some(u) = controller.push(a_base) {
+                safety.check_update(&u, controller.target_m())?;
+                if u.drive_v != self.drive_v {
+                    self.drive_v = u.drive_v;
+                    drive_changed = true;
+                }
+                self.last_update = Some(u);
+                if self.stage == Stage::Settle {
+                    let s = self.settle.as_mut().expect("settling").period_done(u.error);
+                    if s != Settle::Wait {
+                        self.begin_record(&mut out, sample + 1, s == Settle::Settled);
+                    }
+                }
+            }
+            if self.stage == Stage::Record && self.recorded == self.record_len {
+                self.end_record(&mut out, block.time + (i + 1) as f64 * dt, sample + 1)?;
+            }
+        }
+        if drive_changed && out.command.is_none() && self.stage != Stage::Done {
+            out.command = Some(DriveCommand {
+                frequency_hz: self.omega() / TAU,
+                amplitude_v: self.drive_v,
+                ramp_s: TAU / self.omega(),
+            });
+        }
+        let u = self.last_update;
+        out.control = Some(ControlState {
+            time: block.time,
+            seq: block.seq,
+            test: self.test,
+            step: self.step,
+            phase: match self.stage {
+                Stage::Pending => Phase::Transition,
+                Stage::Settle => Phase::Settle,
+                Stage::Record => Phase::Record,
+                Stage::Done => Phase::Done,
+            },
+            frequency_hz: self.omega() / TAU,
+            target_m: self.target(),
+            measured_m: u.map_or(f64::NAN, |u| u.measured_m),
+            period_amplitude_m: u.map_or(f64::NAN, |u| u.period_amplitude_m),
+            error: u.map_or(f64::NAN, |u| u.error),
+            drive_v: self.drive_v,
+        });
+        out.done = self.stage == Stage::Done;
+        Ok(out)
+    }
+
+    fn begin_record(&mut self, out: &mut BlockOutcome, first: u64, settled: bool) {
+        let dt = self.layout.dt();
+        let spp = TAU / (self.omega() * dt);
+        let periods = f64::from(self.spec().record_periods);
+        self.record_len = (periods * spp).ceil() as usize + 1;
+        self.record = vec![0; self.record_len * self.layout.channels.len()];
+        self.recorded = 0;
+        self.record_first = first;
+        self.settled = settled;
+        self.settle_seconds = (first - self.step_start_sample) as f64 * dt;
+        self.stage = Stage::Record;
+        out.events.push(SessionEvent {
+            time: first as f64 * dt,
+            sample: first,
+            kind: EventKind::RecordStart {
+                test: self.spec().name.clone(),
+                step: self.step,
+                settled,
+                settle_seconds: self.settle_seconds,
+            },
+        });
+    }
+
+    fn end_record(&mut self, out: &mut BlockOutcome, time: f64, sample: u64) -> Result<(), AbortReason> {
+        let info = StepInfo {
+            test: self.spec().name.clone(),
+            step: self.step,
+            omega_ratio: self.ratios[self.step],
+            omega: self.omega(),
+            base_amp_target: self.target(),
+            drive_amplitude: self.drive_v,
+            settle_seconds: self.settle_seconds,
+            settled: self.settled,
+            record_first_sample: self.record_first,
+            record_samples: self.record_len,
+            contact_threshold_v: self.setup.control.contact_threshold_v,
+        };
+        let summary = summarize(&self.layout, &info, &self.record)
+            .map_err(|e| AbortReason::Backend(format!("step summary: {e}")))?;
+        out.events.push(SessionEvent {
+            time,
+            sample,
+            kind: EventKind::RecordEnd { info: info.clone() },
+        });
+        out.steps.push((info, summary));
+        self.record = Vec::new();
+        // Next step, next test, or done.
+        if self.step + 1 < self.ratios.len() {
+            self.step += 1;
+            self.push_step_start(out, time, sample, 0.0);
+        } else {
+            out.events.push(SessionEvent {
+                time,
+                sample,
+                kind: EventKind::TestEnd {
+                    test: self.spec().name.clone(),
+                },
+            });
+            if self.test + 1 < self.setup.plan.tests.len() {
+                let old = self.target();
+                self.test += 1;
+                self.step = 0;
+                self.ratios = self.spec().omega_ratios();
+                // Feed-forward: scale the drive with the level.
+                self.drive_v = (self.drive_v * self.target() / old).min(self.setup.safety.max_drive_v);
+                out.begin_test = Some(self.test);
+                self.push_test_start(out, time, sample);
+                self.push_step_start(out, time, sample, 0.25);
+            } else {
+                self.stage = Stage::Done;
+            }
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,375 @@
+//! The async stepped-sine session: drives a [`RigBackend`] through the [`Procedure`], checks
+//! the safety limits on every block, hands every record to a [`SessionRecorder`] (the MCAP
+//! log) and ramps the drive down at the end or on an abort, recording the blocks of the ramp.
+//!
+//! Shutdown (Ctrl-C) is a future passed in: when it completes, the session aborts with
+//! [`AbortReason::Operator`]. The DAQ watchdog is a wall-clock timeout on every block.
+
+use std::future::Future;
+use std::time::Duration;
+
+use crate::rig::{DaqBlock, DaqLayout, DriveCommand, RigBackend, RigStatus};
+
+use super::events::{ControlState, EventKind, Phase, SessionEvent};
+use super::procedure::{BlockOutcome, Procedure, SessionSetup};
+use super::safety::{AbortReason, SafetyMonitor};
+use super::summary::{StepInfo, StepSummary};
+
+/// Where a session's records go. Implementations must not block (the MCAP recorder queues to
+/// a writer thread); an error aborts the session.
+pub trait SessionRecorder: Send {
+    /// The DAQ layout, once before the first block.
+    fn layout(&mut self, layout: &DaqLayout) -> Result<(), String>;
+    /// A raw DAQ block.
+    fn block(&mut self, block: &DaqBlock) -> Result<(), String>;
+    /// The control state after a block.
+    fn control(&mut self, state: &ControlState) -> Result<(), String>;
+    /// A session event.
+    fn event(&mut self, event: &SessionEvent) -> Result<(), String>;
+    /// Rig status (about once per second of rig time).
+    fn status(&mut self, time: f64, status: &RigStatus) -> Result<(), String>;
+    /// A finished step.
+    fn step(&mut self, time: f64, info: &StepInfo, summary: &StepSummary) -> Result<(), String>;
+}
+
+/// A recorder that keeps nothing.
+#[derive(Debug, Default, Clone, Copy)]
+pub struct NullRecorder;
+
+impl SessionRecorder for NullRecorder {
+    fn layout(&mut self, _: &DaqLayout) -> Result<(), String> {
+        Ok(())
+    }
+    fn block(&mut self, _: &DaqBlock) -> Result<(), String> {
+        Ok(())
+    }
+    fn control(&mut self, _: &ControlState) -> Result<(), String> {
+        Ok(())
+    }
+    fn event(&mut self, _: &SessionEvent) -> Result<(), String> {
+        Ok(())
+    }
+    fn status(&mut self, _: f64, _: &RigStatus) -> Result<(), String> {
+        Ok(())
+    }
+    fn step(&mut self, _: f64, _: &StepInfo, _: &StepSummary) -> Result<(), String> {
+        Ok(())
+    }
+}
+
+/// One test of a session summary.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct TestSummary {
+    /// Test name.
+    pub name: String,
+    /// Base level / l.
+    pub level: f64,
+    /// "up" or "down".
+    pub direction: String,
+    /// Clearance / l of the plan.
+    pub clearance: f64,
+    /// Finished steps.
+    pub steps: Vec<StepSummary>,
+}
+
+/// The summary of a session: reproducible from the log alone (`rigtwin replay`), so nothing
+/// here depends on the wall clock.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct SessionSummary {
+    /// Plan name.
+    pub plan: String,
+    /// Whether the session was aborted.
+    pub aborted: bool,
+    /// Why, as text.
+    pub abort_reason: Option<String>,
+    /// DAQ blocks received (including the ramp-down).
+    pub blocks: u64,
+    /// Rig time covered by the blocks, s.
+    pub rig_seconds: f64,
+    /// The tests that started, with their finished steps.
+    pub tests: Vec<TestSummary>,
+}
+
+impl SessionSummary {
+    /// Adds an event's effect on the summary (shared with replay).
+    pub fn apply_event(&mut self, event: &SessionEvent) {
+        match &event.kind {
+            EventKind::SessionStart { plan, .. } => self.plan = plan.clone(),
+            EventKind::TestStart {
+                test,
+                level,
+                direction,
+                clearance,
+            } => self.tests.push(TestSummary {
+                name: test.clone(),
+                level: *level,
+                direction: direction.clone(),
+                clearance: *clearance,
+                steps: Vec::new(),
+            }),
+            EventKind::Abort { message, .. } => {
+                self.aborted = true;
+                self.abort_reason = Some(message.clone());
+            }
+            _ => {}
+        }
+    }
+
+    /// Adds a finished step to the last test.
+    pub fn push_step(&mut self, summary: StepSummary) {
+        if let Some(t) = self.tests.last_mut() {
+            t.steps.push(summary);
+        }
+    }
+}
+
+/// Progress of a session, for a progress display.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SessionProgress {
+    /// Test index and name.
+    pub test: (usize, String),
+    /// Step index and number of steps of the test.
+    pub step: (usize, usize),
+    /// Rig time, s.
+    pub time: f64,
+    /// Phase.
+    pub phase: Phase,
+    /// Last relative control error.
+    pub error: f64,
+}
+
+/// Errors that prevent a session from starting (everything after the start is an abort).
+#[derive(Debug, thiserror::Error)]
+pub enum SessionError {
+    /// The plan or settings cannot run.
+    #[error("session setup: {0}")]
+    Setup(String),
+    /// The backend did not start.
+    #[error(transparent)]
+    Rig(#[from] crate::rig::RigError),
+    /// The recorder failed before the start.
+    #[error("session log: {0}")]
+    Log(String),
+}
+
+struct Run<'a, R: SessionRecorder> {
+    recorder: &'a mut R,
+    summary: SessionSummary,
+    last_status: f64,
+    last_block_end: f64,
+    /// Sample interval, s.
+    dt: f64,
+}
+
+impl<R: SessionRecorder> Run<'_, R> {
+    fn outcome(&mut self, out: &BlockOutcome) -> Result<(), AbortReason> {
+        if let Some(c) = &out.control {
+            self.recorder.control(c).map_err(AbortReason::Log)?;
+        }
+        for e in &out.events {
+            self.summary.apply_event(e);
+            self.recorder.event(e).map_err(AbortReason::Log)?;
+        }
+        for (info, s) in &out.steps {
+            let end = (info.record_first_sample + info.record_samples as u64) as f64 * self.dt;
+            self.recorder
+                .step(end, info, s)
+                .map_err(AbortReason::Log)?;
+            self.summary.push_step(s.clone());
+        }
+        Ok(())
+    }
+
+    fn block(&mut self, block: &DaqBlock, layout: &DaqLayout, status: &RigStatus) -> Result<(), AbortReason> {
+        self.recorder.block(block).map_err(AbortReason::Log)?;
+        self.summary.blocks += 1;
+        self.last_block_end = block.time + block.len as f64 / layout.sample_rate;
+        self.summary.rig_seconds = self.last_block_end;
+        if block.time - self.last_status >= 1.0 || block.seq == 0 {
+            self.last_status = block.time;
+            self.recorder.status(block.time, status).map_err(AbortReason::Log)?;
+        }
+        Ok(())
+    }
+}
+
+/// Runs the plan of `setup` on `backend`, recording into `recorder`, until done, aborted or
+/// `shutdown` completes. Returns the summary (also when aborted); errors only if the session
+/// could not start.
+pub async fn run_session<B: RigBackend, R: SessionRecorder>(
+    backend: &mut B,
+    setup: &SessionSetup,
+    recorder: &mut R,
+    shutdown: impl Future<Output = ()>,
+    progress: &mut (dyn FnMut(&SessionProgress) + Send),
+) -> Result<SessionSummary, SessionError> {
+    let layout = backend.layout().clone();
+    let mut procedure = Procedure::new(setup, &layout).map_err(SessionError::Setup)?;
+    let mut safety = SafetyMonitor::new(&setup.safety, &layout, setup.control.contact_threshold_v);
+    let timeout = Duration::from_secs_f64(setup.safety.daq_timeout_s);
+    recorder.layout(&layout).map_err(SessionError::Log)?;
+    backend.start().await?;
+    let mut run = Run {
+        recorder,
+        summary: SessionSummary {
+            plan: String::new(),
+            aborted: false,
+            abort_reason: None,
+            blocks: 0,
+            rig_seconds: 0.0,
+            tests: Vec::new(),
+        },
+        last_status: f64::NEG_INFINITY,
+        last_block_end: 0.0,
+        dt: layout.dt(),
+    };
+    tokio::pin!(shutdown);
+    let mut last_seq: i64 = -1;
+    let mut frequency_hz = 0.0;
+    let mut drive_on = false;
+    let start = procedure.start(0.0, 0);
+    let abort: Option<AbortReason> = 'session: {
+        if let Err(e) = run.outcome(&start) {
+            break 'session Some(e);
+        }
+        if let Some(t) = start.begin_test {
+            if let Err(e) = backend.begin_test(&setup.plan.tests[t]).await {
+                break 'session Some(AbortReason::Backend(e.to_string()));
+            }
+        }
+        if let Some(cmd) = start.command {
+            frequency_hz = cmd.frequency_hz;
+            drive_on = cmd.amplitude_v > 0.0;
+            if let Err(e) = backend.set_drive(cmd).await {
+                break 'session Some(AbortReason::Backend(e.to_string()));
+            }
+        }
+        loop {
+            let next = tokio::select! {
+                biased;
+                _ = &mut shutdown => break 'session Some(AbortReason::Operator),
+                r = tokio::time::timeout(timeout, backend.next_block()) => r,
+            };
+            let block = match next {
+                Err(_) => {
+                    break 'session Some(AbortReason::DaqTimeout {
+                        seconds: setup.safety.daq_timeout_s,
+                        last_seq,
+                    })
+                }
+                Ok(Err(e)) => break 'session Some(AbortReason::Backend(e.to_string())),
+                Ok(Ok(None)) => break 'session Some(AbortReason::StreamEnded { last_seq }),
+                Ok(Ok(Some(b))) => b,
+            };
+            last_seq = block.seq as i64;
+            let status = backend.status();
+            if let Err(e) = run.block(&block, &layout, &status) {
+                break 'session Some(e);
+            }
+            if let Some(f) = status.faults.first() {
+                break 'session Some(AbortReason::Rig(f.clone()));
+            }
+            if let Err(e) = safety.check_block(&block, &layout, drive_on) {
+                break 'session Some(e);
+            }
+            let out = match procedure.on_block(&block, &mut safety) {
+                Ok(o) => o,
+                Err(e) => break 'session Some(e),
+            };
+            if let Err(e) = run.outcome(&out) {
+                break 'session Some(e);
+            }
+            if let Some(c) = &out.control {
+                let (t, _) = procedure.position();
+                progress(&SessionProgress {
+                    test: (t, setup.plan.tests[t].name.clone()),
+                    step: (c.step, setup.plan.tests[t].steps as usize),
+                    time: c.time,
+                    phase: c.phase,
+                    error: c.error,
+                });
+            }
+            if out.done {
+                break 'session None;
+            }
+            if let Some(t) = out.begin_test {
+                if let Err(e) = backend.begin_test(&setup.plan.tests[t]).await {
+                    break 'session Some(AbortReason::Backend(e.to_string()));
+                }
+            }
+            if let Some(cmd) = out.command {
+                frequency_hz = cmd.frequency_hz;
+                drive_on = cmd.amplitude_v > 0.0;
+                if let Err(e) = backend.set_drive(cmd).await {
+                    break 'session Some(AbortReason::Backend(e.to_string()));
+                }
+            }
+        }
+    };
+
+    // Ramp-down: always, also after an abort; record the blocks of the ramp when the DAQ is
+    // alive.
+    let t_now = run.last_block_end;
+    if let Some(reason) = &abort {
+        tracing::warn!("session aborted: {reason}");
+        let e = SessionEvent {
+            time: t_now,
+            sample: (t_now * layout.sample_rate).round() as u64,
+            kind: EventKind::Abort {
+                reason: reason.clone(),
+                message: reason.to_string(),
+            },
+        };
+        run.summary.apply_event(&e);
+        let _ = run.recorder.event(&e);
+    }
+    let ramp = setup.safety.ramp_down_s;
+    let _ = backend
+        .set_drive(DriveCommand {
+            frequency_hz: if frequency_hz > 0.0 { frequency_hz } else { 1.0 },
+            amplitude_v: 0.0,
+            ramp_s: ramp,
+        })
+        .await;
+    let daq_alive = !matches!(
+        abort,
+        Some(AbortReason::DaqTimeout { .. } | AbortReason::StreamEnded { .. } | AbortReason::SequenceGap { .. })
+    );
+    if daq_alive {
+        let end = t_now + ramp + layout.block_size as f64 / layout.sample_rate;
+        while run.last_block_end < end {
+            match tokio::time::timeout(timeout, backend.next_block()).await {
+                Ok(Ok(Some(b))) => {
+                    let status = backend.status();
+                    let _ = run.block(&b, &layout, &status);
+                    let _ = run.recorder.control(&ControlState {
+                        time: b.time,
+                        seq: b.seq,
+                        test: procedure.position().0,
+                        step: procedure.position().1,
+                        phase: Phase::RampDown,
+                        frequency_hz,
+                        target_m: 0.0,
+                        measured_m: f64::NAN,
+                        period_amplitude_m: f64::NAN,
+                        error: f64::NAN,
+                        drive_v: status.drive.amplitude_v,
+                    });
+                }
+                _ => break,
+            }
+        }
+    } else {
+        tokio::time::sleep(Duration::from_secs_f64(ramp)).await;
+    }
+    let _ = backend.stop().await;
+    let end = SessionEvent {
+        time: run.last_block_end,
+        sample: (run.last_block_end * layout.sample_rate).round() as u64,
+        kind: EventKind::SessionEnd {
+            aborted: abort.is_some(),
+        },
+    };
+    let _ = run.recorder.event(&end);
+    Ok(run.summary)
+}

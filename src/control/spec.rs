@@ -1,0 +1,158 @@
+//! Controller and safety parameters: the `[control]` and `[safety]` sections of a rig
+//! description. Every field has a default, so both sections may be omitted.
+
+use serde::{Deserialize, Serialize};
+
+/// `[control]`: amplitude control of the fundamental base displacement, settle detection and
+/// the contact channel threshold.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ControlSpec {
+    /// Proportional gain on the log-amplitude error `ln(target / measured)`, -. Default 0.3.
+    pub kp: f64,
+    /// Integral gain on the log-amplitude error, per excitation period, -. Default 0.25.
+    pub ki: f64,
+    /// Periods the fundamental is demodulated over for each control update (a sliding window
+    /// of whole periods), -. Default 2.
+    pub window_periods: u32,
+    /// Largest change of the drive amplitude per control update, as a ratio (>= 1), -.
+    /// Default 1.5.
+    pub max_step_ratio: f64,
+    /// Drive amplitude that the first step of a test starts from, V (amplifier input);
+    /// 0 = estimate from the shaker's static gain. Default 0.
+    pub initial_drive_v: f64,
+    /// Settling: the control error must stay within this relative tolerance, -. Default 0.005.
+    pub settle_tolerance: f64,
+    /// Settling: the response envelope (RMS of the vibrometer over `settle_window_periods`)
+    /// may change by at most this relative amount between consecutive windows, -. Default 0.1.
+    pub envelope_tolerance: f64,
+    /// Settling: window of the control-error and envelope checks, periods. Default 10.
+    pub settle_window_periods: u32,
+    /// Settling gives up after this multiple of the plan's settle periods and records anyway
+    /// (the step is marked not settled), -. Default 4.
+    pub max_settle_factor: f64,
+    /// Contact-resistance voltage below which the beams are in contact, V. Default 2.5.
+    pub contact_threshold_v: f64,
+}
+
+impl Default for ControlSpec {
+    fn default() -> Self {
+        ControlSpec {
+            kp: 0.3,
+            ki: 0.25,
+            window_periods: 2,
+            max_step_ratio: 1.5,
+            initial_drive_v: 0.0,
+            settle_tolerance: 0.005,
+            envelope_tolerance: 0.1,
+            settle_window_periods: 10,
+            max_settle_factor: 4.0,
+            contact_threshold_v: 2.5,
+        }
+    }
+}
+
+/// `[safety]`: limits that abort a test, and the abort ramp.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SafetySpec {
+    /// Largest drive amplitude the controller may command, V (amplifier input). Default 2.0.
+    pub max_drive_v: f64,
+    /// Periods the controller may sit at `max_drive_v` with the base amplitude still short of
+    /// the target (beyond `settle_tolerance`) before aborting, -. Default 20.
+    pub saturation_periods: u32,
+    /// Largest magnitude of any acceleration channel, m/s^2. Default 3000.
+    pub max_acceleration: f64,
+    /// Largest share of samples in contact over `contact_window_s`, in (0, 1]. Default 0.6.
+    pub max_contact_duty: f64,
+    /// Window of the contact-duty check, s. Default 1.0.
+    pub contact_window_s: f64,
+    /// Longest wait for the next DAQ block (wall clock), s. Default 2.0.
+    pub daq_timeout_s: f64,
+    /// A sensor channel whose counts stay constant for this long while the drive is on is
+    /// dead, s. Default 0.5.
+    pub dead_channel_s: f64,
+    /// Time of the drive ramp-down after an abort or at the end of a session, s. Default 0.5.
+    pub ramp_down_s: f64,
+}
+
+impl Default for SafetySpec {
+    fn default() -> Self {
+        SafetySpec {
+            max_drive_v: 2.0,
+            saturation_periods: 20,
+            max_acceleration: 3000.0,
+            max_contact_duty: 0.6,
+            contact_window_s: 1.0,
+            daq_timeout_s: 2.0,
+            dead_channel_s: 0.5,
+            ramp_down_s: 0.5,
+        }
+    }
+}
+
+fn positive(key: &str, v: f64) -> Result<(), String> {
+    if v.is_finite() && v > 0.0 {
+        Ok(())
+    } else {
+        Err(format!("{key} = {v}: expected a finite value > 0"))
+    }
+}
+
+impl ControlSpec {
+    /// Checks the values; the error names the key.
+    pub fn validate(&self) -> Result<(), String> {
+        if !(self.kp.is_finite() && self.kp >= 0.0) {
+            return Err(format!("control.kp = {}: expected a finite value >= 0", self.kp));
+        }
+        positive("control.ki", self.ki)?;
+        if self.window_periods == 0 {
+            return Err("control.window_periods = 0: expected at least 1".into());
+        }
+        if !(self.max_step_ratio.is_finite() && self.max_step_ratio >= 1.0) {
+            return Err(format!(
+                "control.max_step_ratio = {}: expected a finite value >= 1",
+                self.max_step_ratio
+            ));
+        }
+        if !(self.initial_drive_v.is_finite() && self.initial_drive_v >= 0.0) {
+            return Err(format!(
+                "control.initial_drive_v = {}: expected >= 0",
+                self.initial_drive_v
+            ));
+        }
+        positive("control.settle_tolerance", self.settle_tolerance)?;
+        positive("control.envelope_tolerance", self.envelope_tolerance)?;
+        if self.settle_window_periods == 0 {
+            return Err("control.settle_window_periods = 0: expected at least 1".into());
+        }
+        if !(self.max_settle_factor.is_finite() && self.max_settle_factor >= 1.0) {
+            return Err(format!(
+                "control.max_settle_factor = {}: expected >= 1",
+                self.max_settle_factor
+            ));
+        }
+        positive("control.contact_threshold_v", self.contact_threshold_v)
+    }
+}
+
+impl SafetySpec {
+    /// Checks the values; the error names the key.
+    pub fn validate(&self) -> Result<(), String> {
+        positive("safety.max_drive_v", self.max_drive_v)?;
+        if self.saturation_periods == 0 {
+            return Err("safety.saturation_periods = 0: expected at least 1".into());
+        }
+        positive("safety.max_acceleration", self.max_acceleration)?;
+        if !(self.max_contact_duty > 0.0 && self.max_contact_duty <= 1.0) {
+            return Err(format!(
+                "safety.max_contact_duty = {}: expected a share in (0, 1]",
+                self.max_contact_duty
+            ));
+        }
+        positive("safety.contact_window_s", self.contact_window_s)?;
+        positive("safety.daq_timeout_s", self.daq_timeout_s)?;
+        positive("safety.dead_channel_s", self.dead_channel_s)?;
+        positive("safety.ramp_down_s", self.ramp_down_s)
+    }
+}

@@ -40,6 +40,15 @@ pub enum ConfigError {
         /// What serde expected.
         message: String,
     },
+    /// A rig-service setting (`[control]`, `[safety]`, `[shaker]`, `[daq]`, `[truth]`) that is
+    /// not acceptable; the message names the key.
+    #[error("{file}: {message}")]
+    Service {
+        /// File name.
+        file: String,
+        /// The key, its value and what was expected.
+        message: String,
+    },
     /// A value that parses but is not acceptable.
     #[error("{file}: `{key}` = {value}: expected {expected}")]
     Invalid {

@@ -58,6 +58,13 @@ pub struct RigConfig {
     /// `[reduction]`: mode selection. Default 180 x f(1FU).
     #[serde(default)]
     pub reduction: ReductionSpec,
+    /// `[control]`: the amplitude controller and settle detection of the rig service. Not
+    /// part of the model: not hashed (changing a gain does not rebuild the ROM).
+    #[serde(default, skip_serializing)]
+    pub control: crate::control::ControlSpec,
+    /// `[safety]`: limits of the rig service. Not hashed.
+    #[serde(default, skip_serializing)]
+    pub safety: crate::control::SafetySpec,
 }
 
 impl RigConfig {

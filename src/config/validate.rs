@@ -70,7 +70,13 @@ pub(super) fn validate(cfg: &RigConfig) -> Result<(), ConfigError> {
     damping(&c, cfg)?;
     mesh(&c, cfg)?;
     sensors(&c, cfg)?;
-    reduction(&c, cfg)
+    reduction(&c, cfg)?;
+    let service = |message: String| ConfigError::Service {
+        file: cfg.source.clone(),
+        message,
+    };
+    cfg.control.validate().map_err(service)?;
+    cfg.safety.validate().map_err(service)
 }
 
 fn materials(c: &Check, cfg: &RigConfig) -> Result<(), ConfigError> {

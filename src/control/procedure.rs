@@ -4,14 +4,16 @@
 //! async session ([`super::session`]). Being synchronous and clock-free it is tested without a
 //! runtime, and replay never needs it.
 //!
-//! Timing: a drive command produced after a block applies from the next block; a step's
-//! frequency starts there, so the controller is retuned at that block's first sample and the
-//! rest of the block that ended a record window is ignored.
+//! Timing: a drive command produced after a block applies from a later block (the backend's
+//! latency: the simulated rig's is two blocks). A step starts with the first block whose
+//! drive state (reported by the backend with the block) runs at the step's frequency: the
+//! controller is retuned at that block's first sample. The blocks in between, and the rest of
+//! the block that ended a record window, are not used.
 
 use std::f64::consts::TAU;
 
 use crate::plan::{Plan, TestSpec};
-use crate::rig::{ChannelKind, DaqBlock, DaqLayout, DriveCommand};
+use crate::rig::{ChannelKind, DaqBlock, DaqLayout, DriveCommand, DriveState};
 
 use super::amplitude::{AmplitudeController, ControlUpdate};
 use super::events::{ControlState, EventKind, Phase, SessionEvent};
@@ -84,7 +86,12 @@ pub struct Procedure {
     recorded: usize,
     last_update: Option<ControlUpdate>,
     drive_v: f64,
+    /// Blocks received while waiting for the drive to take a step's frequency.
+    pending_blocks: u32,
 }
+
+/// Blocks a step waits for the drive to take its frequency before the session aborts.
+const MAX_PENDING_BLOCKS: u32 = 20;
 
 impl Procedure {
     /// Procedure for `setup` on a stream with `layout`. Errors name what is missing.
@@ -127,6 +134,7 @@ impl Procedure {
             recorded: 0,
             last_update: None,
             drive_v: initial.min(setup.safety.max_drive_v),
+            pending_blocks: 0,
         })
     }
 
@@ -201,10 +209,12 @@ impl Procedure {
         self.stage = Stage::Pending;
     }
 
-    /// Processes one block (already checked by the safety monitor for shape and sequence).
+    /// Processes one block (already checked by the safety monitor for shape and sequence);
+    /// `drive` is the drive state the backend produced the block with.
     pub fn on_block(
         &mut self,
         block: &DaqBlock,
+        drive: &DriveState,
         safety: &mut SafetyMonitor,
     ) -> Result<BlockOutcome, AbortReason> {
         let mut out = BlockOutcome::default();
@@ -214,6 +224,19 @@ impl Procedure {
             return Ok(out);
         }
         if self.stage == Stage::Pending {
+            let f = self.omega() / TAU;
+            if (drive.frequency_hz - f).abs() > 1e-9 * f {
+                self.pending_blocks += 1;
+                if self.pending_blocks > MAX_PENDING_BLOCKS {
+                    return Err(AbortReason::Backend(format!(
+                        "the drive did not take the step's frequency {f:.4} Hz within {MAX_PENDING_BLOCKS} blocks (it runs at {:.4} Hz)",
+                        drive.frequency_hz
+                    )));
+                }
+                out.control = Some(self.control_state(block));
+                return Ok(out);
+            }
+            self.pending_blocks = 0;
             let (omega, target) = (self.omega(), self.target());
             match &mut self.controller {
                 Some(c) => c.retune(target, omega, dt, block.time),
@@ -286,8 +309,14 @@ impl Procedure {
                 ramp_s: TAU / self.omega(),
             });
         }
+        out.control = Some(self.control_state(block));
+        out.done = self.stage == Stage::Done;
+        Ok(out)
+    }
+
+    fn control_state(&self, block: &DaqBlock) -> ControlState {
         let u = self.last_update;
-        out.control = Some(ControlState {
+        ControlState {
             time: block.time,
             seq: block.seq,
             test: self.test,
@@ -304,9 +333,7 @@ impl Procedure {
             period_amplitude_m: u.map_or(f64::NAN, |u| u.period_amplitude_m),
             error: u.map_or(f64::NAN, |u| u.error),
             drive_v: self.drive_v,
-        });
-        out.done = self.stage == Stage::Done;
-        Ok(out)
+        }
     }
 
     fn begin_record(&mut self, out: &mut BlockOutcome, first: u64, settled: bool) {

@@ -272,7 +272,7 @@ pub async fn run_session<B: RigBackend, R: SessionRecorder>(
             if let Err(e) = safety.check_block(&block, &layout, drive_on) {
                 break 'session Some(e);
             }
-            let out = match procedure.on_block(&block, &mut safety) {
+            let out = match procedure.on_block(&block, &status.drive, &mut safety) {
                 Ok(o) => o,
                 Err(e) => break 'session Some(e),
             };

@@ -1,0 +1,171 @@
+//! The simulated rig as a [`RigBackend`]: the deterministic core ([`SimRig`]) runs on the
+//! blocking pool one block ahead of the consumer, like a DAQ with one block of buffering, on
+//! virtual time (as fast as it computes) or paced to the wall clock (`realtime`).
+//!
+//! Timing, identical in both modes so that a paced session reproduces a virtual one: when the
+//! consumer takes block `k`, block `k + 1` is already being computed, so a drive command sent
+//! after block `k` applies from block `k + 2`; the status returned after block `k` describes
+//! the drive of block `k`. With `realtime`, block `k` is handed out no earlier than the wall
+//! time of its last sample; a block finished later than that counts as an overrun.
+
+use std::time::Duration;
+
+use tokio::task::JoinHandle;
+use tokio::time::Instant;
+
+use crate::plan::TestSpec;
+
+use super::sim::{InjectedFault, SimRig};
+use super::{DaqBlock, DaqLayout, DriveCommand, DriveState, RigBackend, RigError, RigFault, RigStatus};
+
+type Pending = JoinHandle<(SimRig, DaqBlock, DriveState, Vec<RigFault>, bool)>;
+
+/// The simulated rig backend.
+#[derive(Debug)]
+pub struct SimBackend {
+    rig: Option<SimRig>,
+    layout: DaqLayout,
+    pending: Option<Pending>,
+    commands: Vec<DriveCommand>,
+    faults: Vec<InjectedFault>,
+    realtime: bool,
+    started: Option<Instant>,
+    status: RigStatus,
+    /// Beam length, m: the unit of a test's clearance.
+    beam_length: f64,
+    stalled: bool,
+}
+
+impl SimBackend {
+    /// Backend around `rig`; `beam_length` (m) converts a test's clearance (/ l) to metres.
+    pub fn new(rig: SimRig, beam_length: f64, realtime: bool) -> SimBackend {
+        SimBackend {
+            layout: rig.layout().clone(),
+            rig: Some(rig),
+            pending: None,
+            commands: Vec::new(),
+            faults: Vec::new(),
+            realtime,
+            started: None,
+            status: RigStatus::default(),
+            beam_length,
+            stalled: false,
+        }
+    }
+
+    /// Schedules an injected fault (applied before the next block is computed).
+    pub fn inject(&mut self, fault: InjectedFault) {
+        self.faults.push(fault);
+    }
+
+    /// Takes the core back from the computation in flight (if any).
+    async fn settle_pending(&mut self) -> Result<Option<(DaqBlock, DriveState, Vec<RigFault>, bool)>, RigError> {
+        match self.pending.take() {
+            None => Ok(None),
+            Some(h) => {
+                let (rig, block, drive, faults, stalled) =
+                    h.await.map_err(|e| RigError::Link(format!("simulation task: {e}")))?;
+                self.rig = Some(rig);
+                Ok(Some((block, drive, faults, stalled)))
+            }
+        }
+    }
+
+    fn spawn_next(&mut self) -> Result<(), RigError> {
+        let mut rig = self
+            .rig
+            .take()
+            .ok_or_else(|| RigError::State("simulation core missing".into()))?;
+        for f in self.faults.drain(..) {
+            rig.schedule(f).map_err(|e| RigError::Config(e.to_string()))?;
+        }
+        for c in self.commands.drain(..) {
+            rig.set_drive(c).map_err(|e| RigError::Command(e.to_string()))?;
+        }
+        self.pending = Some(tokio::task::spawn_blocking(move || {
+            let stalled_before = rig.stalled();
+            let block = rig.next_block();
+            let drive = rig.drive();
+            let faults = rig.faults().to_vec();
+            (rig, block, drive, faults, stalled_before)
+        }));
+        Ok(())
+    }
+}
+
+impl RigBackend for SimBackend {
+    fn layout(&self) -> &DaqLayout {
+        &self.layout
+    }
+
+    async fn start(&mut self) -> Result<(), RigError> {
+        if self.started.is_some() {
+            return Err(RigError::State("already started".into()));
+        }
+        self.started = Some(Instant::now());
+        self.status.running = true;
+        self.spawn_next()
+    }
+
+    async fn set_drive(&mut self, command: DriveCommand) -> Result<(), RigError> {
+        if !(command.frequency_hz.is_finite() && command.frequency_hz > 0.0)
+            || !(command.amplitude_v.is_finite() && command.amplitude_v >= 0.0)
+            || !(command.ramp_s.is_finite() && command.ramp_s >= 0.0)
+        {
+            return Err(RigError::Command(format!("{command:?}")));
+        }
+        self.commands.push(command);
+        Ok(())
+    }
+
+    async fn begin_test(&mut self, test: &TestSpec) -> Result<(), RigError> {
+        // Applies from the next block computed (the one after the block in flight).
+        self.faults.push(InjectedFault::ClearanceChange {
+            at_s: 0.0,
+            clearance_m: test.clearance * self.beam_length,
+        });
+        Ok(())
+    }
+
+    async fn next_block(&mut self) -> Result<Option<DaqBlock>, RigError> {
+        let Some(started) = self.started else {
+            return Err(RigError::State("next_block before start".into()));
+        };
+        if self.stalled {
+            std::future::pending::<()>().await;
+        }
+        let Some((block, drive, faults, stalled)) = self.settle_pending().await? else {
+            return Ok(None);
+        };
+        if stalled {
+            // The DAQ stopped: this block and all later ones never arrive.
+            self.stalled = true;
+            std::future::pending::<()>().await;
+        }
+        self.spawn_next()?;
+        let end = block.time + block.len as f64 / self.layout.sample_rate;
+        if self.realtime {
+            let deadline = started + Duration::from_secs_f64(end);
+            let now = Instant::now();
+            if now > deadline + Duration::from_secs_f64(block.len as f64 / self.layout.sample_rate) {
+                self.status.overruns += 1;
+            }
+            tokio::time::sleep_until(deadline).await;
+        }
+        self.status.time = end;
+        self.status.drive = drive;
+        self.status.faults = faults;
+        Ok(Some(block))
+    }
+
+    fn status(&self) -> RigStatus {
+        self.status.clone()
+    }
+
+    async fn stop(&mut self) -> Result<(), RigError> {
+        let _ = self.settle_pending().await;
+        self.status.running = false;
+        self.status.drive.amplitude_v = 0.0;
+        Ok(())
+    }
+}

@@ -115,9 +115,9 @@ impl SessionSummary {
         }
     }
 
-    /// Adds a finished step to the last test.
-    pub fn push_step(&mut self, summary: StepSummary) {
-        if let Some(t) = self.tests.last_mut() {
+    /// Adds a finished step to its test (the last test of that name).
+    pub fn push_step(&mut self, test: &str, summary: StepSummary) {
+        if let Some(t) = self.tests.iter_mut().rev().find(|t| t.name == test) {
             t.steps.push(summary);
         }
     }
@@ -175,7 +175,7 @@ impl<R: SessionRecorder> Run<'_, R> {
             self.recorder
                 .step(end, info, s)
                 .map_err(AbortReason::Log)?;
-            self.summary.push_step(s.clone());
+            self.summary.push_step(&info.test, s.clone());
         }
         Ok(())
     }

@@ -1,0 +1,168 @@
+//! Replay of a recorded session: every per-step metric recomputed from the raw DAQ blocks of
+//! the log with the live session's own code ([`crate::control::summarize`]), and the session
+//! summary rebuilt from the logged events. For a session that ran to its end (or aborted
+//! cleanly) the result equals the live summary bit for bit.
+
+use std::path::Path;
+
+use crate::control::{summarize, EventKind, SessionEvent, SessionSummary, StepInfo};
+use crate::rig::{DaqBlock, DaqLayout};
+
+use super::recorder::{StepMessage, TOPIC_DAQ, TOPIC_EVENTS, TOPIC_LAYOUT, TOPIC_STEPS};
+use super::{read_session, LogReadError, SessionRead};
+
+/// Errors of a replay.
+#[derive(Debug, thiserror::Error)]
+pub enum ReplayError {
+    /// The log could not be read.
+    #[error(transparent)]
+    Read(#[from] LogReadError),
+    /// The log lacks something replay needs, or it is inconsistent.
+    #[error("{path}: {message}")]
+    Content {
+        /// The file.
+        path: String,
+        /// What is wrong.
+        message: String,
+    },
+}
+
+/// A replayed session.
+#[derive(Debug, Clone)]
+pub struct Replay {
+    /// The summary rebuilt from the raw recording.
+    pub summary: SessionSummary,
+    /// The per-step summaries the live session logged (for comparison).
+    pub logged_steps: Vec<StepMessage>,
+    /// The DAQ layout.
+    pub layout: DaqLayout,
+    /// Whether the file was complete (false: recovered after a crash).
+    pub complete: bool,
+    /// What was lost, for an incomplete file.
+    pub note: Option<String>,
+}
+
+/// The session's DAQ stream: layout and blocks in order.
+#[derive(Debug, Clone)]
+pub struct Recording {
+    /// The layout.
+    pub layout: DaqLayout,
+    /// Blocks, in sequence order.
+    pub blocks: Vec<DaqBlock>,
+    /// Events, in order.
+    pub events: Vec<SessionEvent>,
+}
+
+fn content(path: &Path, message: impl Into<String>) -> ReplayError {
+    ReplayError::Content {
+        path: path.display().to_string(),
+        message: message.into(),
+    }
+}
+
+/// Decodes the layout, the DAQ blocks and the events of a session log.
+pub fn recording(session: &SessionRead) -> Result<Recording, ReplayError> {
+    let path = &session.path;
+    session.require_rigtwin()?;
+    let layout = session
+        .decode::<DaqLayout>(TOPIC_LAYOUT)?
+        .into_iter()
+        .next()
+        .map(|(_, _, l)| l)
+        .ok_or_else(|| content(path, format!("no {TOPIC_LAYOUT} message: not a session log")))?;
+    let blocks: Vec<DaqBlock> = session
+        .decode::<DaqBlock>(TOPIC_DAQ)?
+        .into_iter()
+        .map(|(_, _, b)| b)
+        .collect();
+    for (i, b) in blocks.iter().enumerate() {
+        if b.seq != i as u64 {
+            return Err(content(
+                path,
+                format!("{TOPIC_DAQ}: block {} where {i} was due (lost data)", b.seq),
+            ));
+        }
+        b.check(&layout).map_err(|m| content(path, m))?;
+    }
+    let events = session
+        .decode::<SessionEvent>(TOPIC_EVENTS)?
+        .into_iter()
+        .map(|(_, _, e)| e)
+        .collect();
+    Ok(Recording {
+        layout,
+        blocks,
+        events,
+    })
+}
+
+/// The counts of a record window (channel-major), from the blocks.
+pub fn window_counts(rec: &Recording, info: &StepInfo) -> Option<Vec<i32>> {
+    let n = info.record_samples;
+    let nch = rec.layout.channels.len();
+    let first = info.record_first_sample;
+    let mut out = vec![0; n * nch];
+    let mut filled = 0usize;
+    for b in &rec.blocks {
+        let (b0, b1) = (b.first_sample, b.first_sample + b.len as u64);
+        let (w0, w1) = (first, first + n as u64);
+        let (s, e) = (b0.max(w0), b1.min(w1));
+        if s >= e {
+            continue;
+        }
+        for k in 0..nch {
+            let src = &b.channel(k)[(s - b0) as usize..(e - b0) as usize];
+            out[k * n + (s - w0) as usize..k * n + (e - w0) as usize].copy_from_slice(src);
+        }
+        filled += (e - s) as usize;
+    }
+    (filled == n).then_some(out)
+}
+
+/// Replays the session log at `path`.
+pub fn replay(path: &Path) -> Result<Replay, ReplayError> {
+    let session = read_session(path)?;
+    let rec = recording(&session)?;
+    let mut summary = SessionSummary {
+        plan: String::new(),
+        aborted: false,
+        abort_reason: None,
+        blocks: rec.blocks.len() as u64,
+        rig_seconds: rec
+            .blocks
+            .last()
+            .map_or(0.0, |b| b.time + b.len as f64 / rec.layout.sample_rate),
+        tests: Vec::new(),
+    };
+    for e in &rec.events {
+        summary.apply_event(e);
+        if let EventKind::RecordEnd { info } = &e.kind {
+            let counts = window_counts(&rec, info).ok_or_else(|| {
+                content(
+                    path,
+                    format!(
+                        "record window of step {} of test {} (samples {}..{}) is not in the DAQ blocks",
+                        info.step,
+                        info.test,
+                        info.record_first_sample,
+                        info.record_first_sample + info.record_samples as u64
+                    ),
+                )
+            })?;
+            let s = summarize(&rec.layout, info, &counts).map_err(|e| content(path, e.to_string()))?;
+            summary.push_step(&info.test, s);
+        }
+    }
+    let logged_steps = session
+        .decode::<StepMessage>(TOPIC_STEPS)?
+        .into_iter()
+        .map(|(_, _, m)| m)
+        .collect();
+    Ok(Replay {
+        summary,
+        logged_steps,
+        layout: rec.layout,
+        complete: session.complete,
+        note: session.note,
+    })
+}

@@ -14,6 +14,7 @@ pub mod cli;
 pub mod config;
 pub mod contact;
 pub mod fe;
+pub mod log;
 pub mod plan;
 pub mod report;
 pub mod rig;

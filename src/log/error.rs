@@ -16,6 +16,14 @@ pub enum LogError {
         /// The I/O error.
         source: std::io::Error,
     },
+    /// The log options are out of range.
+    #[error("session log {path}: bad options: {reason}")]
+    Options {
+        /// The log file.
+        path: PathBuf,
+        /// What is wrong.
+        reason: String,
+    },
     /// The MCAP writer refused a record (e.g. too many channels) or failed to write it.
     #[error("session log {path}: {what}: {source}")]
     Mcap {

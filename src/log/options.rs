@@ -45,6 +45,29 @@ pub struct LogOptions {
     pub queue_capacity: usize,
 }
 
+impl LogOptions {
+    /// Shortest accepted flush interval: shorter ones would keep the writer thread busy.
+    pub const MIN_FLUSH_INTERVAL: Duration = Duration::from_millis(1);
+
+    /// Checks the values; the first problem, described.
+    pub fn check(&self) -> Result<(), String> {
+        if self.chunk_size_bytes == 0 {
+            return Err("chunk_size_bytes is 0, expected a positive size in bytes".into());
+        }
+        if self.flush_interval < Self::MIN_FLUSH_INTERVAL {
+            return Err(format!(
+                "flush_interval is {:?}, expected at least {:?}",
+                self.flush_interval,
+                Self::MIN_FLUSH_INTERVAL
+            ));
+        }
+        if self.queue_capacity == 0 {
+            return Err("queue_capacity is 0, expected at least 1 message".into());
+        }
+        Ok(())
+    }
+}
+
 impl Default for LogOptions {
     fn default() -> Self {
         Self {

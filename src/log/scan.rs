@@ -97,13 +97,17 @@ pub(super) fn scan(
             };
         }
         if rest.is_empty() {
+            let after = if pos == magic.len() {
+                "right after the MCAP magic"
+            } else {
+                "after a complete record"
+            };
             return Ok(ScanEnd {
                 complete: false,
                 valid_bytes: len as u64,
                 lost: Some(format!(
-                    "the file ends at byte offset {len} after a complete record, without \
-                     footer: the writer did not close it; messages after its last flush were \
-                     lost"
+                    "the file ends at byte offset {len} {after}, without footer: the writer \
+                     did not close it; messages after its last flush were lost"
                 )),
             });
         }

@@ -277,6 +277,42 @@ fn misuse_is_reported() {
 }
 
 #[test]
+fn bad_options_are_rejected() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("s.mcap");
+    for (options, what) in [
+        (
+            LogOptions {
+                flush_interval: Duration::ZERO,
+                ..options()
+            },
+            "flush_interval",
+        ),
+        (
+            LogOptions {
+                queue_capacity: 0,
+                ..options()
+            },
+            "queue_capacity",
+        ),
+        (
+            LogOptions {
+                chunk_size_bytes: 0,
+                ..options()
+            },
+            "chunk_size_bytes",
+        ),
+    ] {
+        let err = SessionLog::create(&path, options, vec![], vec![])
+            .err()
+            .unwrap();
+        assert!(matches!(err, LogError::Options { .. }), "{err}");
+        assert!(err.to_string().contains(what), "{err}");
+    }
+    assert!(!path.exists(), "no file for bad options");
+}
+
+#[test]
 fn missing_directory_is_an_error_naming_the_file() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("no/such/dir/s.mcap");

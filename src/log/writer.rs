@@ -4,7 +4,7 @@
 //!
 //! Messages are serialised to JSON on the caller's thread and queued on a bounded channel with
 //! `try_send`: a full queue is reported as [`LogError::Backlog`], never waited on, so the
-//! control loop cannot stall on a slow disk. The writer thread ([`super::task`]) owns the file.
+//! control loop cannot stall on a slow disk. The writer thread (`task.rs`) owns the file.
 
 use std::collections::{BTreeMap, HashMap};
 use std::fs::File;
@@ -54,6 +54,10 @@ impl SessionLog {
         attachments: Vec<Attachment>,
     ) -> Result<(LogHandle, LogJoin), LogError> {
         let path = path.as_ref().to_path_buf();
+        options.check().map_err(|reason| LogError::Options {
+            path: path.clone(),
+            reason,
+        })?;
         if let Some((name, _)) = metadata.iter().find(|(n, _)| n == RIGTWIN_METADATA) {
             return Err(LogError::ReservedMetadata {
                 path,
@@ -71,7 +75,7 @@ impl SessionLog {
         })?;
         let mut write_options = mcap::WriteOptions::new()
             .compression(options.compression.to_mcap())
-            .chunk_size(Some(options.chunk_size_bytes.max(1)))
+            .chunk_size(Some(options.chunk_size_bytes))
             .library(format!(
                 "rigtwin/{} ({})",
                 env!("CARGO_PKG_VERSION"),
@@ -122,7 +126,7 @@ impl SessionLog {
 
         let shared = Arc::new(Shared {
             path: path.clone(),
-            capacity: options.queue_capacity.max(1),
+            capacity: options.queue_capacity,
             closed: AtomicBool::new(false),
             failure: OnceLock::new(),
             registry: Mutex::new(Registry::default()),
@@ -495,7 +499,8 @@ pub(super) struct WriterOutcome {
 impl LogJoin {
     /// Closes the log: later `log` calls fail with [`LogError::Closed`]; the writer thread
     /// writes what is queued, the summary and the footer, syncs the file to disk and stops.
-    /// Waits for that. Returns the writer's first error if it failed on the way.
+    /// Waits for that (blocking: from async code call it in `spawn_blocking`). Returns the
+    /// writer's first error if it failed on the way.
     pub fn close(self) -> Result<LogStats, LogError> {
         self.shared.closed.store(true, Ordering::Release);
         if let Some(inner) = self.handle.upgrade() {

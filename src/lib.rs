@@ -15,6 +15,7 @@ pub mod config;
 pub mod contact;
 pub mod control;
 pub mod fe;
+pub mod log;
 pub mod plan;
 pub mod report;
 pub mod rig;

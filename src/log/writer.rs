@@ -1,0 +1,536 @@
+//! The caller side of the session log: [`SessionLog::create`] opens the file and starts the
+//! writer thread; [`LogHandle`] registers channels and hands messages to the thread without
+//! ever waiting; [`LogJoin`] closes the log and returns its [`LogStats`].
+//!
+//! Messages are serialised to JSON on the caller's thread and queued on a bounded channel with
+//! `try_send`: a full queue is reported as [`LogError::Backlog`], never waited on, so the
+//! control loop cannot stall on a slow disk. The writer thread (`task.rs`) owns the file.
+
+use std::collections::{BTreeMap, HashMap};
+use std::fs::File;
+use std::io::BufWriter;
+use std::marker::PhantomData;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, Ordering};
+use std::sync::mpsc::{self, SyncSender, TrySendError};
+use std::sync::{Arc, Mutex, OnceLock, PoisonError, Weak};
+use std::thread::JoinHandle;
+
+use serde::Serialize;
+
+use super::task::{Command, WriterTask};
+use super::{
+    LogError, LogOptions, FORMAT_VERSION, MESSAGE_ENCODING, RIGTWIN_METADATA, SCHEMA_ENCODING,
+};
+
+/// A file stored in the session log (e.g. the rig configuration TOML).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Attachment {
+    /// File name (e.g. "rig.toml").
+    pub name: String,
+    /// Media type (e.g. "application/toml", "application/octet-stream").
+    pub media_type: String,
+    /// The content.
+    pub data: Vec<u8>,
+}
+
+/// A metadata record: a name and string key-value pairs (e.g. "session", "rom").
+pub type MetadataRecord = (String, BTreeMap<String, String>);
+
+/// Opens session logs.
+pub struct SessionLog;
+
+impl SessionLog {
+    /// Creates (truncates) the MCAP file at `path`, writes the header, the writer's own
+    /// "rigtwin" metadata record (crate and format version), then `metadata` and
+    /// `attachments` in order, flushes them to the OS and starts the writer thread.
+    ///
+    /// The name "rigtwin" is reserved for the writer's record. Returns the handle to log with
+    /// (clone it for other tasks) and the join side that closes the log.
+    pub fn create(
+        path: impl AsRef<Path>,
+        options: LogOptions,
+        metadata: Vec<MetadataRecord>,
+        attachments: Vec<Attachment>,
+    ) -> Result<(LogHandle, LogJoin), LogError> {
+        let path = path.as_ref().to_path_buf();
+        options.check().map_err(|reason| LogError::Options {
+            path: path.clone(),
+            reason,
+        })?;
+        if let Some((name, _)) = metadata.iter().find(|(n, _)| n == RIGTWIN_METADATA) {
+            return Err(LogError::ReservedMetadata {
+                path,
+                name: name.clone(),
+            });
+        }
+        let mcap_err = |what: String| {
+            let path = path.clone();
+            move |source| LogError::Mcap { path, what, source }
+        };
+        let file = File::create(&path).map_err(|source| LogError::Io {
+            path: path.clone(),
+            what: "cannot create the file",
+            source,
+        })?;
+        let mut write_options = mcap::WriteOptions::new()
+            .compression(options.compression.to_mcap())
+            .chunk_size(Some(options.chunk_size_bytes))
+            .library(format!(
+                "rigtwin/{} ({})",
+                env!("CARGO_PKG_VERSION"),
+                mcap::LIBRARY_IDENTIFIER
+            ));
+        // NOTE: zstd's worker threads would compete with the control loop for the cores; the
+        // writer thread compresses on its own.
+        write_options = write_options.compression_threads(0);
+        let mut writer = write_options
+            .create(BufWriter::new(file))
+            .map_err(mcap_err("cannot write the MCAP header".into()))?;
+
+        let own = BTreeMap::from([
+            (
+                "crate_version".to_string(),
+                env!("CARGO_PKG_VERSION").to_string(),
+            ),
+            ("format_version".to_string(), FORMAT_VERSION.to_string()),
+            ("message_encoding".to_string(), MESSAGE_ENCODING.to_string()),
+            ("schema_encoding".to_string(), SCHEMA_ENCODING.to_string()),
+        ]);
+        for (name, entries) in std::iter::once((RIGTWIN_METADATA.to_string(), own)).chain(metadata)
+        {
+            let record = mcap::records::Metadata {
+                name,
+                metadata: entries,
+            };
+            writer.write_metadata(&record).map_err(mcap_err(format!(
+                "cannot write metadata record {}",
+                record.name
+            )))?;
+        }
+        for a in attachments {
+            let record = mcap::Attachment {
+                log_time: 0,
+                create_time: 0,
+                name: a.name,
+                media_type: a.media_type,
+                data: a.data.into(),
+            };
+            writer
+                .attach(&record)
+                .map_err(mcap_err(format!("cannot write attachment {}", record.name)))?;
+        }
+        writer
+            .flush()
+            .map_err(mcap_err("cannot flush the header".into()))?;
+
+        let shared = Arc::new(Shared {
+            path: path.clone(),
+            capacity: options.queue_capacity,
+            closed: AtomicBool::new(false),
+            failure: OnceLock::new(),
+            registry: Mutex::new(Registry::default()),
+            backlog_drops: AtomicU64::new(0),
+            progress: Progress::default(),
+        });
+        let (tx, rx) = mpsc::sync_channel(shared.capacity);
+        let task = WriterTask::new(writer, Arc::clone(&shared), options.flush_interval);
+        let thread = std::thread::Builder::new()
+            .name("rigtwin-log".into())
+            .spawn(move || task.run(rx))
+            .map_err(|source| LogError::Io {
+                path: path.clone(),
+                what: "cannot start the writer thread",
+                source,
+            })?;
+        let inner = Arc::new(HandleInner {
+            tx,
+            shared: Arc::clone(&shared),
+        });
+        let join = LogJoin {
+            handle: Arc::downgrade(&inner),
+            shared,
+            thread,
+        };
+        Ok((LogHandle { inner }, join))
+    }
+}
+
+/// State shared by the handles, the join side and the writer thread.
+pub(super) struct Shared {
+    /// The log file.
+    pub(super) path: PathBuf,
+    /// Queue capacity, messages.
+    pub(super) capacity: usize,
+    /// Set by [`LogJoin::close`] and when the writer thread stops.
+    pub(super) closed: AtomicBool,
+    /// Why the writer thread stopped early (an I/O error).
+    pub(super) failure: OnceLock<String>,
+    /// The registered channels.
+    pub(super) registry: Mutex<Registry>,
+    /// Messages dropped because the queue was full.
+    pub(super) backlog_drops: AtomicU64,
+    /// Written by the writer thread.
+    pub(super) progress: Progress,
+}
+
+impl Shared {
+    fn closed_error(&self) -> LogError {
+        LogError::Closed {
+            path: self.path.clone(),
+            reason: self
+                .failure
+                .get()
+                .cloned()
+                .unwrap_or_else(|| "the log was closed".into()),
+        }
+    }
+}
+
+/// Counters the writer thread updates as it goes.
+#[derive(Default)]
+pub(super) struct Progress {
+    pub(super) messages_written: AtomicU64,
+    pub(super) messages_flushed: AtomicU64,
+    pub(super) flushes: AtomicU64,
+}
+
+/// The registered channels, by topic.
+#[derive(Default)]
+pub(super) struct Registry {
+    pub(super) by_topic: HashMap<String, RawChannel>,
+}
+
+/// Per-channel counters shared by every copy of a channel.
+#[derive(Debug, Default)]
+struct ChannelCounters {
+    next_sequence: AtomicU32,
+    drops: AtomicU64,
+}
+
+/// An MCAP channel of a session log, without a Rust type: messages are JSON bytes matching the
+/// channel's schema. Obtained from [`LogHandle::raw_channel`] (or [`LogChannel::raw`]).
+#[derive(Clone, Debug)]
+pub struct RawChannel {
+    id: u16,
+    topic: Arc<str>,
+    schema_name: Arc<str>,
+    counters: Arc<ChannelCounters>,
+    /// The log the channel belongs to (compared by address only).
+    log: Weak<Shared>,
+}
+
+impl RawChannel {
+    /// The topic.
+    pub fn topic(&self) -> &str {
+        &self.topic
+    }
+
+    /// The schema name.
+    pub fn schema_name(&self) -> &str {
+        &self.schema_name
+    }
+
+    /// Messages of this channel dropped because the writer queue was full.
+    pub fn backlog_drops(&self) -> u64 {
+        self.counters.drops.load(Ordering::Relaxed)
+    }
+}
+
+/// A typed channel: messages of type `T`, JSON-encoded, with `T`'s JSON Schema.
+#[derive(Debug)]
+pub struct LogChannel<T> {
+    raw: RawChannel,
+    _type: PhantomData<fn(&T)>,
+}
+
+impl<T> Clone for LogChannel<T> {
+    fn clone(&self) -> Self {
+        Self {
+            raw: self.raw.clone(),
+            _type: PhantomData,
+        }
+    }
+}
+
+impl<T> LogChannel<T> {
+    /// The topic.
+    pub fn topic(&self) -> &str {
+        self.raw.topic()
+    }
+
+    /// The untyped channel (to log pre-serialised JSON).
+    pub fn raw(&self) -> &RawChannel {
+        &self.raw
+    }
+}
+
+struct HandleInner {
+    tx: SyncSender<Command>,
+    shared: Arc<Shared>,
+}
+
+/// Logs messages to a session log from any thread. Cheap to clone; `Send + Sync`.
+///
+/// When every handle is dropped the writer thread finishes the file (summary and footer);
+/// [`LogJoin::close`] does the same explicitly and reports the outcome.
+#[derive(Clone)]
+pub struct LogHandle {
+    inner: Arc<HandleInner>,
+}
+
+/// What the writer thread has done so far.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct LogProgress {
+    /// Messages handed to the MCAP writer.
+    pub messages_written: u64,
+    /// Messages in the file up to the last flush (what a crash now would keep).
+    pub messages_flushed: u64,
+    /// Flushes done (chunk finished and handed to the OS).
+    pub flushes: u64,
+    /// Messages dropped because the queue was full.
+    pub backlog_drops: u64,
+}
+
+impl LogHandle {
+    /// The log file.
+    pub fn path(&self) -> &Path {
+        &self.inner.shared.path
+    }
+
+    /// Registers (or returns the existing) channel `topic` for messages of type `T`: message
+    /// encoding "json", schema named after `T` (schemars' schema name) with encoding
+    /// "jsonschema" and `T`'s JSON Schema as data.
+    ///
+    /// May wait for queue space: register channels at setup, not in the control loop.
+    pub fn channel<T: Serialize + schemars::JsonSchema>(
+        &self,
+        topic: &str,
+    ) -> Result<LogChannel<T>, LogError> {
+        let schema = schemars::schema_for!(T);
+        let data = serde_json::to_vec(&schema).map_err(|source| LogError::Serialize {
+            path: self.inner.shared.path.clone(),
+            topic: topic.to_string(),
+            source,
+        })?;
+        let raw = self.raw_channel(topic, &T::schema_name(), data)?;
+        Ok(LogChannel {
+            raw,
+            _type: PhantomData,
+        })
+    }
+
+    /// Registers (or returns the existing) channel `topic` with message encoding "json" and a
+    /// "jsonschema" schema given as name and JSON bytes (for replay and re-logging tools).
+    /// Registering a topic again with another schema is an error.
+    ///
+    /// May wait for queue space: register channels at setup, not in the control loop.
+    pub fn raw_channel(
+        &self,
+        topic: &str,
+        schema_name: &str,
+        schema_json: Vec<u8>,
+    ) -> Result<RawChannel, LogError> {
+        let shared = &self.inner.shared;
+        if shared.closed.load(Ordering::Acquire) {
+            return Err(shared.closed_error());
+        }
+        let mut registry = shared
+            .registry
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner);
+        if let Some(existing) = registry.by_topic.get(topic) {
+            if &*existing.schema_name != schema_name {
+                return Err(LogError::TopicConflict {
+                    path: shared.path.clone(),
+                    topic: topic.to_string(),
+                    existing: existing.schema_name.to_string(),
+                    requested: schema_name.to_string(),
+                });
+            }
+            return Ok(existing.clone());
+        }
+        let id = u16::try_from(registry.by_topic.len() + 1).map_err(|_| LogError::Mcap {
+            path: shared.path.clone(),
+            what: format!("cannot register channel {topic}"),
+            source: mcap::McapError::TooManyChannels,
+        })?;
+        // NOTE: sent under the registry lock so channel records reach the writer in id order
+        // and before any message of the channel.
+        self.inner
+            .tx
+            .send(Command::Channel {
+                id,
+                topic: topic.to_string(),
+                schema_name: schema_name.to_string(),
+                schema: schema_json,
+            })
+            .map_err(|_| shared.closed_error())?;
+        let channel = RawChannel {
+            id,
+            topic: topic.into(),
+            schema_name: schema_name.into(),
+            counters: Arc::default(),
+            log: Arc::downgrade(shared),
+        };
+        registry.by_topic.insert(topic.to_string(), channel.clone());
+        Ok(channel)
+    }
+
+    /// Serialises `value` to JSON and queues it on `channel` with the next sequence number of
+    /// the channel. `log_time_ns` is the rig time of the message, ns (also its publish time).
+    ///
+    /// Never blocks: a full queue returns [`LogError::Backlog`] (the message is dropped and
+    /// counted, its sequence number stays unused); a closed log returns [`LogError::Closed`].
+    pub fn log<T: Serialize>(
+        &self,
+        channel: &LogChannel<T>,
+        log_time_ns: u64,
+        value: &T,
+    ) -> Result<(), LogError> {
+        let data = serde_json::to_vec(value).map_err(|source| LogError::Serialize {
+            path: self.inner.shared.path.clone(),
+            topic: channel.topic().to_string(),
+            source,
+        })?;
+        self.log_json(&channel.raw, log_time_ns, data)
+    }
+
+    /// Queues pre-serialised JSON bytes on `channel` (not checked against the schema), like
+    /// [`LogHandle::log`]. Never blocks.
+    pub fn log_json(
+        &self,
+        channel: &RawChannel,
+        log_time_ns: u64,
+        json: Vec<u8>,
+    ) -> Result<(), LogError> {
+        let shared = &self.inner.shared;
+        if !self.owns(channel) {
+            return Err(LogError::ForeignChannel {
+                path: shared.path.clone(),
+                topic: channel.topic.to_string(),
+            });
+        }
+        if shared.closed.load(Ordering::Acquire) {
+            return Err(shared.closed_error());
+        }
+        let sequence = channel
+            .counters
+            .next_sequence
+            .fetch_add(1, Ordering::Relaxed);
+        let command = Command::Message {
+            channel_id: channel.id,
+            sequence,
+            log_time: log_time_ns,
+            data: json,
+        };
+        match self.inner.tx.try_send(command) {
+            Ok(()) => Ok(()),
+            Err(TrySendError::Full(_)) => {
+                channel.counters.drops.fetch_add(1, Ordering::Relaxed);
+                shared.backlog_drops.fetch_add(1, Ordering::Relaxed);
+                Err(LogError::Backlog {
+                    path: shared.path.clone(),
+                    topic: channel.topic.to_string(),
+                    capacity: shared.capacity,
+                })
+            }
+            Err(TrySendError::Disconnected(_)) => Err(shared.closed_error()),
+        }
+    }
+
+    /// What the writer thread has done so far (for health displays and tests).
+    pub fn progress(&self) -> LogProgress {
+        self.inner.shared.progress_snapshot()
+    }
+
+    fn owns(&self, channel: &RawChannel) -> bool {
+        std::ptr::eq(channel.log.as_ptr(), Arc::as_ptr(&self.inner.shared))
+    }
+
+    #[cfg(test)]
+    pub(super) fn send_for_test(&self, command: Command) {
+        // The test hook may wait: it is only used to stall the writer thread.
+        let _ = self.inner.tx.send(command);
+    }
+}
+
+impl Shared {
+    fn progress_snapshot(&self) -> LogProgress {
+        LogProgress {
+            messages_written: self.progress.messages_written.load(Ordering::Relaxed),
+            messages_flushed: self.progress.messages_flushed.load(Ordering::Relaxed),
+            flushes: self.progress.flushes.load(Ordering::Relaxed),
+            backlog_drops: self.backlog_drops.load(Ordering::Relaxed),
+        }
+    }
+}
+
+/// What a closed session log holds.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct LogStats {
+    /// Messages written per topic (every registered topic, also those without messages).
+    pub messages_per_topic: BTreeMap<String, u64>,
+    /// Messages dropped because the writer queue was full, per topic (topics with drops).
+    pub drops_per_topic: BTreeMap<String, u64>,
+    /// Messages dropped because the writer queue was full, in total.
+    pub backlog_drops: u64,
+    /// Size of the finished file, bytes.
+    pub bytes_written: u64,
+    /// Flushes done (chunk finished and handed to the OS), including the final one.
+    pub flushes: u64,
+}
+
+/// The writer side of a session log: closes it and reports the outcome. Dropping it without
+/// closing leaves the writer thread running until every [`LogHandle`] is dropped.
+pub struct LogJoin {
+    handle: Weak<HandleInner>,
+    shared: Arc<Shared>,
+    thread: JoinHandle<Result<WriterOutcome, LogError>>,
+}
+
+/// What the writer thread returns when it finishes.
+pub(super) struct WriterOutcome {
+    pub(super) messages_per_topic: BTreeMap<String, u64>,
+    pub(super) bytes_written: u64,
+    pub(super) flushes: u64,
+}
+
+impl LogJoin {
+    /// Closes the log: later `log` calls fail with [`LogError::Closed`]; the writer thread
+    /// writes what is queued, the summary and the footer, syncs the file to disk and stops.
+    /// Waits for that (blocking: from async code call it in `spawn_blocking`). Returns the
+    /// writer's first error if it failed on the way.
+    pub fn close(self) -> Result<LogStats, LogError> {
+        self.shared.closed.store(true, Ordering::Release);
+        if let Some(inner) = self.handle.upgrade() {
+            // Waits for queue space; fails only if the thread already stopped.
+            let _ = inner.tx.send(Command::Close);
+        }
+        let outcome = self.thread.join().map_err(|_| LogError::WriterPanicked {
+            path: self.shared.path.clone(),
+        })??;
+        let drops_per_topic = self
+            .shared
+            .registry
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .by_topic
+            .iter()
+            .filter(|(_, c)| c.backlog_drops() > 0)
+            .map(|(t, c)| (t.clone(), c.backlog_drops()))
+            .collect();
+        Ok(LogStats {
+            messages_per_topic: outcome.messages_per_topic,
+            drops_per_topic,
+            backlog_drops: self.shared.backlog_drops.load(Ordering::Relaxed),
+            bytes_written: outcome.bytes_written,
+            flushes: outcome.flushes,
+        })
+    }
+
+    /// The log file.
+    pub fn path(&self) -> &Path {
+        &self.shared.path
+    }
+}

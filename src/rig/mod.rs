@@ -6,6 +6,7 @@
 //! commands from the next block on, and reports faults in its status.
 
 pub mod daq;
+pub mod sim;
 
 use std::future::Future;
 

@@ -1,0 +1,313 @@
+//! The truth model: the ROM integrator (end-of-step coupling, fixed `dt`) coupled two-way to
+//! the shaker. Per truth step the base acceleration is solved from the base equation with the
+//! beams' modal reaction, the ROM steps under it, then base and coil advance.
+//!
+//! Base equation: `M a_b + sum_i beta_i eta_i'' = F`, `F = Bl i - k x_b - c v_b`. The
+//! integrator's damped leapfrog gives the modal acceleration of the step as
+//! `eta_i'' = (v_i^{j+1/2} - v_i^{j-1/2}) / dt = alpha_i (F_i - beta_i a_b)`,
+//! `F_i = -D_i v_i^{j-1/2} - omega_i^2 eta_i^j + (Phi_g^T lambda)_i`, `alpha_i = 1 / (1 + D_i dt / 2)`,
+//! so `(M - sum_i alpha_i beta_i^2 + c dt / 2) a_b = Bl i - k x_b - c v_b^{j-1/2} - sum_i alpha_i beta_i F_i`
+//! (the suspension damping averaged over the half steps like the modal damping).
+//!
+// NOTE (momentum balance): with `alpha_i` the base sees exactly the modal acceleration the
+// integrator then applies, so base and beams exchange momentum consistently step by step;
+// `alpha_i = 1` (the continuous equation) would leave an O(D dt) mismatch per step.
+//
+// NOTE (contact forces): the contact forces are internal to the beams: their direct load on
+// the base, `b^T f`, is zero, and their modal part `sum_i beta_i (Phi_g^T lambda)_i` tends to
+// zero as the modes become complete (~0 for the truth ROM). It is kept for consistency with
+// the truncated modal reaction but taken from the previous step (`lambda` of this step is only
+// known after the modal step): a one-step lag on a term that is nearly zero.
+
+use crate::rom::Rom;
+use crate::sim::{
+    Integrator, IntegratorParameters, StabilityLimits, State, StepOutput, StepSink, TimeStep,
+};
+
+use super::shaker::Shaker;
+use super::{ShakerSpec, SimRigError};
+
+/// The ROM outputs the beam sensors read, in channel order.
+pub const BEAM_SENSORS: [&str; 4] = ["lower_tip", "lower_mid", "upper_tip", "upper_mid"];
+
+/// Index of the upper tip in [`BEAM_SENSORS`] (the vibrometer's spot).
+pub const UPPER_TIP: usize = 2;
+
+/// What one truth step produced: the physical quantities the sensors read.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct StepValues {
+    /// Start time of the step `t^j`, s.
+    pub time: f64,
+    /// Base acceleration `a_b^j`, m/s^2.
+    pub base_acceleration: f64,
+    /// Base displacement `x_b^j`, m.
+    pub base_displacement: f64,
+    /// Base velocity before and after the step, `v_b^{j-1/2}`, `v_b^{j+1/2}`, m/s.
+    pub base_velocity: [f64; 2],
+    /// Relative velocities of the beam sensors ([`BEAM_SENSORS`]) before and after the step,
+    /// at `t^{j-1/2}` and `t^{j+1/2}`, m/s.
+    pub relative_velocity: [[f64; 4]; 2],
+    /// Amplifier output `u^j`, V.
+    pub amplifier_output: f64,
+    /// Whether the amplifier clipped.
+    pub clipped: bool,
+    /// Coil current `i^j`, A.
+    pub current: f64,
+    /// Whether any contact pair was closed in the step.
+    pub any_closed: bool,
+}
+
+/// Copies what the sensors need from the integrator's step output.
+#[derive(Clone, Copy, Debug, Default)]
+struct Capture {
+    index: [usize; 4],
+    velocity: [f64; 4],
+    any_closed: bool,
+}
+
+impl StepSink for Capture {
+    #[inline]
+    fn record(&mut self, out: &StepOutput<'_>) {
+        for (v, &i) in self.velocity.iter_mut().zip(&self.index) {
+            *v = out.velocity[i];
+        }
+        self.any_closed = out.contact.any_closed;
+    }
+}
+
+/// The truth: ROM + shaker, stepped together.
+#[derive(Clone, Debug)]
+pub struct Truth {
+    integrator: Integrator,
+    state: State,
+    shaker: Shaker,
+    dt: f64,
+    /// Per mode: `alpha_i beta_i`, `D_i = 2 zeta_i omega_i`, `omega_i^2`.
+    alpha_beta: Vec<f64>,
+    damping: Vec<f64>,
+    omega2: Vec<f64>,
+    /// `Phi_g (alpha .* beta)`, 3C: the contact term `sum_i alpha_i beta_i (Phi_g^T lambda)_i
+    /// = lambda . p`.
+    p: Vec<f64>,
+    /// `1 / (M - sum_i alpha_i beta_i^2 + c dt / 2)`, 1/kg.
+    inv_mass: f64,
+    capture: Capture,
+    last: StepValues,
+    steps: u64,
+    failure: Option<String>,
+    solver_failures: u64,
+}
+
+impl Truth {
+    /// The truth for ROM `rom`, shaker `shaker` and clearance `clearance_m` (m), at rest. The
+    /// truth step (s) is chosen by `choose_dt` from the ROM's stability limits (the ROM is
+    /// checked by the integrator before its limits are computed).
+    pub fn new(
+        rom: &Rom,
+        shaker: &ShakerSpec,
+        clearance_m: f64,
+        choose_dt: impl FnOnce(&StabilityLimits) -> Result<f64, SimRigError>,
+    ) -> Result<Truth, SimRigError> {
+        let mut index = [0; 4];
+        for (slot, name) in index.iter_mut().zip(BEAM_SENSORS) {
+            *slot = rom.outputs.iter().position(|o| o.name == name).ok_or_else(|| {
+                SimRigError::Rom(format!(
+                    "the truth ROM has no output {name:?} (outputs: {:?}); the beam \
+                     accelerometers and the vibrometer read the outputs {BEAM_SENSORS:?}",
+                    rom.outputs.iter().map(|o| &o.name).collect::<Vec<_>>()
+                ))
+            })?;
+        }
+        // A provisional step far inside any stability limit lets the integrator check the ROM
+        // and compute its limits; the real step follows from them.
+        let params = IntegratorParameters {
+            time_step: TimeStep::StepsPerReferencePeriod { steps: 1.0e6 },
+            ..IntegratorParameters::default()
+        };
+        let mut integrator = Integrator::new(rom, params)?;
+        let dt = choose_dt(integrator.limits())?;
+        integrator.set_time_step(TimeStep::Dt { dt })?;
+        integrator.set_clearance(clearance_m)?;
+        let state = integrator.state_at_rest();
+
+        let m = rom.n_modes();
+        let damping: Vec<f64> = (0..m)
+            .map(|i| 2.0 * rom.damping_ratio[i] * rom.omega[i])
+            .collect();
+        let alpha_beta: Vec<f64> = (0..m)
+            .map(|i| rom.beta[i] / (1.0 + 0.5 * damping[i] * dt))
+            .collect();
+        let modal_mass: f64 = alpha_beta.iter().zip(&rom.beta).map(|(a, b)| a * b).sum();
+        let free_mass = shaker.moving_mass - modal_mass;
+        if !(free_mass > 0.0) {
+            return Err(SimRigError::Spec(format!(
+                "shaker.moving_mass = {}: expected more than the beams' modal mass \
+                 sum(beta_i^2) = {modal_mass:.4} kg of the truth ROM (the moving mass includes \
+                 the beams)",
+                shaker.moving_mass
+            )));
+        }
+        let nb = 3 * rom.n_pairs();
+        let p: Vec<f64> = (0..nb)
+            .map(|r| (0..m).map(|i| rom.phi_g[(r, i)] * alpha_beta[i]).sum())
+            .collect();
+        let shaker_model = Shaker::new(shaker, dt);
+        let inv_mass = 1.0 / (free_mass + 0.5 * shaker_model.damping() * dt);
+        Ok(Truth {
+            integrator,
+            state,
+            shaker: shaker_model,
+            dt,
+            alpha_beta,
+            damping,
+            omega2: rom.omega.iter().map(|w| w * w).collect(),
+            p,
+            inv_mass,
+            capture: Capture {
+                index,
+                ..Capture::default()
+            },
+            last: StepValues::default(),
+            steps: 0,
+            failure: None,
+            solver_failures: 0,
+        })
+    }
+
+    /// The truth step, s.
+    pub fn dt(&self) -> f64 {
+        self.dt
+    }
+
+    /// One truth step with amplifier input `drive_v` (V). After a failure (see
+    /// [`Truth::failure`]) the truth is frozen and every step reads zero.
+    #[inline]
+    pub fn step(&mut self, drive_v: f64) -> StepValues {
+        let time = self.steps as f64 * self.dt;
+        self.steps += 1;
+        if self.failure.is_some() {
+            return StepValues {
+                time,
+                ..StepValues::default()
+            };
+        }
+        let (u, clipped) = self.shaker.amplifier(drive_v);
+
+        // Base acceleration from the base equation (see the module docs).
+        let eta = self.state.eta();
+        let v = self.state.eta_dot();
+        let mut modal = 0.0;
+        for i in 0..eta.len() {
+            let f = -self.damping[i] * v[i] - self.omega2[i] * eta[i];
+            modal += self.alpha_beta[i] * f;
+        }
+        let lambda = self.state.lambda();
+        for &k in self.state.closed_pairs() {
+            for r in 3 * k..3 * k + 3 {
+                modal += self.p[r] * lambda[r];
+            }
+        }
+        let v_prev = self.shaker.velocity_half();
+        let x_b = self.shaker.displacement();
+        let current = self.shaker.current();
+        let a_b = (self.shaker.elastic_and_coil_force()
+            - self.shaker.damping() * v_prev
+            - modal)
+            * self.inv_mass;
+        if !a_b.is_finite() {
+            return self.fail(time, "the base acceleration");
+        }
+
+        let before = self.capture.velocity;
+        match self.integrator.step(&mut self.state, a_b, &mut self.capture) {
+            Ok(report) => {
+                self.solver_failures += report.counters.max_iterations + report.counters.diverged;
+                if report.stop.is_some() {
+                    return self.fail(time, "the modal state");
+                }
+            }
+            Err(e) => {
+                self.failure = Some(format!(
+                    "truth model failed at t = {time:.6} s: {e}; the simulated rig stopped"
+                ));
+                return StepValues {
+                    time,
+                    ..StepValues::default()
+                };
+            }
+        }
+        self.shaker.advance(a_b, u);
+        if !self.shaker.is_finite() {
+            return self.fail(time, "the shaker state");
+        }
+        self.last = StepValues {
+            time,
+            base_acceleration: a_b,
+            base_displacement: x_b,
+            base_velocity: [v_prev, self.shaker.velocity_half()],
+            relative_velocity: [before, self.capture.velocity],
+            amplifier_output: u,
+            clipped,
+            current,
+            any_closed: self.capture.any_closed,
+        };
+        self.last
+    }
+
+    #[cold]
+    fn fail(&mut self, time: f64, what: &str) -> StepValues {
+        self.failure = Some(format!(
+            "truth model became non-finite at t = {time:.6} s ({what}); the simulated rig \
+             stopped: lower the drive or check the truth ROM and shaker parameters"
+        ));
+        StepValues {
+            time,
+            ..StepValues::default()
+        }
+    }
+
+    /// Why the truth stopped, if it did (latched).
+    pub fn failure(&self) -> Option<&str> {
+        self.failure.as_deref()
+    }
+
+    /// The values of the last good step.
+    pub fn last(&self) -> &StepValues {
+        &self.last
+    }
+
+    /// Truth steps done.
+    pub fn steps(&self) -> u64 {
+        self.steps
+    }
+
+    /// Contact solves that stopped at the sweep limit or diverged.
+    pub fn solver_failures(&self) -> u64 {
+        self.solver_failures
+    }
+
+    /// The clearance in use, m.
+    pub fn clearance(&self) -> f64 {
+        self.integrator.clearance()
+    }
+
+    /// Changes the clearance (finite, m).
+    pub fn set_clearance(&mut self, clearance_m: f64) -> Result<(), SimRigError> {
+        Ok(self.integrator.set_clearance(clearance_m)?)
+    }
+
+    /// The shaker (state and amplifier limit).
+    pub fn shaker(&self) -> &Shaker {
+        &self.shaker
+    }
+
+    /// Lowers the amplifier's output limit, V.
+    pub fn set_amplifier_limit(&mut self, limit_v: f64) {
+        self.shaker.set_limit_v(limit_v);
+    }
+
+    /// Pairs closed in the last step.
+    pub fn closed_pairs(&self) -> usize {
+        self.state.closed_pairs().len()
+    }
+}

@@ -6,7 +6,9 @@
 mod demo;
 mod fe;
 mod progress;
+mod report;
 mod rom;
+mod run;
 mod simulate;
 
 use clap::{Parser, Subcommand};
@@ -38,6 +40,12 @@ pub enum Command {
     Fe(fe::FeCommand),
     /// Virtual stepped sine of a test plan on the ROM, or a convergence study.
     Simulate(simulate::SimulateArgs),
+    /// A stepped-sine session on a rig (the simulated rig: --backend sim), logged to MCAP.
+    Run(run::RunArgs),
+    /// Recompute a recorded session's summary from its raw DAQ blocks.
+    Replay(run::ReplayArgs),
+    /// The paper-style figures of a recorded session.
+    Report(report::ReportArgs),
 }
 
 /// Entry point of the binary.
@@ -54,6 +62,9 @@ pub fn main() -> std::process::ExitCode {
         Command::Rom(c) => rom::run(c),
         Command::Fe(c) => fe::run(c),
         Command::Simulate(a) => simulate::run(a),
+        Command::Run(a) => run::run(a),
+        Command::Replay(a) => run::replay(a),
+        Command::Report(a) => report::run(a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

@@ -531,7 +531,7 @@ pub(crate) fn stepped_sine_figures(
     Ok(written)
 }
 
-fn sanitize(name: &str) -> String {
+pub(crate) fn sanitize(name: &str) -> String {
     name.chars()
         .map(|c| {
             if c.is_ascii_alphanumeric() || c == '-' {
@@ -546,19 +546,30 @@ fn sanitize(name: &str) -> String {
 /// Morlet scalogram of the upper tip velocity u/(Omega l) over the trace (decimated to about
 /// 100 samples per excitation period; analysis frequencies 0.2 to 12 x the excitation).
 fn scalogram_figure(tr: &StepTrace, l: f64, name: &str, out: &Path) -> anyhow::Result<()> {
-    let f_exc = tr.omega / (2.0 * std::f64::consts::PI);
-    let per_period = (2.0 * std::f64::consts::PI / tr.omega / tr.dt)
-        .round()
-        .max(1.0);
+    let label = format!(
+        "simulation, {name}, upper beam, Omega/omega_2 = {:.3}",
+        tr.omega_ratio
+    );
+    scalogram_of(&tr.velocity_upper, tr.dt, tr.omega, l, &label, out)
+}
+
+/// Morlet scalogram of a velocity `v` (m/s, sampled every `dt` s) as u/(Omega l) (decimated
+/// to about 100 samples per excitation period; analysis frequencies 0.2 to 12 x the
+/// excitation; log10 colour scale over 4 decades).
+pub(crate) fn scalogram_of(
+    v: &[f64],
+    dt: f64,
+    omega: f64,
+    l: f64,
+    label: &str,
+    out: &Path,
+) -> anyhow::Result<()> {
+    let f_exc = omega / (2.0 * std::f64::consts::PI);
+    let per_period = (2.0 * std::f64::consts::PI / omega / dt).round().max(1.0);
     let decim = ((per_period / 100.0).floor() as usize).max(1);
-    let s = 1.0 / (tr.omega * l);
-    let x: Vec<f64> = tr
-        .velocity_upper
-        .iter()
-        .step_by(decim)
-        .map(|v| v * s)
-        .collect();
-    let dt = tr.dt * decim as f64;
+    let s = 1.0 / (omega * l);
+    let x: Vec<f64> = v.iter().step_by(decim).map(|v| v * s).collect();
+    let dt = dt * decim as f64;
     let freqs = crate::signal::log_spaced(0.2 * f_exc, 12.0 * f_exc, 120)?;
     let sc = crate::signal::morlet_scalogram(&x, dt, &freqs, &Default::default())?;
     report::scalogram(
@@ -567,10 +578,7 @@ fn scalogram_figure(tr: &StepTrace, l: f64, name: &str, out: &Path) -> anyhow::R
         &ScalogramOptions {
             t0: 0.0,
             decades: 4.0,
-            label: format!(
-                "simulation, {name}, upper beam, Omega/omega_2 = {:.3}",
-                tr.omega_ratio
-            ),
+            label: label.to_string(),
         },
         out,
         &FigureOptions::default(),

@@ -65,6 +65,15 @@ pub struct RigConfig {
     /// `[safety]`: limits of the rig service. Not hashed.
     #[serde(default, skip_serializing)]
     pub safety: crate::control::SafetySpec,
+    /// `[shaker]`: the simulated rig's shaker and amplifier. Not hashed.
+    #[serde(default, skip_serializing)]
+    pub shaker: crate::rig::sim::ShakerSpec,
+    /// `[daq]`: the simulated rig's DAQ (sample rate, ranges, noise). Not hashed.
+    #[serde(default, skip_serializing)]
+    pub daq: crate::rig::sim::DaqSpec,
+    /// `[truth]`: the simulated rig's truth model (its own ROM and time step). Not hashed.
+    #[serde(default, skip_serializing)]
+    pub truth: crate::rig::sim::TruthSpec,
 }
 
 impl RigConfig {
@@ -147,6 +156,15 @@ impl RigConfig {
     pub fn default_rig() -> RigConfig {
         RigConfig::from_str(DEFAULT_RIG_TOML, DEFAULT_RIG_SOURCE)
             .expect("the embedded default rig description is valid (checked by tests)")
+    }
+
+    /// The simulated rig's settings (`[shaker]`, `[daq]`, `[truth]`).
+    pub fn sim_rig_spec(&self) -> crate::rig::sim::SimRigSpec {
+        crate::rig::sim::SimRigSpec {
+            shaker: self.shaker.clone(),
+            daq: self.daq.clone(),
+            truth: self.truth.clone(),
+        }
     }
 
     /// Material by name (validated to exist for every part).

@@ -76,7 +76,10 @@ pub(super) fn validate(cfg: &RigConfig) -> Result<(), ConfigError> {
         message,
     };
     cfg.control.validate().map_err(service)?;
-    cfg.safety.validate().map_err(service)
+    cfg.safety.validate().map_err(service)?;
+    cfg.sim_rig_spec()
+        .validate()
+        .map_err(|e| service(e.to_string()))
 }
 
 fn materials(c: &Check, cfg: &RigConfig) -> Result<(), ConfigError> {

@@ -23,4 +23,4 @@ pub use session::{
     TestSummary,
 };
 pub use spec::{ControlSpec, SafetySpec};
-pub use summary::{summarize, StepInfo, StepSummary};
+pub use summary::{summarize, window_signals, StepInfo, StepSummary, WindowSignals};

@@ -107,13 +107,28 @@ fn first(layout: &DaqLayout, kind: ChannelKind, name: Option<&str>) -> Option<us
     layout.indices_of(kind).first().copied()
 }
 
-/// The step summary from the record window's counts (channel-major: `counts[k * n + i]`,
-/// `n = info.record_samples`).
-pub fn summarize(
+/// The physical signals of a record window, as the summary uses them.
+#[derive(Clone, Debug, PartialEq)]
+pub struct WindowSignals {
+    /// Sample interval, s.
+    pub dt: f64,
+    /// Base acceleration (mean of the platform accelerometers), m/s^2.
+    pub base_acceleration: Vec<f64>,
+    /// Upper tip velocity relative to the base, m/s.
+    pub upper: Vec<f64>,
+    /// Lower tip velocity relative to the base, m/s.
+    pub lower: Vec<f64>,
+    /// Contact closed per sample.
+    pub closed: Vec<bool>,
+}
+
+/// The physical signals of a record window from its counts (channel-major:
+/// `counts[k * n + i]`, `n = info.record_samples`). See the module docs.
+pub fn window_signals(
     layout: &DaqLayout,
     info: &StepInfo,
     counts: &[i32],
-) -> Result<StepSummary, SummaryError> {
+) -> Result<WindowSignals, SummaryError> {
     let n = info.record_samples;
     let nch = layout.channels.len();
     if counts.len() != n * nch {
@@ -148,12 +163,8 @@ pub fn summarize(
     a_base.iter_mut().for_each(|a| *a *= inv);
 
     let dt = layout.dt();
-    let omega = info.omega;
-    let grid = PeriodGrid::new(n, dt, omega).map_err(sig)?;
-    let h = demodulate(&a_base, dt, omega, 0.0).map_err(sig)?;
-    let base_amp_measured = h.magnitude / (omega * omega);
+    let grid = PeriodGrid::new(n, dt, info.omega).map_err(sig)?;
     let v_base = integrate_periodic(&a_base, dt, &grid).map_err(sig)?;
-
     let relative_velocity = |k: usize| -> Result<Vec<f64>, SummaryError> {
         let rel: Vec<f64> = values(k).iter().zip(&a_base).map(|(a, b)| a - b).collect();
         integrate_periodic(&rel, dt, &grid).map_err(sig)
@@ -178,13 +189,38 @@ pub fn summarize(
         .iter()
         .map(|&v| v < info.contact_threshold_v)
         .collect();
-    let metrics = StepRecord {
+    Ok(WindowSignals {
         dt,
+        base_acceleration: a_base,
+        upper,
+        lower,
+        closed,
+    })
+}
+
+/// The step summary from the record window's counts (channel-major: `counts[k * n + i]`,
+/// `n = info.record_samples`).
+pub fn summarize(
+    layout: &DaqLayout,
+    info: &StepInfo,
+    counts: &[i32],
+) -> Result<StepSummary, SummaryError> {
+    let w = window_signals(layout, info, counts)?;
+    let sig = |source| SummaryError::Signal {
+        test: info.test.clone(),
+        step: info.step,
+        source,
+    };
+    let omega = info.omega;
+    let h = demodulate(&w.base_acceleration, w.dt, omega, 0.0).map_err(sig)?;
+    let base_amp_measured = h.magnitude / (omega * omega);
+    let metrics = StepRecord {
+        dt: w.dt,
         omega,
         base_level: info.base_amp_target,
-        tip_velocity_upper: &upper,
-        tip_velocity_lower: &lower,
-        contact_closed: &closed,
+        tip_velocity_upper: &w.upper,
+        tip_velocity_lower: &w.lower,
+        contact_closed: &w.closed,
         normal_force: None,
     }
     .metrics()
@@ -197,6 +233,6 @@ pub fn summarize(
         drive_amplitude: info.drive_amplitude,
         settle_seconds: info.settle_seconds,
         settled: info.settled,
-        record_start_s: info.record_first_sample as f64 * dt,
+        record_start_s: info.record_first_sample as f64 * w.dt,
     })
 }

@@ -10,6 +10,8 @@
 //!   [`LogOptions::flush_interval`], so a crash loses at most the last interval.
 //! - [`reader`]: [`read_session`] reads a file back, also one cut off by a crash.
 //! - `scan` (private): the record walk that recovers truncated files.
+//! - [`recorder`]: the topics of a stepped-sine session and the recorder that logs them.
+//! - [`replay`]: a session's summary recomputed from its raw recording.
 //!
 //! Every file carries a metadata record named [`RIGTWIN_METADATA`] with the crate version and
 //! [`FORMAT_VERSION`]; [`SessionRead::require_rigtwin`] checks it.
@@ -17,6 +19,8 @@
 mod error;
 mod options;
 pub mod reader;
+pub mod recorder;
+pub mod replay;
 mod scan;
 mod task;
 pub mod writer;

@@ -7,6 +7,7 @@
 
 pub mod daq;
 pub mod sim;
+pub mod sim_backend;
 
 use std::future::Future;
 

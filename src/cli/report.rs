@@ -1,0 +1,173 @@
+//! `rigtwin report FILE.mcap --out DIR`: the paper-style figures of a recorded session, drawn
+//! from the raw recording (the same signal processing as the live summary): RMS response and
+//! amplitude ranges of every test, time histories and contact activity of the step nearest
+//! Omega = omega_2 of each test, and its Morlet scalogram; plus the replayed summary as JSON.
+
+use anyhow::Context;
+use clap::Args;
+use std::path::PathBuf;
+
+use crate::control::{window_signals, EventKind, StepInfo};
+use crate::log::replay::{recording, replay, window_counts};
+use crate::plan::Direction;
+use crate::report::{
+    self, Beam, FigureOptions, FrequencyResponse, Source, TestCurve, TimeHistory, TimeWindow,
+};
+
+/// `rigtwin report`
+#[derive(Args, Debug)]
+pub struct ReportArgs {
+    /// The session log (MCAP).
+    pub file: PathBuf,
+    /// Output folder for the figures and the summary.
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+pub(crate) fn run(a: ReportArgs) -> anyhow::Result<()> {
+    let r = replay(&a.file)?;
+    let session = crate::log::read_session(&a.file)?;
+    let rec = recording(&session)?;
+    std::fs::create_dir_all(&a.out)
+        .with_context(|| format!("creating {}", a.out.display()))?;
+    let meta = session.metadata("session").cloned().unwrap_or_default();
+    let l: f64 = meta
+        .get("beam_length_m")
+        .and_then(|s| s.parse().ok())
+        .context("the log's session metadata has no beam_length_m")?;
+    let fig = FigureOptions::default();
+    let mut written = Vec::new();
+
+    let curves: Vec<TestCurve> = r
+        .summary
+        .tests
+        .iter()
+        .filter(|t| !t.steps.is_empty())
+        .map(|t| {
+            let col = |f: fn(&crate::control::StepSummary) -> f64| -> Vec<f64> {
+                t.steps.iter().map(f).collect()
+            };
+            TestCurve {
+                name: t.name.clone(),
+                level: t.level,
+                direction: if t.direction == "up" {
+                    Direction::Up
+                } else {
+                    Direction::Down
+                },
+                source: Source::Measurement,
+                omega_ratio: col(|s| s.omega_ratio),
+                rms_upper: col(|s| s.metrics.rms_upper),
+                rms_lower: col(|s| s.metrics.rms_lower),
+                amp_min_upper: col(|s| s.metrics.amp_min_upper),
+                amp_mean_upper: col(|s| s.metrics.amp_mean_upper),
+                amp_max_upper: col(|s| s.metrics.amp_max_upper),
+                amp_min_lower: col(|s| s.metrics.amp_min_lower),
+                amp_mean_lower: col(|s| s.metrics.amp_mean_lower),
+                amp_max_lower: col(|s| s.metrics.amp_max_lower),
+            }
+        })
+        .collect();
+    if !curves.is_empty() {
+        let data = FrequencyResponse { tests: curves };
+        let p = a.out.join("rms_response.png");
+        report::rms_response(&data, &p, &fig)?;
+        written.push(p);
+        for (beam, file) in [
+            (Beam::Upper, "amplitude_upper.png"),
+            (Beam::Lower, "amplitude_lower.png"),
+        ] {
+            let p = a.out.join(file);
+            report::amplitude_range(&data, beam, &p, &fig)?;
+            written.push(p);
+        }
+    }
+
+    // The step nearest Omega = omega_2 of each test.
+    let mut nearest: Vec<StepInfo> = Vec::new();
+    for e in &rec.events {
+        if let EventKind::RecordEnd { info } = &e.kind {
+            match nearest.iter_mut().find(|n| n.test == info.test) {
+                Some(n) if (info.omega_ratio - 1.0).abs() < (n.omega_ratio - 1.0).abs() => {
+                    *n = info.clone()
+                }
+                Some(_) => {}
+                None => nearest.push(info.clone()),
+            }
+        }
+    }
+    let mut histories = Vec::new();
+    for info in &nearest {
+        let Some(counts) = window_counts(&rec, info) else {
+            continue;
+        };
+        let w = window_signals(&rec.layout, info, &counts)?;
+        let s = 1.0 / (info.omega * l);
+        histories.push(TimeHistory {
+            name: info.test.clone(),
+            source: Source::Measurement,
+            omega_ratio: info.omega_ratio,
+            t: (0..w.upper.len()).map(|k| k as f64 * w.dt).collect(),
+            upper: w.upper.iter().map(|v| v * s).collect(),
+            lower: w.lower.iter().map(|v| v * s).collect(),
+            contact_closed: w.closed.clone(),
+            normal_force: Vec::new(),
+            tangential_force: Vec::new(),
+        });
+        let p = a
+            .out
+            .join(format!("scalogram_{}.png", super::simulate::sanitize(&info.test)));
+        super::simulate::scalogram_of(
+            &w.upper,
+            w.dt,
+            info.omega,
+            l,
+            &format!(
+                "measurement, {}, upper beam, Omega/omega_2 = {:.3}",
+                info.test, info.omega_ratio
+            ),
+            &p,
+        )?;
+        written.push(p);
+    }
+    if !histories.is_empty() {
+        let end = histories
+            .iter()
+            .filter_map(|h| h.t.last().copied())
+            .fold(f64::INFINITY, f64::min);
+        let period = nearest
+            .iter()
+            .map(|i| std::f64::consts::TAU / i.omega)
+            .fold(0.0, f64::max);
+        let zoom = TimeWindow {
+            start: (end - 5.0 * period).max(0.0),
+            end,
+        };
+        for (file, window) in [
+            ("time_histories.png", None),
+            ("time_histories_zoom.png", Some(zoom)),
+        ] {
+            let p = a.out.join(file);
+            report::time_histories(&histories, window, &p, &fig)?;
+            written.push(p);
+        }
+        for (file, window) in [
+            ("contact_activity.png", None),
+            ("contact_activity_zoom.png", Some(zoom)),
+        ] {
+            let p = a.out.join(file);
+            match report::contact_activity(&histories, window, &p, &fig) {
+                Ok(()) => written.push(p),
+                Err(report::ReportError::NothingToPlot { .. }) => {}
+                Err(e) => return Err(e.into()),
+            }
+        }
+    }
+    let json = a.out.join("summary.json");
+    super::write_json(&json, &r.summary)?;
+    written.push(json);
+    for p in &written {
+        println!("{}", p.display());
+    }
+    Ok(())
+}

@@ -1,0 +1,311 @@
+//! `rigtwin run`: a stepped-sine session on a rig backend (the simulated rig today), logged to
+//! MCAP, with a JSON summary; `rigtwin replay`: the summary recomputed from a recording.
+
+use anyhow::{bail, Context};
+use clap::{Args, ValueEnum};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use crate::config::RigConfig;
+use crate::control::{run_session, SessionProgress, SessionSetup, SessionSummary};
+use crate::log::recorder::McapRecorder;
+use crate::log::{Attachment, LogOptions, SessionLog};
+use crate::plan::Plan;
+use crate::rig::sim::{InjectedFault, SimRig};
+use crate::rig::sim_backend::SimBackend;
+use crate::rom::Rom;
+
+/// Which rig to run on.
+#[derive(Clone, Copy, Debug, ValueEnum, PartialEq, Eq)]
+pub enum BackendArg {
+    /// The simulated rig (truth model + shaker + sensors + DAQ).
+    Sim,
+}
+
+/// `rigtwin run`
+#[derive(Args, Debug)]
+pub struct RunArgs {
+    /// Rig description (TOML). Without it: the embedded default rig.
+    pub config: Option<PathBuf>,
+    /// Stepped-sine plan (TOML), as for `rigtwin simulate`.
+    #[arg(long)]
+    pub plan: PathBuf,
+    /// Rig backend.
+    #[arg(long, value_enum, default_value = "sim")]
+    pub backend: BackendArg,
+    /// Session log (MCAP).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Session summary (JSON).
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+    /// Pace the simulated rig to the wall clock (default: virtual time, as fast as it runs).
+    #[arg(long)]
+    pub realtime: bool,
+    /// Inject a fault into the simulated rig, as JSON, e.g.
+    /// '{"kind":"dead_channel","at_s":3.0,"channel":"upper_tip"}' (repeatable). Kinds:
+    /// daq_stall, dead_channel, drive_saturation, clearance_change.
+    #[arg(long)]
+    pub inject: Vec<String>,
+    /// Rebuild the ROMs even if cached.
+    #[arg(long)]
+    pub rebuild: bool,
+    /// No progress display.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// `rigtwin replay`
+#[derive(Args, Debug)]
+pub struct ReplayArgs {
+    /// The session log (MCAP).
+    pub file: PathBuf,
+    /// Write the recomputed summary (JSON) here.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+}
+
+/// The twin ROM (the model) and the truth ROM (the simulated rig's structure: more modes).
+pub(crate) fn roms(cfg: &RigConfig, rebuild: bool, quiet: bool) -> anyhow::Result<(Rom, Rom, PathBuf)> {
+    let (twin, twin_path, _) = super::demo::cached_rom(cfg, rebuild, quiet)?;
+    let mut truth_cfg = cfg.clone();
+    truth_cfg.reduction = crate::config::ReductionSpec {
+        cutoff_ratio: Some(cfg.truth.cutoff_ratio),
+        cutoff_hz: None,
+        modes: None,
+    };
+    let (truth, _, _) = super::demo::cached_rom(&truth_cfg, rebuild, quiet)?;
+    Ok((twin, truth, twin_path))
+}
+
+/// What a finished session left behind.
+pub(crate) struct RunOutcome {
+    pub summary: SessionSummary,
+    pub wall_seconds: f64,
+    pub messages: u64,
+    pub overruns: u64,
+}
+
+/// Runs `plan` on the simulated rig of `cfg`, logging to `out`.
+pub(crate) fn run_sim_session(
+    cfg: &RigConfig,
+    config_text: &str,
+    plan: &Plan,
+    out: &Path,
+    realtime: bool,
+    inject: &[InjectedFault],
+    rebuild: bool,
+    quiet: bool,
+) -> anyhow::Result<RunOutcome> {
+    let (twin, truth, twin_path) = roms(cfg, rebuild, quiet)?;
+    let l = cfg.rig.beam_length;
+    let spec = cfg.sim_rig_spec();
+    let rig = SimRig::new(&truth, &spec, cfg.contact.clearance).context("simulated rig")?;
+    let mut backend = SimBackend::new(rig, l, realtime);
+    for f in inject {
+        backend.inject(f.clone());
+    }
+    let setup = SessionSetup {
+        plan: plan.clone(),
+        control: cfg.control.clone(),
+        safety: cfg.safety.clone(),
+        omega_ref: twin.omega_ref(),
+        beam_length: l,
+    };
+    let mut session_meta = BTreeMap::new();
+    session_meta.insert("backend".to_string(), "sim".to_string());
+    session_meta.insert("realtime".to_string(), realtime.to_string());
+    session_meta.insert("plan".to_string(), plan.name.clone().unwrap_or_default());
+    session_meta.insert("plan_source".to_string(), plan.source.clone());
+    session_meta.insert("omega_ref_rad_s".to_string(), format!("{:e}", twin.omega_ref()));
+    session_meta.insert("beam_length_m".to_string(), format!("{l:e}"));
+    session_meta.insert(
+        "started_unix_s".to_string(),
+        std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_secs())
+            .to_string(),
+    );
+    let mut rom_meta = BTreeMap::new();
+    rom_meta.insert("path".to_string(), twin_path.display().to_string());
+    rom_meta.insert("config_hash".to_string(), twin.meta.config_hash.clone());
+    rom_meta.insert("modes".to_string(), twin.n_modes().to_string());
+    rom_meta.insert("pairs".to_string(), twin.n_pairs().to_string());
+    rom_meta.insert("truth_config_hash".to_string(), truth.meta.config_hash.clone());
+    rom_meta.insert("truth_modes".to_string(), truth.n_modes().to_string());
+    let mut plan_text = String::new();
+    if let Ok(t) = std::fs::read_to_string(&plan.source) {
+        plan_text = t;
+    }
+    let mut attachments = vec![Attachment {
+        name: "rig.toml".into(),
+        media_type: "application/toml".into(),
+        data: config_text.as_bytes().to_vec(),
+    }];
+    if !plan_text.is_empty() {
+        attachments.push(Attachment {
+            name: "plan.toml".into(),
+            media_type: "application/toml".into(),
+            data: plan_text.into_bytes(),
+        });
+    }
+    let (handle, join) = SessionLog::create(
+        out,
+        LogOptions::default(),
+        vec![("session".into(), session_meta), ("rom".into(), rom_meta)],
+        attachments,
+    )
+    .with_context(|| format!("creating the session log {}", out.display()))?;
+    let mut recorder = McapRecorder::new(handle)?;
+
+    let bar = if quiet {
+        ProgressBar::hidden()
+    } else {
+        ProgressBar::with_draw_target(None, ProgressDrawTarget::stderr())
+    };
+    bar.set_style(
+        ProgressStyle::with_template("{spinner} [{elapsed_precise}] rig t = {prefix} s {wide_msg}")
+            .expect("template"),
+    );
+    bar.enable_steady_tick(std::time::Duration::from_millis(150));
+    let t0 = Instant::now();
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .context("starting the async runtime")?;
+    let summary = runtime.block_on(async {
+        let shutdown = async {
+            let _ = tokio::signal::ctrl_c().await;
+        };
+        let mut progress = |p: &SessionProgress| {
+            bar.set_prefix(format!("{:.1}", p.time));
+            bar.set_message(format!(
+                "{} step {}/{} {:?} error {:+.4}",
+                p.test.1,
+                p.step.0 + 1,
+                p.step.1,
+                p.phase,
+                p.error
+            ));
+        };
+        let s = run_session(&mut backend, &setup, &mut recorder, shutdown, &mut progress).await?;
+        anyhow::Ok((s, crate::rig::RigBackend::status(&backend).overruns))
+    })?;
+    let (summary, overruns) = summary;
+    bar.finish_and_clear();
+    let messages = recorder.messages();
+    drop(recorder);
+    join.close().context("closing the session log")?;
+    Ok(RunOutcome {
+        summary,
+        wall_seconds: t0.elapsed().as_secs_f64(),
+        messages,
+        overruns,
+    })
+}
+
+fn print_summary(s: &SessionSummary) {
+    for t in &s.tests {
+        println!("  test {} ({} steps):", t.name, t.steps.len());
+        for st in &t.steps {
+            println!(
+                "    Omega/omega_2 {:.4}  rms upper {:7.2} lower {:7.2}  contact {:.3}  impacts/period {:.2}  base {:.4e} m (target {:.4e}, {:+.2} %)  drive {:.4} V  settle {:.2} s{}",
+                st.omega_ratio,
+                st.metrics.rms_upper,
+                st.metrics.rms_lower,
+                st.metrics.contact_fraction,
+                st.metrics.impacts_per_period,
+                st.base_amp_measured,
+                st.base_amp_target,
+                100.0 * (st.base_amp_measured / st.base_amp_target - 1.0),
+                st.drive_amplitude,
+                st.settle_seconds,
+                if st.settled { "" } else { " (not settled)" }
+            );
+        }
+    }
+    if let Some(r) = &s.abort_reason {
+        println!("ABORTED: {r}");
+    }
+}
+
+pub(crate) fn run(a: RunArgs) -> anyhow::Result<()> {
+    if a.backend != BackendArg::Sim {
+        bail!("only --backend sim is available");
+    }
+    let (cfg, text) = match &a.config {
+        Some(p) => {
+            let text = std::fs::read_to_string(p)
+                .with_context(|| format!("reading the rig description {}", p.display()))?;
+            (RigConfig::from_str(&text, &p.display().to_string())?, text)
+        }
+        None => (
+            RigConfig::default_rig(),
+            crate::config::DEFAULT_RIG_TOML.to_string(),
+        ),
+    };
+    let plan = Plan::from_path(&a.plan)?;
+    let inject: Vec<InjectedFault> = a
+        .inject
+        .iter()
+        .map(|s| {
+            serde_json::from_str(s).with_context(|| format!("--inject {s}: not a fault description"))
+        })
+        .collect::<anyhow::Result<_>>()?;
+    let o = run_sim_session(&cfg, &text, &plan, &a.out, a.realtime, &inject, a.rebuild, a.quiet)?;
+    println!(
+        "session: {} blocks, {:.1} s of rig time in {:.1} s wall ({:.2}x real time), {} log messages, {} overruns",
+        o.summary.blocks,
+        o.summary.rig_seconds,
+        o.wall_seconds,
+        o.summary.rig_seconds / o.wall_seconds,
+        o.messages,
+        o.overruns
+    );
+    print_summary(&o.summary);
+    println!("log: {}", a.out.display());
+    if let Some(j) = &a.json {
+        super::write_json(j, &o.summary)?;
+        println!("summary: {}", j.display());
+    }
+    if o.summary.aborted {
+        bail!(
+            "session aborted: {}",
+            o.summary.abort_reason.as_deref().unwrap_or("unknown")
+        );
+    }
+    Ok(())
+}
+
+pub(crate) fn replay(a: ReplayArgs) -> anyhow::Result<()> {
+    let r = crate::log::replay::replay(&a.file)?;
+    if !r.complete {
+        println!(
+            "note: the log was not closed ({}); replaying what it holds",
+            r.note.as_deref().unwrap_or("truncated")
+        );
+    }
+    let same = r.logged_steps.len()
+        == r.summary.tests.iter().map(|t| t.steps.len()).sum::<usize>()
+        && r
+            .logged_steps
+            .iter()
+            .zip(r.summary.tests.iter().flat_map(|t| t.steps.iter()))
+            .all(|(a, b)| &a.summary == b);
+    println!(
+        "replay: {} blocks, {:.1} s of rig time, {} steps recomputed ({} the logged summaries)",
+        r.summary.blocks,
+        r.summary.rig_seconds,
+        r.logged_steps.len(),
+        if same { "identical to" } else { "DIFFERENT from" }
+    );
+    print_summary(&r.summary);
+    if let Some(j) = &a.json {
+        super::write_json(j, &r.summary)?;
+        println!("summary: {}", j.display());
+    }
+    Ok(())
+}

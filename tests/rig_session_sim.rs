@@ -1,0 +1,326 @@
+//! `rigtwin run` on the simulated rig, end to end through the CLI: a short stepped sine
+//! through the impact band at the high level. Guards:
+//! - the control holds the fundamental base displacement within 1 % of the target in every
+//!   record window (across resonance, in the impact regime);
+//! - the session log is standard MCAP that the official Python reader reads: expected channels
+//!   and JSON schemas, DAQ sequence numbers without gaps, as many blocks as the session
+//!   received;
+//! - `rigtwin replay` recomputes the summary from the raw blocks bit for bit, and `rigtwin
+//!   report` draws the figures from the recording;
+//! - injected faults (DAQ stall, dead channel, drive saturation, clearance change) each end
+//!   in an abort with a reason, a ramp-down of the drive and a complete log.
+
+mod log_support;
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use rigtwin::control::{ControlState, EventKind, Phase, SessionEvent};
+use rigtwin::log::read_session;
+use rigtwin::log::recorder::{TOPIC_CONTROL, TOPIC_DAQ, TOPIC_EVENTS};
+
+/// Through the impact band at the high level: 1.01 -> 0.99 omega_2 in 3 steps.
+const PLAN: &str = r#"
+name = "session-test"
+[defaults]
+level = 6.0e-5
+clearance = 2.78e-3
+steps = 3
+settle_periods = 60
+record_periods = 30
+steps_per_period = 1000
+
+[[test]]
+name = "high-down"
+direction = "down"
+omega_start = 1.01
+omega_end = 0.99
+"#;
+
+fn cache() -> PathBuf {
+    PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("rom-cache")
+}
+
+fn rigtwin(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_rigtwin"))
+        .env("RIGTWIN_CACHE", cache())
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+fn text(o: &Output) -> String {
+    format!(
+        "{}\n{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    )
+}
+
+fn write_plan(dir: &Path, text: &str) -> String {
+    let p = dir.join("plan.toml");
+    std::fs::write(&p, text).unwrap();
+    p.display().to_string()
+}
+
+fn json(path: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+#[test]
+fn session_holds_the_base_amplitude_logs_standard_mcap_and_replays_bit_for_bit() {
+    let dir = tempfile::tempdir().unwrap();
+    let plan = write_plan(dir.path(), PLAN);
+    let mcap = dir.path().join("session.mcap");
+    let summary = dir.path().join("summary.json");
+    let o = rigtwin(&[
+        "run",
+        "--plan",
+        &plan,
+        "--backend",
+        "sim",
+        "--quiet",
+        "--out",
+        mcap.to_str().unwrap(),
+        "--json",
+        summary.to_str().unwrap(),
+    ]);
+    println!("{}", text(&o));
+    assert!(o.status.success(), "{}", text(&o));
+    let s = json(&summary);
+    assert_eq!(s["aborted"], false);
+    let steps = s["tests"][0]["steps"].as_array().unwrap();
+    assert_eq!(steps.len(), 3);
+    let mut impacts = 0.0;
+    for st in steps {
+        let (q, target) = (
+            st["base_amp_measured"].as_f64().unwrap(),
+            st["base_amp_target"].as_f64().unwrap(),
+        );
+        assert!(
+            (q / target - 1.0).abs() < 0.01,
+            "base amplitude {q:e} vs target {target:e} at {}",
+            st["omega_ratio"]
+        );
+        for key in [
+            "rms_upper",
+            "rms_lower",
+            "amp_min_upper",
+            "amp_mean_upper",
+            "amp_max_upper",
+            "contact_fraction",
+            "impacts_per_period",
+            "drive_amplitude",
+            "settle_seconds",
+        ] {
+            assert!(st[key].as_f64().is_some(), "{key} missing in {st}");
+        }
+        impacts += st["impacts_per_period"].as_f64().unwrap();
+    }
+    assert!(impacts > 0.0, "no impacts through the band: {steps:?}");
+
+    // Replay: the same summary, bit for bit (the JSON files are identical).
+    let replayed = dir.path().join("replay.json");
+    let o = rigtwin(&[
+        "replay",
+        mcap.to_str().unwrap(),
+        "--json",
+        replayed.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(text(&o).contains("identical to"), "{}", text(&o));
+    assert_eq!(
+        std::fs::read_to_string(&summary).unwrap(),
+        std::fs::read_to_string(&replayed).unwrap()
+    );
+
+    // Report: figures from the recording.
+    let figs = dir.path().join("figures");
+    let o = rigtwin(&["report", mcap.to_str().unwrap(), "--out", figs.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", text(&o));
+    for f in ["rms_response.png", "amplitude_upper.png", "time_histories.png"] {
+        assert!(figs.join(f).is_file(), "{f} missing: {}", text(&o));
+    }
+
+    // The official Python reader.
+    let Some(python) = log_support::mcap_python_or_skip("session log in python") else {
+        return;
+    };
+    let py = log_support::read_with_python(&python, &mcap);
+    for topic in [
+        "/daq/layout",
+        "/daq/blocks",
+        "/control/state",
+        "/session/events",
+        "/rig/status",
+        "/session/steps",
+    ] {
+        let ch = &py["channels"][topic];
+        assert_eq!(ch["message_encoding"], "json", "{topic}: {ch}");
+        assert_eq!(ch["schema_encoding"], "jsonschema", "{topic}: {ch}");
+        assert_eq!(ch["schema_is_object"], true, "{topic}: {ch}");
+        assert_eq!(py["sequences_contiguous_from_0"][topic], true, "{topic}");
+    }
+    assert_eq!(py["payload_errors"].as_array().unwrap().len(), 0);
+    assert_eq!(py["counts"]["/daq/blocks"], s["blocks"], "blocks logged vs received");
+    assert_eq!(py["counts"]["/session/steps"], 3);
+    assert!(py["metadata"]["rigtwin"].is_object() && py["metadata"]["session"].is_object());
+    assert!(py["attachments"]["rig.toml"].is_object());
+}
+
+fn run_with_fault(fault: &str) -> (serde_json::Value, PathBuf, tempfile::TempDir, String) {
+    let dir = tempfile::tempdir().unwrap();
+    let plan = write_plan(dir.path(), PLAN);
+    let mcap = dir.path().join("session.mcap");
+    let summary = dir.path().join("summary.json");
+    let o = rigtwin(&[
+        "run",
+        "--plan",
+        &plan,
+        "--quiet",
+        "--out",
+        mcap.to_str().unwrap(),
+        "--json",
+        summary.to_str().unwrap(),
+        "--inject",
+        fault,
+    ]);
+    assert!(!o.status.success(), "an abort must fail the command: {}", text(&o));
+    (json(&summary), mcap, dir, text(&o))
+}
+
+/// The log is complete (closed), ends with the abort, the ramp-down and the session end, and
+/// the drive is at zero at the end.
+fn check_aborted_log(mcap: &Path, reason_kind: &str) {
+    let s = read_session(mcap).unwrap();
+    assert!(s.complete, "{:?}", s.note);
+    let events: Vec<SessionEvent> = s
+        .decode::<SessionEvent>(TOPIC_EVENTS)
+        .unwrap()
+        .into_iter()
+        .map(|x| x.2)
+        .collect();
+    let abort = events
+        .iter()
+        .find_map(|e| match &e.kind {
+            EventKind::Abort { reason, .. } => Some(reason.clone()),
+            _ => None,
+        })
+        .expect("an abort event");
+    let kind = serde_json::to_value(&abort).unwrap()["kind"].clone();
+    assert_eq!(kind, reason_kind, "{abort:?}");
+    assert!(matches!(
+        events.last().unwrap().kind,
+        EventKind::SessionEnd { aborted: true }
+    ));
+    let control: Vec<ControlState> = s
+        .decode::<ControlState>(TOPIC_CONTROL)
+        .unwrap()
+        .into_iter()
+        .map(|x| x.2)
+        .collect();
+    let blocks = s.decode::<serde_json::Value>(TOPIC_DAQ).unwrap();
+    let ramp: Vec<&ControlState> = control.iter().filter(|c| c.phase == Phase::RampDown).collect();
+    if reason_kind != "daq_timeout" {
+        // The DAQ is alive: the ramp-down was recorded and ends with the drive off.
+        assert!(ramp.len() >= 10, "ramp-down blocks: {}", ramp.len());
+        assert!(ramp.last().unwrap().drive_v < 1e-9, "{:?}", ramp.last());
+        assert!(ramp.windows(2).all(|w| w[1].drive_v <= w[0].drive_v + 1e-12));
+    }
+    // Sequence numbers of the raw blocks are gap-free.
+    for (i, (_, seq, b)) in blocks.iter().enumerate() {
+        assert_eq!(*seq, i as u64);
+        assert_eq!(b["seq"].as_u64(), Some(i as u64));
+    }
+}
+
+#[test]
+fn injected_faults_abort_with_a_reason_a_ramp_down_and_a_complete_log() {
+    for (fault, kind, words) in [
+        (r#"{"kind":"daq_stall","at_s":2.0}"#, "daq_timeout", "DAQ silent"),
+        (
+            r#"{"kind":"dead_channel","at_s":2.0,"channel":"platform_2"}"#,
+            "dead_channel",
+            "platform_2",
+        ),
+        (
+            r#"{"kind":"drive_saturation","at_s":2.0,"limit_v":0.2}"#,
+            "rig",
+            "saturated",
+        ),
+        (
+            r#"{"kind":"clearance_change","at_s":2.0,"clearance_m":-0.0002}"#,
+            "contact_duty",
+            "contact duty",
+        ),
+    ] {
+        let (s, mcap, _dir, out) = run_with_fault(fault);
+        println!("{fault}: {}", s["abort_reason"]);
+        assert_eq!(s["aborted"], true, "{out}");
+        let reason = s["abort_reason"].as_str().unwrap();
+        assert!(reason.contains(words), "{fault}: {reason}");
+        check_aborted_log(&mcap, kind);
+    }
+}
+
+#[test]
+fn bad_input_gives_clear_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let mcap = dir.path().join("x.mcap");
+    // A misspelled plan key.
+    let plan = write_plan(dir.path(), &PLAN.replace("settle_periods", "settle_period"));
+    let o = rigtwin(&["run", "--plan", &plan, "--quiet", "--out", mcap.to_str().unwrap()]);
+    assert!(!o.status.success());
+    assert!(text(&o).contains("settle_period"), "{}", text(&o));
+    // A bad controller setting in the rig description.
+    let cfg = dir.path().join("rig.toml");
+    std::fs::write(
+        &cfg,
+        format!("{}\n[control]\nki = -1.0\n", rigtwin::config::DEFAULT_RIG_TOML),
+    )
+    .unwrap();
+    let plan = write_plan(dir.path(), PLAN);
+    let o = rigtwin(&[
+        "run",
+        cfg.to_str().unwrap(),
+        "--plan",
+        &plan,
+        "--quiet",
+        "--out",
+        mcap.to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    assert!(text(&o).contains("control.ki"), "{}", text(&o));
+    // A bad fault description.
+    let o = rigtwin(&[
+        "run", "--plan", &plan, "--quiet", "--out", mcap.to_str().unwrap(), "--inject", "{\"kind\":\"meteor\"}",
+    ]);
+    assert!(!o.status.success());
+    assert!(text(&o).contains("--inject"), "{}", text(&o));
+    // Replay of files that are not session logs.
+    let png = dir.path().join("a.png");
+    std::fs::write(&png, b"\x89PNG\r\n\x1a\n not an mcap").unwrap();
+    let txt = dir.path().join("a.mcap");
+    std::fs::write(&txt, "hello").unwrap();
+    let cut = dir.path().join("cut.mcap");
+    std::fs::write(&cut, b"\x89MCA").unwrap();
+    for f in [&png, &txt, &cut, &dir.path().join("missing.mcap")] {
+        let o = rigtwin(&["replay", f.to_str().unwrap()]);
+        assert!(!o.status.success(), "{}", f.display());
+        let t = text(&o);
+        assert!(t.contains(f.file_name().unwrap().to_str().unwrap()), "{t}");
+        assert!(!t.contains("panicked"), "{t}");
+    }
+    // An MCAP from another tool: no rigtwin metadata.
+    let foreign = dir.path().join("foreign.mcap");
+    {
+        let mut w = mcap::Writer::new(std::io::BufWriter::new(
+            std::fs::File::create(&foreign).unwrap(),
+        ))
+        .unwrap();
+        w.finish().unwrap();
+    }
+    let o = rigtwin(&["replay", foreign.to_str().unwrap()]);
+    assert!(!o.status.success());
+    assert!(text(&o).contains("rigtwin"), "{}", text(&o));
+}

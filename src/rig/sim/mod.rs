@@ -12,6 +12,10 @@
 //! Deterministic: the same ROM, spec, clearance, commands and injected faults give
 //! bit-identical blocks. No clock, no I/O; the per-step loop does not allocate.
 
+// NOTE: validation uses negated comparisons such as `!(dt < limit)` on purpose: they reject
+// NaN together with out-of-range values.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 pub mod daq;
 pub mod drive;
 pub mod filter;
@@ -21,7 +25,9 @@ pub mod spec;
 pub mod truth;
 
 pub use shaker::{base_acceleration_frf, BaseMode, Complex};
-pub use spec::{ChannelNoise, ChannelRanges, ContactCircuitSpec, DaqSpec, ShakerSpec, SimRigSpec, TruthSpec};
+pub use spec::{
+    ChannelNoise, ChannelRanges, ContactCircuitSpec, DaqSpec, ShakerSpec, SimRigSpec, TruthSpec,
+};
 
 use serde::{Deserialize, Serialize};
 
@@ -200,9 +206,9 @@ impl SimRig {
         let fs = spec.daq.sample_rate;
         let mut oversampling = 1;
         let truth_model = Truth::new(truth, &spec.shaker, clearance_m, |limits| {
-            oversampling =
-                spec.truth
-                    .oversampling_for(fs, limits.dt_max_open(), limits.omega_ref);
+            oversampling = spec
+                .truth
+                .oversampling_for(fs, limits.dt_max_open(), limits.omega_ref);
             let dt = 1.0 / (fs * f64::from(oversampling));
             if !(dt < limits.dt_max_open()) {
                 return Err(SimRigError::Spec(format!(

@@ -291,7 +291,10 @@ impl SimRigSpec {
         let s = &self.shaker;
         positive("shaker.moving_mass", s.moving_mass)?;
         non_negative("shaker.suspension_stiffness", s.suspension_stiffness)?;
-        non_negative("shaker.suspension_damping_ratio", s.suspension_damping_ratio)?;
+        non_negative(
+            "shaker.suspension_damping_ratio",
+            s.suspension_damping_ratio,
+        )?;
         positive("shaker.coil_resistance", s.coil_resistance)?;
         positive("shaker.coil_inductance", s.coil_inductance)?;
         positive("shaker.force_constant", s.force_constant)?;
@@ -301,7 +304,9 @@ impl SimRigSpec {
         let d = &self.daq;
         positive("daq.sample_rate", d.sample_rate)?;
         if d.block_size == 0 {
-            return Err(SimRigError::Spec("daq.block_size = 0: expected >= 1".into()));
+            return Err(SimRigError::Spec(
+                "daq.block_size = 0: expected >= 1".into(),
+            ));
         }
         if !(2..=32).contains(&d.adc_bits) {
             return Err(SimRigError::Spec(format!(
@@ -326,7 +331,10 @@ impl SimRigSpec {
             "a fraction of the sample rate in (0, 0.5)",
         )?;
         let n = &d.noise_rms;
-        non_negative("daq.noise_rms.platform_acceleration", n.platform_acceleration)?;
+        non_negative(
+            "daq.noise_rms.platform_acceleration",
+            n.platform_acceleration,
+        )?;
         non_negative("daq.noise_rms.beam_acceleration", n.beam_acceleration)?;
         non_negative("daq.noise_rms.vibrometer", n.vibrometer)?;
         non_negative("daq.noise_rms.contact_voltage", n.contact_voltage)?;

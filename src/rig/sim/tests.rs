@@ -60,12 +60,14 @@ fn measure(rig: &mut SimRig, f_hz: f64, amp: f64, settle_s: f64, record_s: f64) 
     }
     let mut trace = TruthTrace::default();
     let mut platform = Vec::new();
-    let scale = rig.layout().channels[0].scale;
     for _ in 0..blocks(record_s) {
         let b = rig.next_block_traced(&mut trace);
-        platform.extend(b.channel(0).iter().map(|&c| rig.layout().channels[0].value(c)));
+        platform.extend(
+            b.channel(0)
+                .iter()
+                .map(|&c| rig.layout().channels[0].value(c)),
+        );
     }
-    let _ = scale;
     let w = 2.0 * std::f64::consts::PI * f_hz;
     let t0 = trace.time[0];
     let truth = demodulate(&trace.base_acceleration, 1.0 / fs, w, t0).unwrap();
@@ -82,9 +84,13 @@ fn shaker_alone_matches_the_electromechanical_frf() {
         let mut rig = SimRig::new(&rom, &spec, 1.0).unwrap();
         let amp = 0.05;
         let (truth, daq) = measure(&mut rig, f, amp, 1.5, 0.5);
-        let expected = amp * base_acceleration_frf(&spec.shaker, &[], 2.0 * std::f64::consts::PI * f).abs();
+        let expected =
+            amp * base_acceleration_frf(&spec.shaker, &[], 2.0 * std::f64::consts::PI * f).abs();
         let (et, ed) = (truth / expected - 1.0, daq / expected - 1.0);
-        assert!(et.abs() < 0.01, "{f} Hz: truth {truth} vs {expected} ({et:e})");
+        assert!(
+            et.abs() < 0.01,
+            "{f} Hz: truth {truth} vs {expected} ({et:e})"
+        );
         // The platform channel: filter gain (flat here), noise and quantisation on top.
         assert!(ed.abs() < 0.01, "{f} Hz: DAQ {daq} vs {expected} ({ed:e})");
         assert!(rig.faults().is_empty(), "{:?}", rig.faults());
@@ -108,13 +114,16 @@ fn one_attached_mode_gives_the_resonant_force_drop_of_the_frf() {
         let mut rig = SimRig::new(&rom, &spec, 1.0).unwrap();
         let amp = 0.05;
         let (truth, _) = measure(&mut rig, f, amp, 2.5, 0.5);
-        let expected =
-            amp * base_acceleration_frf(&spec.shaker, &[mode], 2.0 * std::f64::consts::PI * f).abs();
+        let expected = amp
+            * base_acceleration_frf(&spec.shaker, &[mode], 2.0 * std::f64::consts::PI * f).abs();
         let e = truth / expected - 1.0;
         assert!(e.abs() < 0.01, "{f} Hz: {truth} vs {expected} ({e:e})");
         measured.push(truth);
     }
-    assert!(measured[1] < measured[0] && measured[1] < measured[2], "{measured:?}");
+    assert!(
+        measured[1] < measured[0] && measured[1] < measured[2],
+        "{measured:?}"
+    );
 }
 
 #[test]
@@ -137,7 +146,9 @@ fn rejects_bad_setup_and_commands() {
 
     let mut no_sensor = rom.clone();
     no_sensor.outputs.remove(1);
-    let msg = SimRig::new(&no_sensor, &spec(4), 1.0).unwrap_err().to_string();
+    let msg = SimRig::new(&no_sensor, &spec(4), 1.0)
+        .unwrap_err()
+        .to_string();
     assert!(msg.contains("lower_mid"), "{msg}");
     assert!(SimRig::new(&rom, &spec(4), f64::NAN).is_err());
 
@@ -155,7 +166,10 @@ fn rejects_bad_setup_and_commands() {
         })
         .unwrap_err()
         .to_string();
-    assert!(msg.contains("platform_9") && msg.contains("platform_1"), "{msg}");
+    assert!(
+        msg.contains("platform_9") && msg.contains("platform_1"),
+        "{msg}"
+    );
     assert!(rig
         .schedule(InjectedFault::DaqStall { at_s: f64::NAN })
         .is_err());

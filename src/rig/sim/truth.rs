@@ -110,13 +110,17 @@ impl Truth {
     ) -> Result<Truth, SimRigError> {
         let mut index = [0; 4];
         for (slot, name) in index.iter_mut().zip(BEAM_SENSORS) {
-            *slot = rom.outputs.iter().position(|o| o.name == name).ok_or_else(|| {
-                SimRigError::Rom(format!(
-                    "the truth ROM has no output {name:?} (outputs: {:?}); the beam \
+            *slot = rom
+                .outputs
+                .iter()
+                .position(|o| o.name == name)
+                .ok_or_else(|| {
+                    SimRigError::Rom(format!(
+                        "the truth ROM has no output {name:?} (outputs: {:?}); the beam \
                      accelerometers and the vibrometer read the outputs {BEAM_SENSORS:?}",
-                    rom.outputs.iter().map(|o| &o.name).collect::<Vec<_>>()
-                ))
-            })?;
+                        rom.outputs.iter().map(|o| &o.name).collect::<Vec<_>>()
+                    ))
+                })?;
         }
         // A provisional step far inside any stability limit lets the integrator check the ROM
         // and compute its limits; the real step follows from them.
@@ -203,23 +207,25 @@ impl Truth {
         }
         let lambda = self.state.lambda();
         for &k in self.state.closed_pairs() {
-            for r in 3 * k..3 * k + 3 {
-                modal += self.p[r] * lambda[r];
+            let rows = 3 * k..3 * k + 3;
+            for (p, l) in self.p[rows.clone()].iter().zip(&lambda[rows]) {
+                modal += p * l;
             }
         }
         let v_prev = self.shaker.velocity_half();
         let x_b = self.shaker.displacement();
         let current = self.shaker.current();
-        let a_b = (self.shaker.elastic_and_coil_force()
-            - self.shaker.damping() * v_prev
-            - modal)
+        let a_b = (self.shaker.elastic_and_coil_force() - self.shaker.damping() * v_prev - modal)
             * self.inv_mass;
         if !a_b.is_finite() {
             return self.fail(time, "the base acceleration");
         }
 
         let before = self.capture.velocity;
-        match self.integrator.step(&mut self.state, a_b, &mut self.capture) {
+        match self
+            .integrator
+            .step(&mut self.state, a_b, &mut self.capture)
+        {
             Ok(report) => {
                 self.solver_failures += report.counters.max_iterations + report.counters.diverged;
                 if report.stop.is_some() {

@@ -195,7 +195,7 @@ impl SimRig {
     /// The simulated rig with `truth` as the real structure, at rest, drive off, clearance
     /// `clearance_m` (m) between the probes. Checks the spec, the ROM (outputs named by the
     /// beam sensors), the moving mass against the beams' modal mass and the truth step
-    /// against the ROM's open stability limit.
+    /// against the open stability limit of the ROM with the shaker attached.
     pub fn new(truth: &Rom, spec: &SimRigSpec, clearance_m: f64) -> Result<SimRig, SimRigError> {
         spec.validate()?;
         if !clearance_m.is_finite() {
@@ -213,8 +213,9 @@ impl SimRig {
             if !(dt < limits.dt_max_open()) {
                 return Err(SimRigError::Spec(format!(
                     "truth.oversampling = {oversampling}: the truth step 1 / ({fs} Hz x \
-                     {oversampling}) = {dt:.4e} s is beyond the truth ROM's open stability \
-                     limit {:.4e} s; use at least {} or leave it out (automatic)",
+                     {oversampling}) = {dt:.4e} s is beyond the open stability limit of the \
+                     truth ROM with the shaker attached, {:.4e} s; use at least {} or leave \
+                     it out (automatic)",
                     limits.dt_max_open(),
                     (1.0 / (fs * limits.dt_max_open())).floor() + 1.0
                 )));

@@ -220,11 +220,12 @@ pub struct TruthSpec {
     /// everything the "rig" does. Default 400.
     pub cutoff_ratio: f64,
     /// Truth steps per DAQ sample (>= 1), overriding the automatic choice. The truth step is
-    /// `dt = 1 / (sample_rate * oversampling)` and must stay below the truth ROM's open
-    /// stability limit. Default: none (automatic).
+    /// `dt = 1 / (sample_rate * oversampling)` and must stay below the open stability limit
+    /// of the truth ROM with the base attached. Default: none (automatic).
     pub oversampling: Option<u32>,
-    /// Automatic choice: the largest fraction of the open stability limit
-    /// `dt_max_open = 2 / max(Omega)` the truth step may use, in (0, 1). Default 0.5.
+    /// Automatic choice: the largest fraction of the open stability limit the truth step may
+    /// use, in (0, 1) (`dt_max_open = 2 / w_max`, `w_max` the highest frequency of the truth
+    /// ROM with the base attached, about max(Omega)). Default 0.5.
     pub stability_margin: f64,
     /// Automatic choice: at least this many truth steps per 1FU period (> 0). Default 1000
     /// (the reference's resolution).

@@ -251,3 +251,54 @@ fn drive_saturation_clips_and_latches() {
     assert_eq!(rig.faults(), &[RigFault::DriveSaturated { limit_v: 4.0 }]);
     assert_eq!(rig.truth().amplifier_limit_v, 4.0);
 }
+
+#[test]
+fn a_non_finite_truth_is_reported_not_a_panic() {
+    let rom = stub_rom(2000.0, 0.01, 0.0);
+    let mut rig = SimRig::new(&rom, &spec(4), 1.0).unwrap();
+    rig.set_drive(DriveCommand {
+        frequency_hz: 40.0,
+        amplitude_v: 0.1,
+        ramp_s: 0.0,
+    })
+    .unwrap();
+    rig.next_block();
+    rig.truth.poison();
+    for _ in 0..3 {
+        let b = rig.next_block();
+        b.check(rig.layout()).unwrap();
+    }
+    assert!(rig.truth().failed);
+    assert_eq!(rig.faults().len(), 1, "{:?}", rig.faults());
+    match &rig.faults()[0] {
+        RigFault::Device(msg) => assert!(msg.contains("non-finite"), "{msg}"),
+        other => panic!("{other:?}"),
+    }
+}
+
+#[test]
+fn a_stiff_base_coupling_gets_a_stable_step() {
+    // Moving mass barely above the mode's beta^2 = 0.25 kg: the base's free mass is 0.01 kg,
+    // and the coil's back-EMF damping and electrical stiffness on it are far stiffer than the
+    // mode.
+    let rom = stub_rom(55.0, 0.01, 0.5);
+    let mut s = spec(1);
+    s.shaker.moving_mass = 0.26;
+    let msg = SimRig::new(&rom, &s, 1.0).unwrap_err().to_string();
+    assert!(msg.contains("shaker attached"), "{msg}");
+    s.truth.oversampling = None;
+    let mut rig = SimRig::new(&rom, &s, 1.0).unwrap();
+    assert!(rig.oversampling() > 1);
+    rig.set_drive(DriveCommand {
+        frequency_hz: 50.0,
+        amplitude_v: 0.01,
+        ramp_s: 0.0,
+    })
+    .unwrap();
+    for _ in 0..40 {
+        rig.next_block();
+    }
+    let t = rig.truth();
+    assert!(!t.failed && t.base_acceleration.is_finite(), "{t:?}");
+    assert!(rig.faults().is_empty(), "{:?}", rig.faults());
+}

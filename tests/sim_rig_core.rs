@@ -182,7 +182,9 @@ fn impacts_at_the_high_level_drive_the_contact_voltage() {
 
     // The contact voltage: at the open level (5 V) until the first impact, low (below the
     // midpoint) only within a short lag (RC 50 us, anti-alias filter ~0.2 ms) after truth
-    // steps with closed pairs, and low after every contact lasting at least 3 samples.
+    // steps with closed pairs, and low after every contact closed for at least 3 samples' worth
+    // of truth steps (0.29 ms, about 6 RC time constants).
+    let os = rig.oversampling();
     let mid = 2.5;
     assert!(contact[..first].iter().all(|&v| (v - 5.0).abs() < 0.05));
     let lag = 6;
@@ -202,12 +204,16 @@ fn impacts_at_the_high_level_drive_the_contact_voltage() {
             let end = (n..closed.len())
                 .find(|&k| closed[k] == 0)
                 .unwrap_or(closed.len());
-            if end - n >= 3 {
+            let closed_time = closed[n..end].iter().sum::<u32>();
+            if closed_time >= 3 * os {
                 long_contacts += 1;
                 let to = (end + lag).min(contact.len());
                 assert!(
                     contact[n..to].iter().any(|&v| v < mid),
-                    "contact over samples {n}..{end} not seen on the contact voltage"
+                    "contact over samples {n}..{end} (closed truth steps {:?}) not seen on the \
+                     contact voltage {:?}",
+                    &closed[n..end],
+                    &contact[n..to]
                 );
             }
             n = end;
@@ -215,7 +221,7 @@ fn impacts_at_the_high_level_drive_the_contact_voltage() {
             n += 1;
         }
     }
-    println!("{long_contacts} contacts of >= 3 samples");
+    println!("{long_contacts} contacts closed for >= 3 samples");
 
     // Impacts load the beam accelerometers hard, but within their range by default.
     for name in ["lower_tip", "upper_tip", "lower_mid", "upper_mid"] {

@@ -108,8 +108,8 @@ pub struct Truth {
 // mass matrix (it is 1 off the plane of the base and beta). The coil's resistive back-EMF acts
 // on the base as a damper `Bl^2 / R` taken from the previous half step, stable for
 // `dt < 2 mu_min R / Bl^2`, i.e. like a frequency `Bl^2 / (R mu_min)`. With the default
-// shaker (M = 30 kg, |beta|^2 ~ 0.3 kg) mu_min ~ 0.99 and both coil terms are far below the
-// modes, so the ROM's own bound moves by ~0.5 %; a moving mass close to sum(beta_i^2) makes
+// shaker (M = 50 kg, |beta|^2 ~ 0.74 kg) mu_min ~ 0.985 and both coil terms are far below
+// the modes, so the ROM's own bound moves by ~0.8 %; a moving mass close to sum(beta_i^2) makes
 // the explicit base coupling stiff, and this keeps the step stable.
 fn coupled_limits(
     limits: &StabilityLimits,

@@ -305,3 +305,49 @@ fn a_stiff_base_coupling_gets_a_stable_step() {
     assert!(!t.failed && t.base_acceleration.is_finite(), "{t:?}");
     assert!(rig.faults().is_empty(), "{:?}", rig.faults());
 }
+
+#[test]
+fn adc_clipping_latches_over_range_once_per_channel() {
+    let rom = stub_rom(2000.0, 0.01, 0.0);
+    let mut s = spec(4);
+    s.daq.full_scale.platform_acceleration = 0.05;
+    let mut rig = SimRig::new(&rom, &s, 1.0).unwrap();
+    rig.set_drive(DriveCommand {
+        frequency_hz: 40.0,
+        amplitude_v: 0.1,
+        ramp_s: 0.0,
+    })
+    .unwrap();
+    for _ in 0..20 {
+        let b = rig.next_block();
+        b.check(rig.layout()).unwrap();
+    }
+    let names: Vec<&str> = rig
+        .faults()
+        .iter()
+        .map(|f| match f {
+            RigFault::OverRange { channel } => channel.as_str(),
+            other => panic!("{other:?}"),
+        })
+        .collect();
+    assert_eq!(names, ["platform_1", "platform_2", "platform_3"]);
+}
+
+#[test]
+fn injected_faults_read_from_json() {
+    let f: InjectedFault =
+        serde_json::from_str(r#"{"kind": "dead_channel", "at_s": 1.5, "channel": "upper_tip"}"#)
+            .unwrap();
+    assert_eq!(
+        f,
+        InjectedFault::DeadChannel {
+            at_s: 1.5,
+            channel: "upper_tip".into()
+        }
+    );
+    assert_eq!(f.at_s(), 1.5);
+    assert!(serde_json::from_str::<InjectedFault>(
+        r#"{"kind": "daq_stall", "at_s": 1.0, "extra": 1}"#
+    )
+    .is_err());
+}

@@ -381,7 +381,7 @@ fn speed() {
         ("open (no contact)", APART, 0.05, 5.0),
         ("high level, impacts", 2.78e-3 * L, high, 5.0),
         (
-            "clearance 0: contact over half of every period",
+            "clearance 0 (probes touching at rest), 0.05 V",
             0.0,
             0.05,
             0.5,

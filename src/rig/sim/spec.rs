@@ -9,7 +9,7 @@
 //! moving on a soft suspension (5.7 Hz), a low-impedance coil (0.8 ohm, 1 mH, 40 N/A) behind a
 //! voltage amplifier, and a 24-bit DAQ at 10240 Hz. With the default ROM (sum(beta_i^2) =
 //! 0.74 kg, 1FU: beta^2 = 0.21 kg at 0.18 % damping) the linear base acceleration at a
-//! constant drive dips to about 0.67 of its value at 0.9 / 1.1 omega_1FU (30 kg: 0.39,
+//! constant drive dips to about 0.6 of its value at 0.9 / 1.1 omega_1FU (30 kg: 0.39,
 //! 100 kg: 0.84); under impacts the tips cannot build up the resonance and the dip mostly
 //! disappears.
 

@@ -18,7 +18,9 @@ impl DriveGenerator {
     /// Checks a command's ranges: frequency finite, > 0 and below `nyquist_hz`; amplitude and
     /// ramp finite and >= 0. Returns a description of the first problem.
     pub fn check(cmd: &DriveCommand, nyquist_hz: f64) -> Result<(), String> {
-        if !(cmd.frequency_hz.is_finite() && cmd.frequency_hz > 0.0 && cmd.frequency_hz < nyquist_hz)
+        if !(cmd.frequency_hz.is_finite()
+            && cmd.frequency_hz > 0.0
+            && cmd.frequency_hz < nyquist_hz)
         {
             return Err(format!(
                 "frequency_hz = {}: expected > 0 and below the DAQ's Nyquist frequency {} Hz",
@@ -137,10 +139,7 @@ mod tests {
                 amplitude_v: f64::NAN,
                 ..ok
             },
-            DriveCommand {
-                ramp_s: -1.0,
-                ..ok
-            },
+            DriveCommand { ramp_s: -1.0, ..ok },
         ] {
             assert!(DriveGenerator::check(&bad, 5120.0).is_err(), "{bad:?}");
         }

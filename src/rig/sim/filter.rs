@@ -54,8 +54,14 @@ impl Biquad {
         // H(z) = (b0 + b1 z^-1 + b2 z^-2) / (1 + a1 z^-1 + a2 z^-2), z^-1 = e^{-i theta}.
         let (c1, s1) = (theta.cos(), -theta.sin());
         let (c2, s2) = ((2.0 * theta).cos(), -(2.0 * theta).sin());
-        let (nr, ni) = (self.b0 + self.b1 * c1 + self.b2 * c2, self.b1 * s1 + self.b2 * s2);
-        let (dr, di) = (1.0 + self.a1 * c1 + self.a2 * c2, self.a1 * s1 + self.a2 * s2);
+        let (nr, ni) = (
+            self.b0 + self.b1 * c1 + self.b2 * c2,
+            self.b1 * s1 + self.b2 * s2,
+        );
+        let (dr, di) = (
+            1.0 + self.a1 * c1 + self.a2 * c2,
+            self.a1 * s1 + self.a2 * s2,
+        );
         let d2 = dr * dr + di * di;
         ((nr * dr + ni * di) / d2, (ni * dr - nr * di) / d2)
     }
@@ -124,7 +130,7 @@ mod tests {
         let fs = OS * FS_DAQ;
         let mut flt = filter();
         let n = 200_000;
-        let (mut sc, mut ss, mut cc, mut cs, mut sn) = (0.0, 0.0, 0.0, 0.0, 0.0);
+        let (mut sc, mut ss, mut cc, mut cs) = (0.0, 0.0, 0.0, 0.0);
         for k in 0..n {
             let ph = 2.0 * PI * f * k as f64 / fs;
             let y = flt.push(ph.sin());
@@ -133,10 +139,8 @@ mod tests {
                 ss += y * ph.sin();
                 cc += ph.cos() * ph.cos();
                 cs += ph.sin() * ph.sin();
-                sn += 1.0;
             }
         }
-        let _ = sn;
         ((sc / cc).powi(2) + (ss / cs).powi(2)).sqrt()
     }
 

@@ -12,6 +12,10 @@
 //! Deterministic: the same ROM, spec, clearance, commands and injected faults give
 //! bit-identical blocks. No clock, no I/O; the per-step loop does not allocate.
 
+// NOTE: validation uses negated comparisons such as `!(dt < limit)` on purpose: they reject
+// NaN together with out-of-range values.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 pub mod daq;
 pub mod drive;
 pub mod filter;
@@ -21,7 +25,9 @@ pub mod spec;
 pub mod truth;
 
 pub use shaker::{base_acceleration_frf, BaseMode, Complex};
-pub use spec::{ChannelNoise, ChannelRanges, ContactCircuitSpec, DaqSpec, ShakerSpec, SimRigSpec, TruthSpec};
+pub use spec::{
+    ChannelNoise, ChannelRanges, ContactCircuitSpec, DaqSpec, ShakerSpec, SimRigSpec, TruthSpec,
+};
 
 use serde::{Deserialize, Serialize};
 
@@ -189,7 +195,7 @@ impl SimRig {
     /// The simulated rig with `truth` as the real structure, at rest, drive off, clearance
     /// `clearance_m` (m) between the probes. Checks the spec, the ROM (outputs named by the
     /// beam sensors), the moving mass against the beams' modal mass and the truth step
-    /// against the ROM's open stability limit.
+    /// against the open stability limit of the ROM with the shaker attached.
     pub fn new(truth: &Rom, spec: &SimRigSpec, clearance_m: f64) -> Result<SimRig, SimRigError> {
         spec.validate()?;
         if !clearance_m.is_finite() {
@@ -200,15 +206,16 @@ impl SimRig {
         let fs = spec.daq.sample_rate;
         let mut oversampling = 1;
         let truth_model = Truth::new(truth, &spec.shaker, clearance_m, |limits| {
-            oversampling =
-                spec.truth
-                    .oversampling_for(fs, limits.dt_max_open(), limits.omega_ref);
+            oversampling = spec
+                .truth
+                .oversampling_for(fs, limits.dt_max_open(), limits.omega_ref);
             let dt = 1.0 / (fs * f64::from(oversampling));
             if !(dt < limits.dt_max_open()) {
                 return Err(SimRigError::Spec(format!(
                     "truth.oversampling = {oversampling}: the truth step 1 / ({fs} Hz x \
-                     {oversampling}) = {dt:.4e} s is beyond the truth ROM's open stability \
-                     limit {:.4e} s; use at least {} or leave it out (automatic)",
+                     {oversampling}) = {dt:.4e} s is beyond the open stability limit of the \
+                     truth ROM with the shaker attached, {:.4e} s; use at least {} or leave \
+                     it out (automatic)",
                     limits.dt_max_open(),
                     (1.0 / (fs * limits.dt_max_open())).floor() + 1.0
                 )));

@@ -101,7 +101,11 @@ mod tests {
         }
         let expected = circuit.closed_voltage
             + (circuit.open_voltage - circuit.closed_voltage) * (-1.0f64).exp();
-        assert!((out[8] - expected).abs() < 1e-12, "{} vs {expected}", out[8]);
+        assert!(
+            (out[8] - expected).abs() < 1e-12,
+            "{} vs {expected}",
+            out[8]
+        );
     }
 
     #[test]

@@ -113,6 +113,12 @@ impl Shaker {
         self.current
     }
 
+    /// Makes the state non-finite (tests of the failure path).
+    #[cfg(test)]
+    pub(crate) fn poison(&mut self) {
+        self.x = f64::NAN;
+    }
+
     /// Whether the state is finite.
     pub fn is_finite(&self) -> bool {
         self.x.is_finite() && self.v_half.is_finite() && self.current.is_finite()

@@ -60,12 +60,14 @@ fn measure(rig: &mut SimRig, f_hz: f64, amp: f64, settle_s: f64, record_s: f64) 
     }
     let mut trace = TruthTrace::default();
     let mut platform = Vec::new();
-    let scale = rig.layout().channels[0].scale;
     for _ in 0..blocks(record_s) {
         let b = rig.next_block_traced(&mut trace);
-        platform.extend(b.channel(0).iter().map(|&c| rig.layout().channels[0].value(c)));
+        platform.extend(
+            b.channel(0)
+                .iter()
+                .map(|&c| rig.layout().channels[0].value(c)),
+        );
     }
-    let _ = scale;
     let w = 2.0 * std::f64::consts::PI * f_hz;
     let t0 = trace.time[0];
     let truth = demodulate(&trace.base_acceleration, 1.0 / fs, w, t0).unwrap();
@@ -82,9 +84,13 @@ fn shaker_alone_matches_the_electromechanical_frf() {
         let mut rig = SimRig::new(&rom, &spec, 1.0).unwrap();
         let amp = 0.05;
         let (truth, daq) = measure(&mut rig, f, amp, 1.5, 0.5);
-        let expected = amp * base_acceleration_frf(&spec.shaker, &[], 2.0 * std::f64::consts::PI * f).abs();
+        let expected =
+            amp * base_acceleration_frf(&spec.shaker, &[], 2.0 * std::f64::consts::PI * f).abs();
         let (et, ed) = (truth / expected - 1.0, daq / expected - 1.0);
-        assert!(et.abs() < 0.01, "{f} Hz: truth {truth} vs {expected} ({et:e})");
+        assert!(
+            et.abs() < 0.01,
+            "{f} Hz: truth {truth} vs {expected} ({et:e})"
+        );
         // The platform channel: filter gain (flat here), noise and quantisation on top.
         assert!(ed.abs() < 0.01, "{f} Hz: DAQ {daq} vs {expected} ({ed:e})");
         assert!(rig.faults().is_empty(), "{:?}", rig.faults());
@@ -96,7 +102,10 @@ fn one_attached_mode_gives_the_resonant_force_drop_of_the_frf() {
     // A heavy, lightly damped mode at 55 Hz: the base sees its apparent mass.
     let (f1, zeta, beta) = (55.0, 0.01, 0.5);
     let rom = stub_rom(f1, zeta, beta);
-    let spec = spec(4);
+    // A light table, so the mode's apparent mass (beta^2 / (2 zeta) = 12.5 kg at resonance)
+    // shows clearly.
+    let mut spec = spec(4);
+    spec.shaker.moving_mass = 5.0;
     let mode = BaseMode {
         omega: 2.0 * std::f64::consts::PI * f1,
         zeta,
@@ -108,13 +117,16 @@ fn one_attached_mode_gives_the_resonant_force_drop_of_the_frf() {
         let mut rig = SimRig::new(&rom, &spec, 1.0).unwrap();
         let amp = 0.05;
         let (truth, _) = measure(&mut rig, f, amp, 2.5, 0.5);
-        let expected =
-            amp * base_acceleration_frf(&spec.shaker, &[mode], 2.0 * std::f64::consts::PI * f).abs();
+        let expected = amp
+            * base_acceleration_frf(&spec.shaker, &[mode], 2.0 * std::f64::consts::PI * f).abs();
         let e = truth / expected - 1.0;
         assert!(e.abs() < 0.01, "{f} Hz: {truth} vs {expected} ({e:e})");
         measured.push(truth);
     }
-    assert!(measured[1] < measured[0] && measured[1] < measured[2], "{measured:?}");
+    assert!(
+        measured[1] < measured[0] && measured[1] < measured[2],
+        "{measured:?}"
+    );
 }
 
 #[test]
@@ -137,7 +149,9 @@ fn rejects_bad_setup_and_commands() {
 
     let mut no_sensor = rom.clone();
     no_sensor.outputs.remove(1);
-    let msg = SimRig::new(&no_sensor, &spec(4), 1.0).unwrap_err().to_string();
+    let msg = SimRig::new(&no_sensor, &spec(4), 1.0)
+        .unwrap_err()
+        .to_string();
     assert!(msg.contains("lower_mid"), "{msg}");
     assert!(SimRig::new(&rom, &spec(4), f64::NAN).is_err());
 
@@ -155,7 +169,10 @@ fn rejects_bad_setup_and_commands() {
         })
         .unwrap_err()
         .to_string();
-    assert!(msg.contains("platform_9") && msg.contains("platform_1"), "{msg}");
+    assert!(
+        msg.contains("platform_9") && msg.contains("platform_1"),
+        "{msg}"
+    );
     assert!(rig
         .schedule(InjectedFault::DaqStall { at_s: f64::NAN })
         .is_err());
@@ -236,4 +253,101 @@ fn drive_saturation_clips_and_latches() {
     assert!(peak_after < 4.5 && peak_after > 3.9, "{peak_after}");
     assert_eq!(rig.faults(), &[RigFault::DriveSaturated { limit_v: 4.0 }]);
     assert_eq!(rig.truth().amplifier_limit_v, 4.0);
+}
+
+#[test]
+fn a_non_finite_truth_is_reported_not_a_panic() {
+    let rom = stub_rom(2000.0, 0.01, 0.0);
+    let mut rig = SimRig::new(&rom, &spec(4), 1.0).unwrap();
+    rig.set_drive(DriveCommand {
+        frequency_hz: 40.0,
+        amplitude_v: 0.1,
+        ramp_s: 0.0,
+    })
+    .unwrap();
+    rig.next_block();
+    rig.truth.poison();
+    for _ in 0..3 {
+        let b = rig.next_block();
+        b.check(rig.layout()).unwrap();
+    }
+    assert!(rig.truth().failed);
+    assert_eq!(rig.faults().len(), 1, "{:?}", rig.faults());
+    match &rig.faults()[0] {
+        RigFault::Device(msg) => assert!(msg.contains("non-finite"), "{msg}"),
+        other => panic!("{other:?}"),
+    }
+}
+
+#[test]
+fn a_stiff_base_coupling_gets_a_stable_step() {
+    // Moving mass barely above the mode's beta^2 = 0.25 kg: the base's free mass is 0.01 kg,
+    // and the coil's back-EMF damping and electrical stiffness on it are far stiffer than the
+    // mode.
+    let rom = stub_rom(55.0, 0.01, 0.5);
+    let mut s = spec(1);
+    s.shaker.moving_mass = 0.26;
+    let msg = SimRig::new(&rom, &s, 1.0).unwrap_err().to_string();
+    assert!(msg.contains("shaker attached"), "{msg}");
+    s.truth.oversampling = None;
+    let mut rig = SimRig::new(&rom, &s, 1.0).unwrap();
+    assert!(rig.oversampling() > 1);
+    rig.set_drive(DriveCommand {
+        frequency_hz: 50.0,
+        amplitude_v: 0.01,
+        ramp_s: 0.0,
+    })
+    .unwrap();
+    for _ in 0..40 {
+        rig.next_block();
+    }
+    let t = rig.truth();
+    assert!(!t.failed && t.base_acceleration.is_finite(), "{t:?}");
+    assert!(rig.faults().is_empty(), "{:?}", rig.faults());
+}
+
+#[test]
+fn adc_clipping_latches_over_range_once_per_channel() {
+    let rom = stub_rom(2000.0, 0.01, 0.0);
+    let mut s = spec(4);
+    s.daq.full_scale.platform_acceleration = 0.05;
+    let mut rig = SimRig::new(&rom, &s, 1.0).unwrap();
+    rig.set_drive(DriveCommand {
+        frequency_hz: 40.0,
+        amplitude_v: 0.1,
+        ramp_s: 0.0,
+    })
+    .unwrap();
+    for _ in 0..20 {
+        let b = rig.next_block();
+        b.check(rig.layout()).unwrap();
+    }
+    let names: Vec<&str> = rig
+        .faults()
+        .iter()
+        .map(|f| match f {
+            RigFault::OverRange { channel } => channel.as_str(),
+            other => panic!("{other:?}"),
+        })
+        .collect();
+    assert_eq!(names, ["platform_1", "platform_2", "platform_3"]);
+}
+
+#[test]
+fn injected_faults_read_from_json() {
+    let f: InjectedFault =
+        serde_json::from_str(r#"{"kind": "dead_channel", "at_s": 1.5, "channel": "upper_tip"}"#)
+            .unwrap();
+    assert_eq!(
+        f,
+        InjectedFault::DeadChannel {
+            at_s: 1.5,
+            channel: "upper_tip".into()
+        }
+    );
+    assert_eq!(f.at_s(), 1.5);
+    assert!(serde_json::from_str::<InjectedFault>(
+        r#"{"kind": "daq_stall", "at_s": 1.0, "extra": 1}"#
+    )
+    .is_err());
 }

@@ -98,6 +98,38 @@ pub struct Truth {
     solver_failures: u64,
 }
 
+/// The ROM's stability limits with the base attached: the open bound becomes a bound on the
+/// highest frequency of the coupled base-coil-modes system.
+///
+// NOTE: the mechanical part has the mass matrix `[[M, beta^T], [beta, I]]` and the stiffness
+// `diag(k + Bl^2 / L, Omega^2)` (at high frequency the coil is an electrical spring: with
+// `L di/dt = -Bl v`, `F = Bl i = -(Bl^2 / L) x`); its highest frequency satisfies
+// `w^2 <= max(k + Bl^2 / L, max Omega^2) / mu_min`, `mu_min` the smallest eigenvalue of the
+// mass matrix (it is 1 off the plane of the base and beta). The coil's resistive back-EMF acts
+// on the base as a damper `Bl^2 / R` taken from the previous half step, stable for
+// `dt < 2 mu_min R / Bl^2`, i.e. like a frequency `Bl^2 / (R mu_min)`. With the default
+// shaker (M = 50 kg, |beta|^2 ~ 0.74 kg) mu_min ~ 0.985 and both coil terms are far below
+// the modes, so the ROM's own bound moves by ~0.8 %; a moving mass close to sum(beta_i^2) makes
+// the explicit base coupling stiff, and this keeps the step stable.
+fn coupled_limits(
+    limits: &StabilityLimits,
+    shaker: &ShakerSpec,
+    modal_mass: f64,
+) -> StabilityLimits {
+    let m = shaker.moving_mass;
+    // Smallest eigenvalue of [[M, |beta|], [|beta|, 1]] as det / largest (no cancellation).
+    let mu_max = 0.5 * (m + 1.0) + (0.25 * (m - 1.0) * (m - 1.0) + modal_mass).sqrt();
+    let mu_min = (m - modal_mass) / mu_max;
+    let bl2 = shaker.force_constant * shaker.force_constant;
+    let k = shaker.suspension_stiffness + bl2 / shaker.coil_inductance;
+    let w_elastic = (k.max(limits.omega_open * limits.omega_open) / mu_min).sqrt();
+    let w_damping = bl2 / (shaker.coil_resistance * mu_min);
+    StabilityLimits {
+        omega_open: w_elastic.max(w_damping).max(limits.omega_open),
+        ..*limits
+    }
+}
+
 impl Truth {
     /// The truth for ROM `rom`, shaker `shaker` and clearance `clearance_m` (m), at rest. The
     /// truth step (s) is chosen by `choose_dt` from the ROM's stability limits (the ROM is
@@ -110,13 +142,17 @@ impl Truth {
     ) -> Result<Truth, SimRigError> {
         let mut index = [0; 4];
         for (slot, name) in index.iter_mut().zip(BEAM_SENSORS) {
-            *slot = rom.outputs.iter().position(|o| o.name == name).ok_or_else(|| {
-                SimRigError::Rom(format!(
-                    "the truth ROM has no output {name:?} (outputs: {:?}); the beam \
+            *slot = rom
+                .outputs
+                .iter()
+                .position(|o| o.name == name)
+                .ok_or_else(|| {
+                    SimRigError::Rom(format!(
+                        "the truth ROM has no output {name:?} (outputs: {:?}); the beam \
                      accelerometers and the vibrometer read the outputs {BEAM_SENSORS:?}",
-                    rom.outputs.iter().map(|o| &o.name).collect::<Vec<_>>()
-                ))
-            })?;
+                        rom.outputs.iter().map(|o| &o.name).collect::<Vec<_>>()
+                    ))
+                })?;
         }
         // A provisional step far inside any stability limit lets the integrator check the ROM
         // and compute its limits; the real step follows from them.
@@ -125,7 +161,17 @@ impl Truth {
             ..IntegratorParameters::default()
         };
         let mut integrator = Integrator::new(rom, params)?;
-        let dt = choose_dt(integrator.limits())?;
+        let modal_mass: f64 = rom.beta.iter().map(|b| b * b).sum();
+        if !(shaker.moving_mass > modal_mass) {
+            return Err(SimRigError::Spec(format!(
+                "shaker.moving_mass = {}: expected more than the beams' modal mass \
+                 sum(beta_i^2) = {modal_mass:.4} kg of the truth ROM (the moving mass includes \
+                 the beams)",
+                shaker.moving_mass
+            )));
+        }
+        let limits = coupled_limits(integrator.limits(), shaker, modal_mass);
+        let dt = choose_dt(&limits)?;
         integrator.set_time_step(TimeStep::Dt { dt })?;
         integrator.set_clearance(clearance_m)?;
         let state = integrator.state_at_rest();
@@ -137,16 +183,13 @@ impl Truth {
         let alpha_beta: Vec<f64> = (0..m)
             .map(|i| rom.beta[i] / (1.0 + 0.5 * damping[i] * dt))
             .collect();
-        let modal_mass: f64 = alpha_beta.iter().zip(&rom.beta).map(|(a, b)| a * b).sum();
-        let free_mass = shaker.moving_mass - modal_mass;
-        if !(free_mass > 0.0) {
-            return Err(SimRigError::Spec(format!(
-                "shaker.moving_mass = {}: expected more than the beams' modal mass \
-                 sum(beta_i^2) = {modal_mass:.4} kg of the truth ROM (the moving mass includes \
-                 the beams)",
-                shaker.moving_mass
-            )));
-        }
+        // alpha_i < 1: at least the free mass checked above.
+        let free_mass = shaker.moving_mass
+            - alpha_beta
+                .iter()
+                .zip(&rom.beta)
+                .map(|(a, b)| a * b)
+                .sum::<f64>();
         let nb = 3 * rom.n_pairs();
         let p: Vec<f64> = (0..nb)
             .map(|r| (0..m).map(|i| rom.phi_g[(r, i)] * alpha_beta[i]).sum())
@@ -203,23 +246,25 @@ impl Truth {
         }
         let lambda = self.state.lambda();
         for &k in self.state.closed_pairs() {
-            for r in 3 * k..3 * k + 3 {
-                modal += self.p[r] * lambda[r];
+            let rows = 3 * k..3 * k + 3;
+            for (p, l) in self.p[rows.clone()].iter().zip(&lambda[rows]) {
+                modal += p * l;
             }
         }
         let v_prev = self.shaker.velocity_half();
         let x_b = self.shaker.displacement();
         let current = self.shaker.current();
-        let a_b = (self.shaker.elastic_and_coil_force()
-            - self.shaker.damping() * v_prev
-            - modal)
+        let a_b = (self.shaker.elastic_and_coil_force() - self.shaker.damping() * v_prev - modal)
             * self.inv_mass;
         if !a_b.is_finite() {
             return self.fail(time, "the base acceleration");
         }
 
         let before = self.capture.velocity;
-        match self.integrator.step(&mut self.state, a_b, &mut self.capture) {
+        match self
+            .integrator
+            .step(&mut self.state, a_b, &mut self.capture)
+        {
             Ok(report) => {
                 self.solver_failures += report.counters.max_iterations + report.counters.diverged;
                 if report.stop.is_some() {
@@ -304,6 +349,12 @@ impl Truth {
     /// Lowers the amplifier's output limit, V.
     pub fn set_amplifier_limit(&mut self, limit_v: f64) {
         self.shaker.set_limit_v(limit_v);
+    }
+
+    /// Makes the shaker state non-finite (tests of the failure path).
+    #[cfg(test)]
+    pub(crate) fn poison(&mut self) {
+        self.shaker.poison();
     }
 
     /// Pairs closed in the last step.

@@ -8,12 +8,14 @@ use serde::{Deserialize, Serialize};
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct ControlSpec {
-    /// Proportional gain on the log-amplitude error `ln(target / measured)`, -. Default 0.3.
+    /// Proportional gain on the log-amplitude error `ln(target / measured)`, -. Default 0.05.
     pub kp: f64,
-    /// Integral gain on the log-amplitude error, per excitation period, -. Default 0.25.
+    /// Integral gain on the log-amplitude error, per excitation period, -. Default 0.08.
     pub ki: f64,
     /// Periods the fundamental is demodulated over for each control update (a sliding window
-    /// of whole periods), -. Default 2.
+    /// of whole periods), -. Default 8: long enough to average out the beat of the beams'
+    /// free transients against the drive in the base reaction (the resonant force drop makes
+    /// the base motion beat by +-15 % after a change), short enough for the loop.
     pub window_periods: u32,
     /// Largest change of the drive amplitude per control update, as a ratio (>= 1), -.
     /// Default 1.5.
@@ -21,12 +23,13 @@ pub struct ControlSpec {
     /// Drive amplitude that the first step of a test starts from, V (amplifier input);
     /// 0 = estimate from the shaker's static gain. Default 0.
     pub initial_drive_v: f64,
-    /// Settling: the control error must stay within this relative tolerance, -. Default 0.005.
+    /// Settling: the mean control error over the settle window must be within this relative
+    /// tolerance, -. Default 0.01.
     pub settle_tolerance: f64,
     /// Settling: the response envelope (RMS of the vibrometer over `settle_window_periods`)
-    /// may change by at most this relative amount between consecutive windows, -. Default 0.1.
+    /// may change by at most this relative amount between consecutive windows, -. Default 0.15.
     pub envelope_tolerance: f64,
-    /// Settling: window of the control-error and envelope checks, periods. Default 10.
+    /// Settling: window of the control-error and envelope checks, periods. Default 25.
     pub settle_window_periods: u32,
     /// Settling gives up after this multiple of the plan's settle periods and records anyway
     /// (the step is marked not settled), -. Default 4.
@@ -38,14 +41,14 @@ pub struct ControlSpec {
 impl Default for ControlSpec {
     fn default() -> Self {
         ControlSpec {
-            kp: 0.3,
-            ki: 0.25,
-            window_periods: 2,
+            kp: 0.05,
+            ki: 0.08,
+            window_periods: 8,
             max_step_ratio: 1.5,
             initial_drive_v: 0.0,
-            settle_tolerance: 0.005,
-            envelope_tolerance: 0.1,
-            settle_window_periods: 10,
+            settle_tolerance: 0.01,
+            envelope_tolerance: 0.15,
+            settle_window_periods: 25,
             max_settle_factor: 4.0,
             contact_threshold_v: 2.5,
         }

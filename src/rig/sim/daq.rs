@@ -2,7 +2,8 @@
 //! channel, decimation to the DAQ rate, white sensor noise from a seeded ChaCha8 generator
 //! (deterministic), and quantisation to ADC counts with clipping at full scale.
 //!
-//! Decimation keeps the filtered value of the first truth step of every DAQ sample period, so
+//! Decimation keeps the filtered value of the first truth step of every DAQ sample period (the
+//! contact channel: its minimum over the period), so
 //! DAQ sample `n` stands at rig time `n / sample_rate` exactly.
 
 use rand::{Rng, SeedableRng};
@@ -103,6 +104,9 @@ pub fn quantise(value: f64, scale: f64, full_scale_counts: i32) -> (i32, bool) {
 pub struct Daq {
     filters: Vec<Butterworth4>,
     filtered: Vec<f64>,
+    /// Channels sampled by a minimum-hold detector instead of the anti-alias filter (the
+    /// contact circuit).
+    min_hold: Vec<bool>,
     noise_rms: Vec<f64>,
     scale: Vec<f64>,
     full_scale_counts: Vec<i32>,
@@ -142,6 +146,11 @@ impl Daq {
         Daq {
             filters,
             filtered: rest.to_vec(),
+            min_hold: layout
+                .channels
+                .iter()
+                .map(|c| c.kind == ChannelKind::ContactVoltage)
+                .collect(),
             noise_rms,
             scale: layout.channels.iter().map(|c| c.scale).collect(),
             full_scale_counts: layout
@@ -161,13 +170,24 @@ impl Daq {
     /// Feeds one truth step of physical values (layout order) through the filters; with
     /// `keep` the outputs become the next DAQ sample.
     #[inline]
+    ///
+    /// NOTE (contact channel): the contact-resistance circuit feeds a minimum-hold detector,
+    /// not the anti-alias filter: an impact lasts a few tens of microseconds, far shorter than
+    /// a DAQ sample, and a low-pass would shave it to a dip that never crosses the threshold.
+    /// Its sample is the lowest circuit voltage over the sample period's truth steps (the
+    /// first of which is `keep`), so every contact shows in the sample that holds it.
     pub fn filter(&mut self, values: &[f64], keep: bool) {
-        for ((f, &x), y) in self
+        for (((f, &x), y), &hold) in self
             .filters
             .iter_mut()
             .zip(values)
             .zip(self.filtered.iter_mut())
+            .zip(&self.min_hold)
         {
+            if hold {
+                *y = if keep { x } else { y.min(x) };
+                continue;
+            }
             let out = f.push(x);
             if keep {
                 *y = out;

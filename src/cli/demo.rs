@@ -1,7 +1,8 @@
 //! `rigtwin demo`: the main job on the embedded default rig. It builds (or reuses from the
-//! cache) the default ROM, reports it, and runs the demo plan (`rig-config/plans/demo.toml`,
-//! embedded) as a virtual stepped sine with figures. The stepped sine on the simulated rig
-//! with the live twin replaces the virtual one when the rig service lands.
+//! cache) the default ROM and the simulated rig's truth ROM, reports the model, runs the demo
+//! plan (`rig-config/plans/demo.toml`, embedded) on the simulated rig under closed-loop
+//! amplitude control — session log (MCAP), summary and figures from the recording — and the
+//! same plan as the model's virtual stepped sine, with figures, for comparison.
 
 use clap::Args;
 use std::path::PathBuf;
@@ -86,5 +87,32 @@ pub(crate) fn run(a: DemoArgs) -> anyhow::Result<()> {
             quiet: a.quiet,
         },
     )?;
+
+    println!("stepped sine on the simulated rig (closed-loop base amplitude control):");
+    let mcap = a.out.join("session.mcap");
+    let o = super::run::run_sim_session(
+        &cfg,
+        crate::config::DEFAULT_RIG_TOML,
+        &plan,
+        &mcap,
+        false,
+        &[],
+        false,
+        a.quiet,
+    )?;
+    super::run::print_session(&o);
+    let json = a.out.join("session.json");
+    super::write_json(&json, &o.summary)?;
+    let figures = a.out.join("session-figures");
+    let written = super::report::figures(&mcap, &figures)?;
+    println!("session log: {}", mcap.display());
+    println!("session summary: {}", json.display());
+    println!("session figures ({}): {}", written.len(), figures.display());
+    if o.summary.aborted {
+        anyhow::bail!(
+            "the session aborted: {}",
+            o.summary.abort_reason.as_deref().unwrap_or("unknown")
+        );
+    }
     Ok(())
 }

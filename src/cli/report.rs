@@ -5,7 +5,7 @@
 
 use anyhow::Context;
 use clap::Args;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use crate::control::{window_signals, EventKind, StepInfo};
 use crate::log::replay::{recording, replay, window_counts};
@@ -25,11 +25,23 @@ pub struct ReportArgs {
 }
 
 pub(crate) fn run(a: ReportArgs) -> anyhow::Result<()> {
+    for p in figures(&a.file, &a.out)? {
+        println!("{}", p.display());
+    }
+    Ok(())
+}
+
+/// Draws the figures of the session log `file` into `out` (created); returns the files
+/// written (figures and `summary.json`).
+pub(crate) fn figures(file: &Path, out: &Path) -> anyhow::Result<Vec<PathBuf>> {
+    let a = ReportArgs {
+        file: file.to_path_buf(),
+        out: out.to_path_buf(),
+    };
     let r = replay(&a.file)?;
     let session = crate::log::read_session(&a.file)?;
     let rec = recording(&session)?;
-    std::fs::create_dir_all(&a.out)
-        .with_context(|| format!("creating {}", a.out.display()))?;
+    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
     let meta = session.metadata("session").cloned().unwrap_or_default();
     let l: f64 = meta
         .get("beam_length_m")
@@ -114,9 +126,10 @@ pub(crate) fn run(a: ReportArgs) -> anyhow::Result<()> {
             normal_force: Vec::new(),
             tangential_force: Vec::new(),
         });
-        let p = a
-            .out
-            .join(format!("scalogram_{}.png", super::simulate::sanitize(&info.test)));
+        let p = a.out.join(format!(
+            "scalogram_{}.png",
+            super::simulate::sanitize(&info.test)
+        ));
         super::simulate::scalogram_of(
             &w.upper,
             w.dt,
@@ -166,8 +179,5 @@ pub(crate) fn run(a: ReportArgs) -> anyhow::Result<()> {
     let json = a.out.join("summary.json");
     super::write_json(&json, &r.summary)?;
     written.push(json);
-    for p in &written {
-        println!("{}", p.display());
-    }
-    Ok(())
+    Ok(written)
 }

@@ -68,7 +68,11 @@ pub struct ReplayArgs {
 }
 
 /// The twin ROM (the model) and the truth ROM (the simulated rig's structure: more modes).
-pub(crate) fn roms(cfg: &RigConfig, rebuild: bool, quiet: bool) -> anyhow::Result<(Rom, Rom, PathBuf)> {
+pub(crate) fn roms(
+    cfg: &RigConfig,
+    rebuild: bool,
+    quiet: bool,
+) -> anyhow::Result<(Rom, Rom, PathBuf)> {
     let (twin, twin_path, _) = super::demo::cached_rom(cfg, rebuild, quiet)?;
     let mut truth_cfg = cfg.clone();
     truth_cfg.reduction = crate::config::ReductionSpec {
@@ -119,7 +123,10 @@ pub(crate) fn run_sim_session(
     session_meta.insert("realtime".to_string(), realtime.to_string());
     session_meta.insert("plan".to_string(), plan.name.clone().unwrap_or_default());
     session_meta.insert("plan_source".to_string(), plan.source.clone());
-    session_meta.insert("omega_ref_rad_s".to_string(), format!("{:e}", twin.omega_ref()));
+    session_meta.insert(
+        "omega_ref_rad_s".to_string(),
+        format!("{:e}", twin.omega_ref()),
+    );
     session_meta.insert("beam_length_m".to_string(), format!("{l:e}"));
     session_meta.insert(
         "started_unix_s".to_string(),
@@ -133,7 +140,10 @@ pub(crate) fn run_sim_session(
     rom_meta.insert("config_hash".to_string(), twin.meta.config_hash.clone());
     rom_meta.insert("modes".to_string(), twin.n_modes().to_string());
     rom_meta.insert("pairs".to_string(), twin.n_pairs().to_string());
-    rom_meta.insert("truth_config_hash".to_string(), truth.meta.config_hash.clone());
+    rom_meta.insert(
+        "truth_config_hash".to_string(),
+        truth.meta.config_hash.clone(),
+    );
     rom_meta.insert("truth_modes".to_string(), truth.n_modes().to_string());
     let mut plan_text = String::new();
     if let Ok(t) = std::fs::read_to_string(&plan.source) {
@@ -183,12 +193,12 @@ pub(crate) fn run_sim_session(
         let mut progress = |p: &SessionProgress| {
             bar.set_prefix(format!("{:.1}", p.time));
             bar.set_message(format!(
-                "{} step {}/{} {:?} error {:+.4}",
+                "{} step {}/{} {:?} error {}",
                 p.test.1,
                 p.step.0 + 1,
                 p.step.1,
                 p.phase,
-                p.error
+                p.error.map_or("-".into(), |e| format!("{e:+.4}"))
             ));
         };
         let s = run_session(&mut backend, &setup, &mut recorder, shutdown, &mut progress).await?;
@@ -205,6 +215,20 @@ pub(crate) fn run_sim_session(
         messages,
         overruns,
     })
+}
+
+/// Prints a finished session: speed, then the steps.
+pub(crate) fn print_session(o: &RunOutcome) {
+    println!(
+        "session: {} blocks, {:.1} s of rig time in {:.1} s wall ({:.2}x real time), {} log messages, {} overruns",
+        o.summary.blocks,
+        o.summary.rig_seconds,
+        o.wall_seconds,
+        o.summary.rig_seconds / o.wall_seconds,
+        o.messages,
+        o.overruns
+    );
+    print_summary(&o.summary);
 }
 
 fn print_summary(s: &SessionSummary) {
@@ -252,20 +276,14 @@ pub(crate) fn run(a: RunArgs) -> anyhow::Result<()> {
         .inject
         .iter()
         .map(|s| {
-            serde_json::from_str(s).with_context(|| format!("--inject {s}: not a fault description"))
+            serde_json::from_str(s)
+                .with_context(|| format!("--inject {s}: not a fault description"))
         })
         .collect::<anyhow::Result<_>>()?;
-    let o = run_sim_session(&cfg, &text, &plan, &a.out, a.realtime, &inject, a.rebuild, a.quiet)?;
-    println!(
-        "session: {} blocks, {:.1} s of rig time in {:.1} s wall ({:.2}x real time), {} log messages, {} overruns",
-        o.summary.blocks,
-        o.summary.rig_seconds,
-        o.wall_seconds,
-        o.summary.rig_seconds / o.wall_seconds,
-        o.messages,
-        o.overruns
-    );
-    print_summary(&o.summary);
+    let o = run_sim_session(
+        &cfg, &text, &plan, &a.out, a.realtime, &inject, a.rebuild, a.quiet,
+    )?;
+    print_session(&o);
     println!("log: {}", a.out.display());
     if let Some(j) = &a.json {
         super::write_json(j, &o.summary)?;
@@ -288,10 +306,8 @@ pub(crate) fn replay(a: ReplayArgs) -> anyhow::Result<()> {
             r.note.as_deref().unwrap_or("truncated")
         );
     }
-    let same = r.logged_steps.len()
-        == r.summary.tests.iter().map(|t| t.steps.len()).sum::<usize>()
-        && r
-            .logged_steps
+    let same = r.logged_steps.len() == r.summary.tests.iter().map(|t| t.steps.len()).sum::<usize>()
+        && r.logged_steps
             .iter()
             .zip(r.summary.tests.iter().flat_map(|t| t.steps.iter()))
             .all(|(a, b)| &a.summary == b);
@@ -300,7 +316,11 @@ pub(crate) fn replay(a: ReplayArgs) -> anyhow::Result<()> {
         r.summary.blocks,
         r.summary.rig_seconds,
         r.logged_steps.len(),
-        if same { "identical to" } else { "DIFFERENT from" }
+        if same {
+            "identical to"
+        } else {
+            "DIFFERENT from"
+        }
     );
     print_summary(&r.summary);
     if let Some(j) = &a.json {

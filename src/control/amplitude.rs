@@ -18,7 +18,9 @@ use crate::signal::{Demodulator, SignalError};
 use super::spec::ControlSpec;
 
 /// One control update, at the end of an excitation period.
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize, schemars::JsonSchema,
+)]
 pub struct ControlUpdate {
     /// Period index since the last retune.
     pub period: u64,
@@ -139,7 +141,11 @@ impl AmplitudeController {
         };
         self.prev_error = Some(e);
         let limit = self.spec.max_step_ratio.ln();
-        let de = if de.is_nan() { 0.0 } else { de.clamp(-limit, limit) };
+        let de = if de.is_nan() {
+            0.0
+        } else {
+            de.clamp(-limit, limit)
+        };
         let wanted = self.drive_v * de.exp();
         let saturated = wanted >= self.max_drive_v
             && measured < self.target_m * (1.0 - self.spec.settle_tolerance);

@@ -5,7 +5,9 @@ use super::safety::AbortReason;
 use super::summary::StepInfo;
 
 /// What the procedure is doing.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "snake_case")]
 pub enum Phase {
     /// A new frequency starts with the next block.
@@ -37,13 +39,13 @@ pub struct ControlState {
     pub frequency_hz: f64,
     /// Target fundamental base-displacement amplitude, m.
     pub target_m: f64,
-    /// Fundamental base-displacement amplitude over the control window, m (NaN before the
-    /// first update).
-    pub measured_m: f64,
+    /// Fundamental base-displacement amplitude over the control window, m (none before the
+    /// first update of a step).
+    pub measured_m: Option<f64>,
     /// Fundamental base-displacement amplitude of the last period, m.
-    pub period_amplitude_m: f64,
+    pub period_amplitude_m: Option<f64>,
     /// Relative control error (measured - target) / target.
-    pub error: f64,
+    pub error: Option<f64>,
     /// Drive amplitude commanded, V.
     pub drive_v: f64,
 }

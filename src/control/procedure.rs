@@ -167,7 +167,13 @@ impl Procedure {
             sample,
             kind: EventKind::SessionStart {
                 plan: self.setup.plan.name.clone().unwrap_or_default(),
-                tests: self.setup.plan.tests.iter().map(|t| t.name.clone()).collect(),
+                tests: self
+                    .setup
+                    .plan
+                    .tests
+                    .iter()
+                    .map(|t| t.name.clone())
+                    .collect(),
             },
         });
         self.push_test_start(&mut out, time, sample);
@@ -228,10 +234,12 @@ impl Procedure {
             if (drive.frequency_hz - f).abs() > 1e-9 * f {
                 self.pending_blocks += 1;
                 if self.pending_blocks > MAX_PENDING_BLOCKS {
-                    return Err(AbortReason::Backend(format!(
-                        "the drive did not take the step's frequency {f:.4} Hz within {MAX_PENDING_BLOCKS} blocks (it runs at {:.4} Hz)",
-                        drive.frequency_hz
-                    )));
+                    return Err(AbortReason::Backend {
+                        message: format!(
+                            "the drive did not take the step's frequency {f:.4} Hz within {MAX_PENDING_BLOCKS} blocks (it runs at {:.4} Hz)",
+                            drive.frequency_hz
+                        ),
+                    });
                 }
                 out.control = Some(self.control_state(block));
                 return Ok(out);
@@ -251,7 +259,9 @@ impl Procedure {
                 )
                 .map(|c| self.controller = Some(c)),
             }
-            .map_err(|e| AbortReason::Backend(format!("controller: {e}")))?;
+            .map_err(|e| AbortReason::Backend {
+                message: format!("controller: {e}"),
+            })?;
             self.settle = Some(SettleDetector::new(
                 &self.setup.control,
                 self.spec().settle_periods,
@@ -329,9 +339,9 @@ impl Procedure {
             },
             frequency_hz: self.omega() / TAU,
             target_m: self.target(),
-            measured_m: u.map_or(f64::NAN, |u| u.measured_m),
-            period_amplitude_m: u.map_or(f64::NAN, |u| u.period_amplitude_m),
-            error: u.map_or(f64::NAN, |u| u.error),
+            measured_m: u.map(|u| u.measured_m),
+            period_amplitude_m: u.map(|u| u.period_amplitude_m),
+            error: u.map(|u| u.error),
             drive_v: self.drive_v,
         }
     }
@@ -359,7 +369,12 @@ impl Procedure {
         });
     }
 
-    fn end_record(&mut self, out: &mut BlockOutcome, time: f64, sample: u64) -> Result<(), AbortReason> {
+    fn end_record(
+        &mut self,
+        out: &mut BlockOutcome,
+        time: f64,
+        sample: u64,
+    ) -> Result<(), AbortReason> {
         let info = StepInfo {
             test: self.spec().name.clone(),
             step: self.step,
@@ -373,8 +388,10 @@ impl Procedure {
             record_samples: self.record_len,
             contact_threshold_v: self.setup.control.contact_threshold_v,
         };
-        let summary = summarize(&self.layout, &info, &self.record)
-            .map_err(|e| AbortReason::Backend(format!("step summary: {e}")))?;
+        let summary =
+            summarize(&self.layout, &info, &self.record).map_err(|e| AbortReason::Backend {
+                message: format!("step summary: {e}"),
+            })?;
         out.events.push(SessionEvent {
             time,
             sample,
@@ -400,7 +417,8 @@ impl Procedure {
                 self.step = 0;
                 self.ratios = self.spec().omega_ratios();
                 // Feed-forward: scale the drive with the level.
-                self.drive_v = (self.drive_v * self.target() / old).min(self.setup.safety.max_drive_v);
+                self.drive_v =
+                    (self.drive_v * self.target() / old).min(self.setup.safety.max_drive_v);
                 out.begin_test = Some(self.test);
                 self.push_test_start(out, time, sample);
                 self.push_step_start(out, time, sample, 0.25);

@@ -16,7 +16,13 @@ use super::spec::SafetySpec;
 
 /// Why a session stopped early.
 #[derive(
-    Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize, schemars::JsonSchema, thiserror::Error,
+    Clone,
+    Debug,
+    PartialEq,
+    serde::Serialize,
+    serde::Deserialize,
+    schemars::JsonSchema,
+    thiserror::Error,
 )]
 #[serde(tag = "kind", rename_all = "snake_case")]
 pub enum AbortReason {
@@ -46,11 +52,17 @@ pub enum AbortReason {
         got: u64,
     },
     /// A block did not fit the layout.
-    #[error("malformed DAQ block: {0}")]
-    BadBlock(String),
+    #[error("malformed DAQ block: {message}")]
+    BadBlock {
+        /// What is wrong.
+        message: String,
+    },
     /// The backend raised a fault.
-    #[error("rig fault: {0}")]
-    Rig(RigFault),
+    #[error("rig fault: {fault}")]
+    Rig {
+        /// The fault.
+        fault: RigFault,
+    },
     /// An acceleration channel exceeded its limit.
     #[error("channel {channel}: |a| = {value:.1} m/s^2 at t = {time:.4} s exceeds safety.max_acceleration = {limit} m/s^2")]
     Acceleration {
@@ -98,11 +110,17 @@ pub enum AbortReason {
         target_m: f64,
     },
     /// The session log could not keep up or failed.
-    #[error("session log: {0}")]
-    Log(String),
+    #[error("session log: {message}")]
+    Log {
+        /// What failed.
+        message: String,
+    },
     /// The backend failed.
-    #[error("rig backend: {0}")]
-    Backend(String),
+    #[error("rig backend: {message}")]
+    Backend {
+        /// What failed.
+        message: String,
+    },
 }
 
 /// Per-block and per-update safety checks of a session.
@@ -144,7 +162,10 @@ impl SafetyMonitor {
             })
             .map(|(i, _)| i)
             .collect();
-        let contact = layout.indices_of(ChannelKind::ContactVoltage).first().copied();
+        let contact = layout
+            .indices_of(ChannelKind::ContactVoltage)
+            .first()
+            .copied();
         let watched: Vec<usize> = layout
             .channels
             .iter()
@@ -187,7 +208,9 @@ impl SafetyMonitor {
             });
         }
         self.next_seq += 1;
-        block.check(layout).map_err(AbortReason::BadBlock)?;
+        block
+            .check(layout)
+            .map_err(|message| AbortReason::BadBlock { message })?;
         let n = block.len;
         for &k in &self.accel {
             let scale = layout.channels[k].scale;
@@ -324,11 +347,16 @@ mod tests {
         // Gap.
         assert!(matches!(
             m.check_block(&block(21, moving, 5000), &l, true),
-            Err(AbortReason::SequenceGap { expected: 20, got: 21 })
+            Err(AbortReason::SequenceGap {
+                expected: 20,
+                got: 21
+            })
         ));
         // Acceleration: 3001 m/s^2 = 300100 counts.
         let mut m = SafetyMonitor::new(&spec, &l, 2.5);
-        let e = m.check_block(&block(0, |_| 300_100, 5000), &l, true).unwrap_err();
+        let e = m
+            .check_block(&block(0, |_| 300_100, 5000), &l, true)
+            .unwrap_err();
         assert!(e.to_string().contains("platform_1"), "{e}");
         // Contact duty: closed (1 V < 2.5 V) all the time.
         let mut m = SafetyMonitor::new(&spec, &l, 2.5);
@@ -353,6 +381,9 @@ mod tests {
             }
         }
         let e = r.unwrap_err();
-        assert!(matches!(e, AbortReason::DeadChannel { .. }) && e.to_string().contains("platform_1"), "{e}");
+        assert!(
+            matches!(e, AbortReason::DeadChannel { .. }) && e.to_string().contains("platform_1"),
+            "{e}"
+        );
     }
 }

@@ -135,7 +135,7 @@ pub struct SessionProgress {
     /// Phase.
     pub phase: Phase,
     /// Last relative control error.
-    pub error: f64,
+    pub error: Option<f64>,
 }
 
 /// Errors that prevent a session from starting (everything after the start is an abort).
@@ -164,30 +164,43 @@ struct Run<'a, R: SessionRecorder> {
 impl<R: SessionRecorder> Run<'_, R> {
     fn outcome(&mut self, out: &BlockOutcome) -> Result<(), AbortReason> {
         if let Some(c) = &out.control {
-            self.recorder.control(c).map_err(AbortReason::Log)?;
+            self.recorder
+                .control(c)
+                .map_err(|message| AbortReason::Log { message })?;
         }
         for e in &out.events {
             self.summary.apply_event(e);
-            self.recorder.event(e).map_err(AbortReason::Log)?;
+            self.recorder
+                .event(e)
+                .map_err(|message| AbortReason::Log { message })?;
         }
         for (info, s) in &out.steps {
             let end = (info.record_first_sample + info.record_samples as u64) as f64 * self.dt;
             self.recorder
                 .step(end, info, s)
-                .map_err(AbortReason::Log)?;
+                .map_err(|message| AbortReason::Log { message })?;
             self.summary.push_step(&info.test, s.clone());
         }
         Ok(())
     }
 
-    fn block(&mut self, block: &DaqBlock, layout: &DaqLayout, status: &RigStatus) -> Result<(), AbortReason> {
-        self.recorder.block(block).map_err(AbortReason::Log)?;
+    fn block(
+        &mut self,
+        block: &DaqBlock,
+        layout: &DaqLayout,
+        status: &RigStatus,
+    ) -> Result<(), AbortReason> {
+        self.recorder
+            .block(block)
+            .map_err(|message| AbortReason::Log { message })?;
         self.summary.blocks += 1;
         self.last_block_end = block.time + block.len as f64 / layout.sample_rate;
         self.summary.rig_seconds = self.last_block_end;
         if block.time - self.last_status >= 1.0 || block.seq == 0 {
             self.last_status = block.time;
-            self.recorder.status(block.time, status).map_err(AbortReason::Log)?;
+            self.recorder
+                .status(block.time, status)
+                .map_err(|message| AbortReason::Log { message })?;
         }
         Ok(())
     }
@@ -234,14 +247,18 @@ pub async fn run_session<B: RigBackend, R: SessionRecorder>(
         }
         if let Some(t) = start.begin_test {
             if let Err(e) = backend.begin_test(&setup.plan.tests[t]).await {
-                break 'session Some(AbortReason::Backend(e.to_string()));
+                break 'session Some(AbortReason::Backend {
+                    message: e.to_string(),
+                });
             }
         }
         if let Some(cmd) = start.command {
             frequency_hz = cmd.frequency_hz;
             drive_on = cmd.amplitude_v > 0.0;
             if let Err(e) = backend.set_drive(cmd).await {
-                break 'session Some(AbortReason::Backend(e.to_string()));
+                break 'session Some(AbortReason::Backend {
+                    message: e.to_string(),
+                });
             }
         }
         loop {
@@ -257,7 +274,11 @@ pub async fn run_session<B: RigBackend, R: SessionRecorder>(
                         last_seq,
                     })
                 }
-                Ok(Err(e)) => break 'session Some(AbortReason::Backend(e.to_string())),
+                Ok(Err(e)) => {
+                    break 'session Some(AbortReason::Backend {
+                        message: e.to_string(),
+                    })
+                }
                 Ok(Ok(None)) => break 'session Some(AbortReason::StreamEnded { last_seq }),
                 Ok(Ok(Some(b))) => b,
             };
@@ -267,7 +288,7 @@ pub async fn run_session<B: RigBackend, R: SessionRecorder>(
                 break 'session Some(e);
             }
             if let Some(f) = status.faults.first() {
-                break 'session Some(AbortReason::Rig(f.clone()));
+                break 'session Some(AbortReason::Rig { fault: f.clone() });
             }
             if let Err(e) = safety.check_block(&block, &layout, drive_on) {
                 break 'session Some(e);
@@ -294,14 +315,18 @@ pub async fn run_session<B: RigBackend, R: SessionRecorder>(
             }
             if let Some(t) = out.begin_test {
                 if let Err(e) = backend.begin_test(&setup.plan.tests[t]).await {
-                    break 'session Some(AbortReason::Backend(e.to_string()));
+                    break 'session Some(AbortReason::Backend {
+                        message: e.to_string(),
+                    });
                 }
             }
             if let Some(cmd) = out.command {
                 frequency_hz = cmd.frequency_hz;
                 drive_on = cmd.amplitude_v > 0.0;
                 if let Err(e) = backend.set_drive(cmd).await {
-                    break 'session Some(AbortReason::Backend(e.to_string()));
+                    break 'session Some(AbortReason::Backend {
+                        message: e.to_string(),
+                    });
                 }
             }
         }
@@ -326,14 +351,22 @@ pub async fn run_session<B: RigBackend, R: SessionRecorder>(
     let ramp = setup.safety.ramp_down_s;
     let _ = backend
         .set_drive(DriveCommand {
-            frequency_hz: if frequency_hz > 0.0 { frequency_hz } else { 1.0 },
+            frequency_hz: if frequency_hz > 0.0 {
+                frequency_hz
+            } else {
+                1.0
+            },
             amplitude_v: 0.0,
             ramp_s: ramp,
         })
         .await;
     let daq_alive = !matches!(
         abort,
-        Some(AbortReason::DaqTimeout { .. } | AbortReason::StreamEnded { .. } | AbortReason::SequenceGap { .. })
+        Some(
+            AbortReason::DaqTimeout { .. }
+                | AbortReason::StreamEnded { .. }
+                | AbortReason::SequenceGap { .. }
+        )
     );
     if daq_alive {
         let end = t_now + ramp + layout.block_size as f64 / layout.sample_rate;
@@ -350,9 +383,9 @@ pub async fn run_session<B: RigBackend, R: SessionRecorder>(
                         phase: Phase::RampDown,
                         frequency_hz,
                         target_m: 0.0,
-                        measured_m: f64::NAN,
-                        period_amplitude_m: f64::NAN,
-                        error: f64::NAN,
+                        measured_m: None,
+                        period_amplitude_m: None,
+                        error: None,
                         drive_v: status.drive.amplitude_v,
                     });
                 }

@@ -106,7 +106,10 @@ impl ControlSpec {
     /// Checks the values; the error names the key.
     pub fn validate(&self) -> Result<(), String> {
         if !(self.kp.is_finite() && self.kp >= 0.0) {
-            return Err(format!("control.kp = {}: expected a finite value >= 0", self.kp));
+            return Err(format!(
+                "control.kp = {}: expected a finite value >= 0",
+                self.kp
+            ));
         }
         positive("control.ki", self.ki)?;
         if self.window_periods == 0 {

@@ -11,7 +11,9 @@
 //! ([`crate::signal::step_metrics`]), normalised by Omega times the target amplitude.
 
 use crate::rig::{ChannelKind, DaqLayout};
-use crate::signal::{demodulate, integrate_periodic, PeriodGrid, SignalError, StepMetrics, StepRecord};
+use crate::signal::{
+    demodulate, integrate_periodic, PeriodGrid, SignalError, StepMetrics, StepRecord,
+};
 
 /// What the session knew about a step when its record window ended (logged with the
 /// `record_end` event, so replay needs nothing else).
@@ -147,7 +149,10 @@ pub fn window_signals(
     };
     let values = |k: usize| -> Vec<f64> {
         let ch = &layout.channels[k];
-        counts[k * n..(k + 1) * n].iter().map(|&c| ch.value(c)).collect()
+        counts[k * n..(k + 1) * n]
+            .iter()
+            .map(|&c| ch.value(c))
+            .collect()
     };
     let platform = layout.indices_of(ChannelKind::PlatformAcceleration);
     if platform.is_empty() {

@@ -69,7 +69,12 @@ pub fn recording(session: &SessionRead) -> Result<Recording, ReplayError> {
         .into_iter()
         .next()
         .map(|(_, _, l)| l)
-        .ok_or_else(|| content(path, format!("no {TOPIC_LAYOUT} message: not a session log")))?;
+        .ok_or_else(|| {
+            content(
+                path,
+                format!("no {TOPIC_LAYOUT} message: not a session log"),
+            )
+        })?;
     let blocks: Vec<DaqBlock> = session
         .decode::<DaqBlock>(TOPIC_DAQ)?
         .into_iter()
@@ -149,7 +154,8 @@ pub fn replay(path: &Path) -> Result<Replay, ReplayError> {
                     ),
                 )
             })?;
-            let s = summarize(&rec.layout, info, &counts).map_err(|e| content(path, e.to_string()))?;
+            let s =
+                summarize(&rec.layout, info, &counts).map_err(|e| content(path, e.to_string()))?;
             summary.push_step(&info.test, s);
         }
     }

@@ -174,7 +174,9 @@ pub struct DriveState {
 }
 
 /// A fault reported by a backend (hardware or simulated). The controller aborts on any.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema, thiserror::Error)]
+#[derive(
+    Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema, thiserror::Error,
+)]
 #[serde(tag = "kind", rename_all = "snake_case")]
 pub enum RigFault {
     /// The amplifier clipped its output (drive saturation).

@@ -59,10 +59,7 @@ pub trait RigBackend: Send {
     /// Called before a test of the plan starts. Hardware: nothing to do (the rig is what it
     /// is). The simulated rig sets its truth clearance to the test's (the plan's clearance
     /// stands for the physical rig's state at that test).
-    fn begin_test(
-        &mut self,
-        test: &TestSpec,
-    ) -> impl Future<Output = Result<(), RigError>> + Send {
+    fn begin_test(&mut self, test: &TestSpec) -> impl Future<Output = Result<(), RigError>> + Send {
         let _ = test;
         async { Ok(()) }
     }

@@ -16,7 +16,9 @@ use tokio::time::Instant;
 use crate::plan::TestSpec;
 
 use super::sim::{InjectedFault, SimRig};
-use super::{DaqBlock, DaqLayout, DriveCommand, DriveState, RigBackend, RigError, RigFault, RigStatus};
+use super::{
+    DaqBlock, DaqLayout, DriveCommand, DriveState, RigBackend, RigError, RigFault, RigStatus,
+};
 
 type Pending = JoinHandle<(SimRig, DaqBlock, DriveState, Vec<RigFault>, bool)>;
 
@@ -59,12 +61,15 @@ impl SimBackend {
     }
 
     /// Takes the core back from the computation in flight (if any).
-    async fn settle_pending(&mut self) -> Result<Option<(DaqBlock, DriveState, Vec<RigFault>, bool)>, RigError> {
+    async fn settle_pending(
+        &mut self,
+    ) -> Result<Option<(DaqBlock, DriveState, Vec<RigFault>, bool)>, RigError> {
         match self.pending.take() {
             None => Ok(None),
             Some(h) => {
-                let (rig, block, drive, faults, stalled) =
-                    h.await.map_err(|e| RigError::Link(format!("simulation task: {e}")))?;
+                let (rig, block, drive, faults, stalled) = h
+                    .await
+                    .map_err(|e| RigError::Link(format!("simulation task: {e}")))?;
                 self.rig = Some(rig);
                 Ok(Some((block, drive, faults, stalled)))
             }
@@ -77,10 +82,12 @@ impl SimBackend {
             .take()
             .ok_or_else(|| RigError::State("simulation core missing".into()))?;
         for f in self.faults.drain(..) {
-            rig.schedule(f).map_err(|e| RigError::Config(e.to_string()))?;
+            rig.schedule(f)
+                .map_err(|e| RigError::Config(e.to_string()))?;
         }
         for c in self.commands.drain(..) {
-            rig.set_drive(c).map_err(|e| RigError::Command(e.to_string()))?;
+            rig.set_drive(c)
+                .map_err(|e| RigError::Command(e.to_string()))?;
         }
         self.pending = Some(tokio::task::spawn_blocking(move || {
             let stalled_before = rig.stalled();
@@ -147,7 +154,8 @@ impl RigBackend for SimBackend {
         if self.realtime {
             let deadline = started + Duration::from_secs_f64(end);
             let now = Instant::now();
-            if now > deadline + Duration::from_secs_f64(block.len as f64 / self.layout.sample_rate) {
+            if now > deadline + Duration::from_secs_f64(block.len as f64 / self.layout.sample_rate)
+            {
                 self.status.overruns += 1;
             }
             tokio::time::sleep_until(deadline).await;

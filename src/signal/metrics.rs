@@ -42,7 +42,9 @@ pub struct MetricsParams {
 
 /// Metrics of one step. Velocities are normalised by `Omega q` (the reference's
 /// `u_tip / (Omega q_base)`), so the linear response at resonance is the dynamic amplification.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize, schemars::JsonSchema,
+)]
 pub struct StepMetrics {
     /// RMS of the upper tip velocity over the window / (Omega q).
     pub rms_upper: f64,

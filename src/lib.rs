@@ -6,9 +6,13 @@
 //! with a massless contact boundary, the ROM file) -> [`contact`] and [`sim`] (implicit frictional
 //! contact inside a leapfrog integrator). [`signal`] holds the per-period metrics shared by
 //! simulation and measurement. [`plan`] holds the stepped-sine test plans and [`report`]
-//! draws the paper-style figures. [`cli`] wires the commands of the `rigtwin` binary.
+//! draws the paper-style figures. The experiment side: [`rig`] (the backend trait, the DAQ
+//! types, the simulated rig), [`control`] (amplitude control, settling, safety, the async
+//! stepped-sine session) and [`log`] (the MCAP session log, its recorder and replay). [`cli`]
+//! wires the commands of the `rigtwin` binary.
 //!
-//! Numerical modules are synchronous, deterministic and never read the clock.
+//! Numerical modules are synchronous, deterministic and never read the clock; async (tokio)
+//! lives in the session and the simulated rig's pacing.
 
 pub mod cli;
 pub mod config;

@@ -1,6 +1,7 @@
 //! `rigtwin demo` end to end, as the README's first command runs it: the default ROM (from the
-//! test cache shared with the other default-rig tests), the ROM summary, and the demo plan's
-//! virtual stepped sine with its JSON and figures.
+//! test cache shared with the other default-rig tests), the ROM summary, the demo plan's
+//! virtual stepped sine with its JSON and figures, and the same plan on the simulated rig:
+//! session log, summary (not aborted, impacts in the band) and figures from the recording.
 
 use std::path::PathBuf;
 use std::process::Command;
@@ -47,5 +48,26 @@ fn demo_reports_the_rom_and_runs_the_demo_plan() {
         "scalogram_high-up.png",
     ] {
         assert!(out_dir.path().join("figures").join(f).exists(), "{f}");
+    }
+    let session: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(out_dir.path().join("session.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(session["aborted"], false);
+    let tests = session["tests"].as_array().unwrap();
+    assert_eq!(tests.len(), 2);
+    for t in tests {
+        let steps = t["steps"].as_array().unwrap();
+        assert_eq!(steps.len(), 13);
+        assert!(steps
+            .iter()
+            .any(|s| s["impacts_per_period"].as_f64().unwrap() > 0.0));
+    }
+    assert!(out_dir.path().join("session.mcap").is_file());
+    for f in ["rms_response.png", "time_histories.png", "summary.json"] {
+        assert!(
+            out_dir.path().join("session-figures").join(f).exists(),
+            "{f}"
+        );
     }
 }

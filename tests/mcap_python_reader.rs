@@ -12,8 +12,6 @@ mod log_support;
 
 use log_support::{mcap_python_or_skip, read_with_python};
 use std::collections::BTreeMap;
-use std::path::Path;
-use std::process::Command;
 
 use rigtwin::log::{Attachment, Compression, LogOptions, SessionLog};
 use serde::Serialize;

@@ -63,6 +63,25 @@ fn write_plan(dir: &Path, text: &str) -> String {
     p.display().to_string()
 }
 
+/// `rigtwin run --plan PLAN_TEXT --quiet --out DIR/session.mcap --json DIR/summary.json EXTRA`.
+fn run_plan(dir: &Path, plan_text: &str, extra: &[&str]) -> (Output, PathBuf, PathBuf) {
+    let plan = write_plan(dir, plan_text);
+    let mcap = dir.join("session.mcap");
+    let summary = dir.join("summary.json");
+    let mut args = vec![
+        "run",
+        "--plan",
+        &plan,
+        "--quiet",
+        "--out",
+        mcap.to_str().unwrap(),
+        "--json",
+        summary.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    (rigtwin(&args), mcap, summary)
+}
+
 fn json(path: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
@@ -70,21 +89,7 @@ fn json(path: &Path) -> serde_json::Value {
 #[test]
 fn session_holds_the_base_amplitude_logs_standard_mcap_and_replays_bit_for_bit() {
     let dir = tempfile::tempdir().unwrap();
-    let plan = write_plan(dir.path(), PLAN);
-    let mcap = dir.path().join("session.mcap");
-    let summary = dir.path().join("summary.json");
-    let o = rigtwin(&[
-        "run",
-        "--plan",
-        &plan,
-        "--backend",
-        "sim",
-        "--quiet",
-        "--out",
-        mcap.to_str().unwrap(),
-        "--json",
-        summary.to_str().unwrap(),
-    ]);
+    let (o, mcap, summary) = run_plan(dir.path(), PLAN, &["--backend", "sim"]);
     println!("{}", text(&o));
     assert!(o.status.success(), "{}", text(&o));
     let s = json(&summary);
@@ -185,21 +190,7 @@ fn session_holds_the_base_amplitude_logs_standard_mcap_and_replays_bit_for_bit()
 
 fn run_with_fault(fault: &str) -> (serde_json::Value, PathBuf, tempfile::TempDir, String) {
     let dir = tempfile::tempdir().unwrap();
-    let plan = write_plan(dir.path(), PLAN);
-    let mcap = dir.path().join("session.mcap");
-    let summary = dir.path().join("summary.json");
-    let o = rigtwin(&[
-        "run",
-        "--plan",
-        &plan,
-        "--quiet",
-        "--out",
-        mcap.to_str().unwrap(),
-        "--json",
-        summary.to_str().unwrap(),
-        "--inject",
-        fault,
-    ]);
+    let (o, mcap, summary) = run_plan(dir.path(), PLAN, &["--inject", fault]);
     assert!(
         !o.status.success(),
         "an abort must fail the command: {}",
@@ -379,25 +370,11 @@ fn bad_input_gives_clear_errors() {
 #[ignore]
 fn record_windows_hold_the_base_amplitude_within_1_percent() {
     let dir = tempfile::tempdir().unwrap();
-    let plan = write_plan(
-        dir.path(),
-        &PLAN
-            .replace("steps = 3", "steps = 5")
-            .replace("omega_start = 1.01", "omega_start = 1.02")
-            .replace("omega_end = 0.99", "omega_end = 0.98"),
-    );
-    let mcap = dir.path().join("session.mcap");
-    let summary = dir.path().join("summary.json");
-    let o = rigtwin(&[
-        "run",
-        "--plan",
-        &plan,
-        "--quiet",
-        "--out",
-        mcap.to_str().unwrap(),
-        "--json",
-        summary.to_str().unwrap(),
-    ]);
+    let plan = PLAN
+        .replace("steps = 3", "steps = 5")
+        .replace("omega_start = 1.01", "omega_start = 1.02")
+        .replace("omega_end = 0.99", "omega_end = 0.98");
+    let (o, _, summary) = run_plan(dir.path(), &plan, &[]);
     assert!(o.status.success(), "{}", text(&o));
     let s = json(&summary);
     for st in s["tests"][0]["steps"].as_array().unwrap() {

@@ -10,9 +10,7 @@ use std::path::{Path, PathBuf};
 use crate::control::{window_signals, EventKind, StepInfo};
 use crate::log::replay::{recording, replay, window_counts};
 use crate::plan::Direction;
-use crate::report::{
-    self, Beam, FigureOptions, FrequencyResponse, Source, TestCurve, TimeHistory, TimeWindow,
-};
+use crate::report::{self, Beam, FigureOptions, FrequencyResponse, Source, TestCurve, TimeHistory};
 
 /// `rigtwin report`
 #[derive(Args, Debug)]
@@ -143,39 +141,11 @@ pub(crate) fn figures(file: &Path, out: &Path) -> anyhow::Result<Vec<PathBuf>> {
         )?;
         written.push(p);
     }
-    if !histories.is_empty() {
-        let end = histories
-            .iter()
-            .filter_map(|h| h.t.last().copied())
-            .fold(f64::INFINITY, f64::min);
-        let period = nearest
-            .iter()
-            .map(|i| std::f64::consts::TAU / i.omega)
-            .fold(0.0, f64::max);
-        let zoom = TimeWindow {
-            start: (end - 5.0 * period).max(0.0),
-            end,
-        };
-        for (file, window) in [
-            ("time_histories.png", None),
-            ("time_histories_zoom.png", Some(zoom)),
-        ] {
-            let p = a.out.join(file);
-            report::time_histories(&histories, window, &p, &fig)?;
-            written.push(p);
-        }
-        for (file, window) in [
-            ("contact_activity.png", None),
-            ("contact_activity_zoom.png", Some(zoom)),
-        ] {
-            let p = a.out.join(file);
-            match report::contact_activity(&histories, window, &p, &fig) {
-                Ok(()) => written.push(p),
-                Err(report::ReportError::NothingToPlot { .. }) => {}
-                Err(e) => return Err(e.into()),
-            }
-        }
-    }
+    let period = nearest
+        .iter()
+        .map(|i| std::f64::consts::TAU / i.omega)
+        .fold(0.0, f64::max);
+    written.extend(super::simulate::time_figures(&histories, period, &a.out)?);
     let json = a.out.join("summary.json");
     super::write_json(&json, &r.summary)?;
     written.push(json);

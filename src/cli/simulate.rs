@@ -455,6 +455,50 @@ fn history(name: &str, tr: &StepTrace, l: f64) -> TimeHistory {
     }
 }
 
+/// Time histories and contact activity (whole records and a zoom on their last five
+/// excitation periods of length `period`, s) of `histories`; returns the files written.
+pub(crate) fn time_figures(
+    histories: &[TimeHistory],
+    period: f64,
+    dir: &Path,
+) -> anyhow::Result<Vec<PathBuf>> {
+    let fig = FigureOptions::default();
+    let mut written = Vec::new();
+    if histories.is_empty() {
+        return Ok(written);
+    }
+    // Zoom: the last five excitation periods of the shortest record.
+    let end = histories
+        .iter()
+        .filter_map(|h| h.t.last().copied())
+        .fold(f64::INFINITY, f64::min);
+    let zoom = TimeWindow {
+        start: (end - 5.0 * period).max(0.0),
+        end,
+    };
+    for (file, window) in [
+        ("time_histories.png", None),
+        ("time_histories_zoom.png", Some(zoom)),
+    ] {
+        let p = dir.join(file);
+        report::time_histories(histories, window, &p, &fig)?;
+        written.push(p);
+    }
+    for (file, window) in [
+        ("contact_activity.png", None),
+        ("contact_activity_zoom.png", Some(zoom)),
+    ] {
+        let p = dir.join(file);
+        match report::contact_activity(histories, window, &p, &fig) {
+            Ok(()) => written.push(p),
+            // No contact in any record: nothing to draw, which is a result, not an error.
+            Err(report::ReportError::NothingToPlot { .. }) => {}
+            Err(e) => return Err(e.into()),
+        }
+    }
+    Ok(written)
+}
+
 /// The figures of a stepped sine; returns the files written.
 pub(crate) fn stepped_sine_figures(
     results: &[TestResult],
@@ -486,42 +530,12 @@ pub(crate) fn stepped_sine_figures(
         .iter()
         .filter_map(|r| r.trace.as_ref().map(|tr| history(&r.spec.name, tr, l)))
         .collect();
-    if !histories.is_empty() {
-        // Zoom: the last five excitation periods of the shortest trace.
-        let end = histories
-            .iter()
-            .filter_map(|h| h.t.last().copied())
-            .fold(f64::INFINITY, f64::min);
-        let period = results
-            .iter()
-            .filter_map(|r| r.trace.as_ref())
-            .map(|t| 2.0 * std::f64::consts::PI / t.omega)
-            .fold(0.0, f64::max);
-        let zoom = TimeWindow {
-            start: (end - 5.0 * period).max(0.0),
-            end,
-        };
-        for (file, window) in [
-            ("time_histories.png", None),
-            ("time_histories_zoom.png", Some(zoom)),
-        ] {
-            let p = dir.join(file);
-            report::time_histories(&histories, window, &p, &fig)?;
-            written.push(p);
-        }
-        for (file, window) in [
-            ("contact_activity.png", None),
-            ("contact_activity_zoom.png", Some(zoom)),
-        ] {
-            let p = dir.join(file);
-            match report::contact_activity(&histories, window, &p, &fig) {
-                Ok(()) => written.push(p),
-                // No contact in any trace: nothing to draw, which is a result, not an error.
-                Err(report::ReportError::NothingToPlot { .. }) => {}
-                Err(e) => return Err(e.into()),
-            }
-        }
-    }
+    let period = results
+        .iter()
+        .filter_map(|r| r.trace.as_ref())
+        .map(|t| 2.0 * std::f64::consts::PI / t.omega)
+        .fold(0.0, f64::max);
+    written.extend(time_figures(&histories, period, dir)?);
     for r in results {
         let Some(tr) = &r.trace else { continue };
         let p = dir.join(format!("scalogram_{}.png", sanitize(&r.spec.name)));

@@ -90,16 +90,16 @@ pub(crate) fn run(a: DemoArgs) -> anyhow::Result<()> {
 
     println!("stepped sine on the simulated rig (closed-loop base amplitude control):");
     let mcap = a.out.join("session.mcap");
-    let o = super::run::run_sim_session(
-        &cfg,
-        crate::config::DEFAULT_RIG_TOML,
-        &plan,
-        &mcap,
-        false,
-        &[],
-        false,
-        a.quiet,
-    )?;
+    let o = super::run::run_sim_session(&super::run::SimSession {
+        cfg: &cfg,
+        config_text: crate::config::DEFAULT_RIG_TOML,
+        plan: &plan,
+        out: &mcap,
+        realtime: false,
+        inject: &[],
+        rebuild: false,
+        quiet: a.quiet,
+    })?;
     super::run::print_session(&o);
     let json = a.out.join("session.json");
     super::write_json(&json, &o.summary)?;

@@ -92,17 +92,38 @@ pub(crate) struct RunOutcome {
     pub overruns: u64,
 }
 
-/// Runs `plan` on the simulated rig of `cfg`, logging to `out`.
-pub(crate) fn run_sim_session(
-    cfg: &RigConfig,
-    config_text: &str,
-    plan: &Plan,
-    out: &Path,
-    realtime: bool,
-    inject: &[InjectedFault],
-    rebuild: bool,
-    quiet: bool,
-) -> anyhow::Result<RunOutcome> {
+/// A session on the simulated rig.
+pub(crate) struct SimSession<'a> {
+    /// The rig description.
+    pub cfg: &'a RigConfig,
+    /// Its text (stored in the log).
+    pub config_text: &'a str,
+    /// The plan.
+    pub plan: &'a Plan,
+    /// The session log.
+    pub out: &'a Path,
+    /// Pace to the wall clock.
+    pub realtime: bool,
+    /// Faults to inject.
+    pub inject: &'a [InjectedFault],
+    /// Rebuild the ROMs.
+    pub rebuild: bool,
+    /// No progress display.
+    pub quiet: bool,
+}
+
+/// Runs the plan on the simulated rig, logging to the session's file.
+pub(crate) fn run_sim_session(session: &SimSession<'_>) -> anyhow::Result<RunOutcome> {
+    let SimSession {
+        cfg,
+        config_text,
+        plan,
+        out,
+        realtime,
+        inject,
+        rebuild,
+        quiet,
+    } = *session;
     let (twin, truth, twin_path) = roms(cfg, rebuild, quiet)?;
     let l = cfg.rig.beam_length;
     let spec = cfg.sim_rig_spec();
@@ -280,9 +301,16 @@ pub(crate) fn run(a: RunArgs) -> anyhow::Result<()> {
                 .with_context(|| format!("--inject {s}: not a fault description"))
         })
         .collect::<anyhow::Result<_>>()?;
-    let o = run_sim_session(
-        &cfg, &text, &plan, &a.out, a.realtime, &inject, a.rebuild, a.quiet,
-    )?;
+    let o = run_sim_session(&SimSession {
+        cfg: &cfg,
+        config_text: &text,
+        plan: &plan,
+        out: &a.out,
+        realtime: a.realtime,
+        inject: &inject,
+        rebuild: a.rebuild,
+        quiet: a.quiet,
+    })?;
     print_session(&o);
     println!("log: {}", a.out.display());
     if let Some(j) = &a.json {

@@ -90,8 +90,9 @@ impl SettleDetector {
             return Settle::TimedOut;
         }
         let mean_error = self.errors.iter().sum::<f64>() / self.window as f64;
-        // NaN (a window not yet full) fails the comparison.
-        if self.periods < self.min_periods || !(mean_error.abs() <= self.tolerance) {
+        // A window not yet full gives NaN, which is not within tolerance.
+        let within = mean_error.is_finite() && mean_error.abs() <= self.tolerance;
+        if self.periods < self.min_periods || !within {
             return Settle::Wait;
         }
         // Envelope: the newest window against the one before (ring order from `next`).

@@ -115,10 +115,13 @@ impl RigBackend for SimBackend {
     }
 
     async fn set_drive(&mut self, command: DriveCommand) -> Result<(), RigError> {
-        if !(command.frequency_hz.is_finite() && command.frequency_hz > 0.0)
-            || !(command.amplitude_v.is_finite() && command.amplitude_v >= 0.0)
-            || !(command.ramp_s.is_finite() && command.ramp_s >= 0.0)
-        {
+        let valid = command.frequency_hz.is_finite()
+            && command.frequency_hz > 0.0
+            && command.amplitude_v.is_finite()
+            && command.amplitude_v >= 0.0
+            && command.ramp_s.is_finite()
+            && command.ramp_s >= 0.0;
+        if !valid {
             return Err(RigError::Command(format!("{command:?}")));
         }
         self.commands.push(command);

@@ -1,6 +1,6 @@
 //! The rig description (`rig-config/*.toml`): geometry, materials, interface layers,
 //! sensors, contact patch, modal damping, mesh resolution and reduction settings, parsed
-//! with serde ([`schema`], [`damping`]), validated ([`validate`]) and hashed for ROM
+//! with serde ([`schema`], [`damping`]), validated (`validate`) and hashed for ROM
 //! provenance. Errors ([`ConfigError`]) name the file, the line:column or key path, the bad
 //! value and what was expected.
 

@@ -9,7 +9,7 @@ pub struct RomInfo {
     pub format_version: u32,
     /// Rig name.
     pub rig_name: String,
-    /// Where K and M came from ("native" or "calculix:<job>").
+    /// Where K and M came from ("native" or "calculix:JOB").
     pub source: String,
     /// SHA-256 of the rig description and reduction settings.
     pub config_hash: String,

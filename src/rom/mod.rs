@@ -1,6 +1,6 @@
 //! Reduced-order model: the sparse generalized eigen solver ([`eigen`]), MacNeal reduction
 //! with relative-displacement boundary coordinates ([`macneal`]), mode labels ([`labels`]),
-//! explicit-step stability limits ([`stability`]) and the versioned ROM file ([`file`]).
+//! explicit-step stability limits ([`stability`]) and the versioned ROM file ([`file`](mod@file)).
 //!
 //! The ROM (DESIGN.md, "The model", step 3):
 //! `g = Phi_g eta + G_res lambda + g0` and `eta'' + D eta' + Omega^2 eta = Phi_g^T lambda - beta a_base`,
@@ -112,7 +112,7 @@ pub struct Rom {
 pub struct RomMeta {
     /// SHA-256 (hex) of the canonical rig description and reduction settings the ROM came from.
     pub config_hash: String,
-    /// Where K and M came from: "native" or "calculix:<job>".
+    /// Where K and M came from: "native" or "calculix:JOB".
     pub source: String,
     /// Rig name from the description.
     pub rig_name: String,

@@ -1,7 +1,7 @@
 //! The rig mesher: turns a validated [`RigConfig`] into the parent [`Mesh`]. Every part is a
 //! structured hex grid ([`BoxGrid`]) with graded lines and its own element block; parts
 //! joined by an elastic interface layer get their own coincident nodes and zero-length
-//! [`Spring`]s; the protrusion is fused to the upper probe (shared nodes).
+//! [`Spring`](crate::fe::mesh::Spring)s; the protrusion is fused to the upper probe (shared nodes).
 //!
 //! Grid lines are chosen so that touching faces conform:
 //! - x: both beams share one set of lines (clamp, free span, probe seat, tip); the blocks take

@@ -296,6 +296,12 @@ pub(crate) fn run(a: RunArgs) -> anyhow::Result<()> {
         ),
     };
     let plan = Plan::from_path(&a.plan)?;
+    if cfg.truth.variants.any() {
+        println!(
+            "simulated rig: hidden physics on ([truth.variants]): {}",
+            cfg.truth.variants.to_json()
+        );
+    }
     let inject: Vec<InjectedFault> = a
         .inject
         .iter()

@@ -437,3 +437,35 @@ fn truth_variants_bad_input_names_the_key() {
         assert!(msg.contains(expect), "{tables}\n-> {msg}");
     }
 }
+
+#[test]
+fn documented_truth_variants_examples_are_valid() {
+    // The commented example at the end of two-beam.toml, uncommented.
+    let text = reference_text();
+    let start = text.find("# [truth.variants]\n").expect("example in two-beam.toml");
+    let example: String = text[start..]
+        .lines()
+        .map(|l| l.strip_prefix("# ").unwrap_or(l.trim_start_matches('#')))
+        .collect::<Vec<_>>()
+        .join("\n");
+    let cfg = parse(&format!("{}\n{example}\n", &text[..start])).unwrap();
+    let v = cfg.sim_rig_spec().truth.variants;
+    assert!(v.clamp_friction.is_some() && v.wear.is_some() && v.tilt.is_some());
+    assert_eq!(v.sensor_gains.len(), 1);
+    // The example in rig-config/README.md.
+    let readme = std::fs::read_to_string(
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("rig-config/README.md"),
+    )
+    .unwrap();
+    let block = readme
+        .split("```toml\n")
+        .nth(1)
+        .and_then(|b| b.split("```").next())
+        .expect("a toml block in rig-config/README.md");
+    let from_readme = parse(&with_variants(block))
+        .unwrap()
+        .sim_rig_spec()
+        .truth
+        .variants;
+    assert_eq!(from_readme, v);
+}

@@ -442,7 +442,9 @@ fn truth_variants_bad_input_names_the_key() {
 fn documented_truth_variants_examples_are_valid() {
     // The commented example at the end of two-beam.toml, uncommented.
     let text = reference_text();
-    let start = text.find("# [truth.variants]\n").expect("example in two-beam.toml");
+    let start = text
+        .find("# [truth.variants]\n")
+        .expect("example in two-beam.toml");
     let example: String = text[start..]
         .lines()
         .map(|l| l.strip_prefix("# ").unwrap_or(l.trim_start_matches('#')))

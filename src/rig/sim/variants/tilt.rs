@@ -85,9 +85,9 @@ mod tests {
             assert!((o - expected).abs() < TOL, "{o} vs {expected}");
         }
         // Against the rotation matrix (Rodrigues) about a diagonal axis: z of R d - d.
-        let axis = [1.0, -2.0];
+        let axis: [f64; 2] = [1.0, -2.0];
         let off = gap_offsets(&pos, &area, &TiltSpec { angle: 0.05, axis });
-        let n = (axis[0] as f64).hypot(axis[1]);
+        let n = axis[0].hypot(axis[1]);
         let a = [axis[0] / n, axis[1] / n, 0.0];
         let (s, c) = 0.05f64.sin_cos();
         for (p, o) in pos.iter().zip(&off) {

@@ -8,7 +8,9 @@
 //! - `rigtwin replay` recomputes the summary from the raw blocks bit for bit, and `rigtwin
 //!   report` draws the figures from the recording;
 //! - injected faults (DAQ stall, dead channel, drive saturation, clearance change) each end
-//!   in an abort with a reason, a ramp-down of the drive and a complete log.
+//!   in an abort with a reason, a ramp-down of the drive and a complete log;
+//! - the session metadata records which truth variants (hidden physics) the simulated rig ran
+//!   with (`{}` for none), and a bad variant in the rig description is a clear error.
 
 mod log_support;
 
@@ -186,7 +188,42 @@ fn session_holds_the_base_amplitude_logs_standard_mcap_and_replays_bit_for_bit()
     );
     assert_eq!(py["counts"]["/session/steps"], 3);
     assert!(py["metadata"]["rigtwin"].is_object() && py["metadata"]["session"].is_object());
+    assert_eq!(py["metadata"]["session"]["truth_variants"], "{}");
     assert!(py["attachments"]["rig.toml"].is_object());
+}
+
+#[test]
+fn a_session_records_its_truth_variants() {
+    let dir = tempfile::tempdir().unwrap();
+    let variants = "[truth.variants]\n\
+                    sensor_gains = [{ channel = \"lower_mid\", gain = 1.02 }]\n\
+                    [truth.variants.wear]\n\
+                    coefficient = 1e-7\n\
+                    [truth.variants.tilt]\n\
+                    angle = 1e-3\n\
+                    axis = [1.0, 0.0]\n";
+    let cfg_text = format!("{}\n{variants}", rigtwin::config::DEFAULT_RIG_TOML);
+    let cfg = dir.path().join("rig.toml");
+    std::fs::write(&cfg, &cfg_text).unwrap();
+    let plan = PLAN
+        .replace("steps = 3", "steps = 2")
+        .replace("settle_periods = 60", "settle_periods = 20")
+        .replace("record_periods = 30", "record_periods = 10");
+    let (o, mcap, _) = run_plan(dir.path(), &plan, &[cfg.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", text(&o));
+    let s = read_session(&mcap).unwrap();
+    let logged = &s.metadata("session").unwrap()["truth_variants"];
+    println!("truth_variants: {logged}");
+    let logged: rigtwin::rig::sim::TruthVariants = serde_json::from_str(logged).unwrap();
+    let expected = rigtwin::config::RigConfig::from_str(&cfg_text, "rig.toml")
+        .unwrap()
+        .sim_rig_spec()
+        .truth
+        .variants;
+    assert!(expected.any());
+    assert_eq!(logged, expected);
+    let attached = &s.attachment("rig.toml").unwrap().data;
+    assert_eq!(attached, cfg_text.as_bytes());
 }
 
 fn run_with_fault(fault: &str) -> (serde_json::Value, PathBuf, tempfile::TempDir, String) {
@@ -321,6 +358,30 @@ fn bad_input_gives_clear_errors() {
     ]);
     assert!(!o.status.success());
     assert!(text(&o).contains("control.ki"), "{}", text(&o));
+    // A sensor gain on a channel the DAQ does not have.
+    std::fs::write(
+        &cfg,
+        format!(
+            "{}\n[truth.variants]\nsensor_gains = [{{ channel = \"upper_tipp\", gain = 1.03 }}]\n",
+            rigtwin::config::DEFAULT_RIG_TOML
+        ),
+    )
+    .unwrap();
+    let o = rigtwin(&[
+        "run",
+        cfg.to_str().unwrap(),
+        "--plan",
+        &plan,
+        "--quiet",
+        "--out",
+        mcap.to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    let t = text(&o);
+    assert!(
+        t.contains("truth.variants.sensor_gains[0].channel") && t.contains("upper_tipp"),
+        "{t}"
+    );
     // A bad fault description.
     let o = rigtwin(&[
         "run",

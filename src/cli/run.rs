@@ -149,6 +149,9 @@ pub(crate) fn run_sim_session(session: &SimSession<'_>) -> anyhow::Result<RunOut
         format!("{:e}", twin.omega_ref()),
     );
     session_meta.insert("beam_length_m".to_string(), format!("{l:e}"));
+    // The simulated rig's hidden physics (`[truth.variants]`, also in the rig.toml
+    // attachment), parsed: `{}` when none is on.
+    session_meta.insert("truth_variants".to_string(), spec.truth.variants.to_json());
     session_meta.insert(
         "started_unix_s".to_string(),
         std::time::SystemTime::now()
@@ -293,6 +296,12 @@ pub(crate) fn run(a: RunArgs) -> anyhow::Result<()> {
         ),
     };
     let plan = Plan::from_path(&a.plan)?;
+    if cfg.truth.variants.any() {
+        println!(
+            "simulated rig: hidden physics on ([truth.variants]): {}",
+            cfg.truth.variants.to_json()
+        );
+    }
     let inject: Vec<InjectedFault> = a
         .inject
         .iter()

@@ -20,7 +20,7 @@ pub use procedure::{Procedure, SessionSetup};
 pub use safety::{AbortReason, SafetyMonitor};
 pub use session::{
     run_session, NullRecorder, SessionError, SessionProgress, SessionRecorder, SessionSummary,
-    TestSummary,
+    Tee, TestSummary,
 };
 pub use spec::{ControlSpec, SafetySpec};
 pub use summary::{summarize, window_signals, StepInfo, StepSummary, WindowSignals};

@@ -161,7 +161,8 @@ async fn watch(url: &str, deadline: Duration) -> Seen {
                             seen.channels.insert(a.topic.clone(), a);
                         }
                         if !subscribe.is_empty() {
-                            let m = serde_json::json!({"op": "subscribe", "subscriptions": subscribe});
+                            let m =
+                                serde_json::json!({"op": "subscribe", "subscriptions": subscribe});
                             ws.send(Message::text(m.to_string())).await.unwrap();
                         }
                     }
@@ -259,7 +260,11 @@ fn a_foxglove_client_sees_the_session_live_decimated_and_the_server_stops_at_the
     let seen = runtime.block_on(watch(&url, Duration::from_secs(900)));
     let output = child.wait_with_output().unwrap();
     let rest: Vec<String> = lines.try_iter().collect();
-    let out = format!("{}\n{}", rest.join("\n"), String::from_utf8_lossy(&output.stderr));
+    let out = format!(
+        "{}\n{}",
+        rest.join("\n"),
+        String::from_utf8_lossy(&output.stderr)
+    );
     println!("{out}");
     assert!(output.status.success(), "{out}");
     assert!(
@@ -271,10 +276,17 @@ fn a_foxglove_client_sees_the_session_live_decimated_and_the_server_stops_at_the
     assert_eq!(seen.negotiated.as_deref(), Some(SUBPROTOCOL));
     assert_eq!(seen.ops.first().map(String::as_str), Some("serverInfo"));
     let info = seen.server_info.as_ref().unwrap();
-    assert!(info["name"].as_str().unwrap().starts_with("rigtwin"), "{info}");
+    assert!(
+        info["name"].as_str().unwrap().starts_with("rigtwin"),
+        "{info}"
+    );
     assert!(seen.closed_by_server, "the server closes the connection");
     let topics: BTreeSet<&str> = seen.channels.keys().map(String::as_str).collect();
-    assert_eq!(topics, TOPICS.iter().copied().collect(), "advertised topics");
+    assert_eq!(
+        topics,
+        TOPICS.iter().copied().collect(),
+        "advertised topics"
+    );
 
     // Same names and schemas as the MCAP log, JSON over JSON Schema.
     let log = read_session(&mcap).unwrap();
@@ -284,7 +296,10 @@ fn a_foxglove_client_sees_the_session_live_decimated_and_the_server_stops_at_the
         assert_eq!(a.schema_encoding, "jsonschema", "{topic}");
         let schema: serde_json::Value = serde_json::from_str(&a.schema)
             .unwrap_or_else(|e| panic!("{topic}: schema is not JSON: {e}"));
-        assert!(schema.is_object() && schema["properties"].is_object(), "{topic}");
+        assert!(
+            schema.is_object() && schema["properties"].is_object(),
+            "{topic}"
+        );
         if topic != "/live/daq" {
             let logged = log.channel(topic).unwrap().schema.clone().unwrap();
             assert_eq!(a.schema_name, logged.name, "{topic}");
@@ -292,7 +307,10 @@ fn a_foxglove_client_sees_the_session_live_decimated_and_the_server_stops_at_the
         }
     }
     assert_eq!(seen.channels["/live/daq"].schema_name, "LiveDaqPoint");
-    assert!(log.channel("/live/daq").is_none(), "the live topic is not logged");
+    assert!(
+        log.channel("/live/daq").is_none(),
+        "the live topic is not logged"
+    );
 
     // Every subscribed topic delivered, log time = rig time.
     let got = |t: &str| seen.messages.get(t).map_or(&[][..], Vec::as_slice);
@@ -310,7 +328,11 @@ fn a_foxglove_client_sees_the_session_live_decimated_and_the_server_stops_at_the
         .map(|(_, v, _)| v["event"].as_str().unwrap())
         .collect();
     assert_eq!(events.first(), Some(&"session_start"), "{events:?}");
-    assert_eq!(events.last(), Some(&"session_end"), "{events:?}: queued records go out before the stop");
+    assert_eq!(
+        events.last(),
+        Some(&"session_end"),
+        "{events:?}: queued records go out before the stop"
+    );
     assert_eq!(got("/session/steps").len(), 2);
     for (_, v, _) in got("/session/steps") {
         assert!(v["summary"]["omega_ratio"].is_f64(), "{v}");
@@ -336,7 +358,10 @@ fn a_foxglove_client_sees_the_session_live_decimated_and_the_server_stops_at_the
         let first = p["first_sample"].as_u64().unwrap();
         let n = p["samples"].as_u64().unwrap();
         assert_eq!(*t, ns(p["time"].as_f64().unwrap()), "{p}");
-        assert_eq!(p["time"].as_f64().unwrap(), first as f64 / layout.sample_rate);
+        assert_eq!(
+            p["time"].as_f64().unwrap(),
+            first as f64 / layout.sample_rate
+        );
         assert_eq!(first % bin, 0, "bins aligned to the sample index: {p}");
         if let Some(prev) = previous {
             assert_eq!(first, prev + bin, "consecutive bins: {p}");
@@ -353,8 +378,18 @@ fn a_foxglove_client_sees_the_session_live_decimated_and_the_server_stops_at_the
             assert!(lo <= mean && mean <= hi, "{}: {v}", ch.name);
             // Physical units: the raw counts of the log times the scale.
             let raw: Vec<i32> = (first..first + n).map(|s| counts(k, s)).collect();
-            assert_eq!(lo, f64::from(*raw.iter().min().unwrap()) * ch.scale, "{}", ch.name);
-            assert_eq!(hi, f64::from(*raw.iter().max().unwrap()) * ch.scale, "{}", ch.name);
+            assert_eq!(
+                lo,
+                f64::from(*raw.iter().min().unwrap()) * ch.scale,
+                "{}",
+                ch.name
+            );
+            assert_eq!(
+                hi,
+                f64::from(*raw.iter().max().unwrap()) * ch.scale,
+                "{}",
+                ch.name
+            );
         }
     }
     let (t0, t1) = (
@@ -402,9 +437,7 @@ fn check_with_jsonschema(dir: &Path, seen: &Seen) {
         if std::env::var_os("RIGTWIN_REQUIRE_JSONSCHEMA_PY").is_some() {
             panic!("RIGTWIN_REQUIRE_JSONSCHEMA_PY is set but `{python}` cannot import jsonschema");
         }
-        eprintln!(
-            "SKIPPED the jsonschema check: `{python} -m pip install jsonschema` to run it"
-        );
+        eprintln!("SKIPPED the jsonschema check: `{python} -m pip install jsonschema` to run it");
         return;
     }
     let mut input = serde_json::Map::new();
@@ -423,11 +456,19 @@ fn check_with_jsonschema(dir: &Path, seen: &Seen) {
     std::fs::write(&path, serde_json::Value::Object(input).to_string()).unwrap();
     let script =
         Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/live_support/check_jsonschema.py");
-    let o = Command::new(&python).arg(script).arg(&path).output().unwrap();
+    let o = Command::new(&python)
+        .arg(script)
+        .arg(&path)
+        .output()
+        .unwrap();
     assert!(o.status.success(), "{}", text(&o));
     let report: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     for (topic, r) in report.as_object().unwrap() {
-        assert!(r["schema_error"].is_null(), "{topic}: {}", r["schema_error"]);
+        assert!(
+            r["schema_error"].is_null(),
+            "{topic}: {}",
+            r["schema_error"]
+        );
         assert!(
             r["invalid"].as_array().unwrap().is_empty(),
             "{topic}: {}",
@@ -466,8 +507,17 @@ fn a_bad_or_busy_foxglove_address_is_a_clear_error() {
     assert!(!o.status.success());
     let t = text(&o);
     assert!(t.contains(&format!("--foxglove {addr}")), "{t}");
-    assert!(t.contains("cannot listen on") && t.contains("choose another port"), "{t}");
+    assert!(
+        t.contains("cannot listen on") && t.contains("choose another port"),
+        "{t}"
+    );
     assert!(!t.contains("panicked"), "{t}");
-    assert!(!mcap.exists(), "no session log for a session that did not start");
-    println!("busy port: failed in {:.2} s: {t}", t0.elapsed().as_secs_f64());
+    assert!(
+        !mcap.exists(),
+        "no session log for a session that did not start"
+    );
+    println!(
+        "busy port: failed in {:.2} s: {t}",
+        t0.elapsed().as_secs_f64()
+    );
 }

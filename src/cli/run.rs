@@ -135,7 +135,11 @@ fn start_live_view(addr: SocketAddr) -> anyhow::Result<(crate::log::live::LiveRe
         println!(
             "live view: open Foxglove, connect to ws://{}:{} (this machine) or \
              ws://HOST:{} (HOST: this machine's name or address, from another one)",
-            if bound.is_ipv4() { "127.0.0.1" } else { "[::1]" },
+            if bound.is_ipv4() {
+                "127.0.0.1"
+            } else {
+                "[::1]"
+            },
             bound.port(),
             bound.port()
         );

@@ -19,8 +19,8 @@ pub use events::{ControlState, EventKind, Phase, SessionEvent};
 pub use procedure::{Procedure, SessionSetup};
 pub use safety::{AbortReason, SafetyMonitor};
 pub use session::{
-    run_session, NullRecorder, SessionError, SessionProgress, SessionRecorder, SessionSummary,
-    Tee, TestSummary,
+    run_session, NullRecorder, SessionError, SessionProgress, SessionRecorder, SessionSummary, Tee,
+    TestSummary,
 };
 pub use spec::{ControlSpec, SafetySpec};
 pub use summary::{summarize, window_signals, StepInfo, StepSummary, WindowSignals};

@@ -76,7 +76,8 @@ impl<R: SessionRecorder> SessionRecorder for Option<R> {
         self.as_mut().map_or(Ok(()), |r| r.status(time, status))
     }
     fn step(&mut self, time: f64, info: &StepInfo, summary: &StepSummary) -> Result<(), String> {
-        self.as_mut().map_or(Ok(()), |r| r.step(time, info, summary))
+        self.as_mut()
+            .map_or(Ok(()), |r| r.step(time, info, summary))
     }
 }
 

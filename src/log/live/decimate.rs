@@ -199,7 +199,13 @@ mod tests {
     }
 
     /// A block of `len` samples from `first`, channel k's sample s being `f(k, s)`.
-    fn block(seq: u64, first: u64, len: usize, k: usize, f: impl Fn(usize, u64) -> i32) -> DaqBlock {
+    fn block(
+        seq: u64,
+        first: u64,
+        len: usize,
+        k: usize,
+        f: impl Fn(usize, u64) -> i32,
+    ) -> DaqBlock {
         let mut counts = Vec::with_capacity(k * len);
         for ch in 0..k {
             counts.extend((0..len as u64).map(|i| f(ch, first + i)));
@@ -269,7 +275,10 @@ mod tests {
             assert!((p.time - s0 as f64 / 1000.0).abs() < 1e-15);
             assert_eq!(p.min, vec![0.5 * s0 as f64, -2.0 * (s0 + 3) as f64]);
             assert_eq!(p.max, vec![0.5 * (s0 + 3) as f64, -2.0 * s0 as f64]);
-            assert_eq!(p.mean, vec![0.5 * (s0 as f64 + 1.5), -2.0 * (s0 as f64 + 1.5)]);
+            assert_eq!(
+                p.mean,
+                vec![0.5 * (s0 as f64 + 1.5), -2.0 * (s0 as f64 + 1.5)]
+            );
         }
     }
 
@@ -315,7 +324,10 @@ mod tests {
         let pts = collect(&mut d, &blocks, true);
         let spans: Vec<(u64, u32)> = pts.iter().map(|p| (p.first, p.samples)).collect();
         // 0-3, 4-7, 8-9 (cut by the gap), 20-23, 24-27, 28-29 (end of stream).
-        assert_eq!(spans, vec![(0, 4), (4, 4), (8, 2), (20, 4), (24, 4), (28, 2)]);
+        assert_eq!(
+            spans,
+            vec![(0, 4), (4, 4), (8, 2), (20, 4), (24, 4), (28, 2)]
+        );
         assert_eq!(pts[2].max, vec![9.0]);
         assert_eq!(pts[3].min, vec![20.0]);
     }

@@ -42,12 +42,12 @@ pub const LIVE_DAQ_SCHEMA: &str = "LiveDaqPoint";
 #[derive(Debug, thiserror::Error)]
 pub enum LiveError {
     /// The server could not listen on the address.
-    #[error("live view: cannot listen on {addr}: {source}{}", bind_hint(source))]
+    #[error("live view: cannot listen on {addr}: {io}{}", bind_hint(io))]
     Bind {
         /// The address asked for.
         addr: SocketAddr,
-        /// The I/O error.
-        source: std::io::Error,
+        /// The I/O error (in the message, not repeated as a cause).
+        io: std::io::Error,
     },
     /// The options are out of range.
     #[error("live view: bad options: {0}")]
@@ -156,7 +156,10 @@ mod tests {
 
     #[test]
     fn a_bare_port_binds_the_loopback_interface_only() {
-        assert_eq!(parse_addr("8765").unwrap(), "127.0.0.1:8765".parse().unwrap());
+        assert_eq!(
+            parse_addr("8765").unwrap(),
+            "127.0.0.1:8765".parse().unwrap()
+        );
         assert_eq!(parse_addr("0").unwrap(), "127.0.0.1:0".parse().unwrap());
         assert_eq!(
             parse_addr("localhost:9000").unwrap(),
@@ -166,12 +169,22 @@ mod tests {
             parse_addr("0.0.0.0:8765").unwrap(),
             "0.0.0.0:8765".parse().unwrap()
         );
-        assert_eq!(parse_addr("[::1]:8765").unwrap(), "[::1]:8765".parse().unwrap());
+        assert_eq!(
+            parse_addr("[::1]:8765").unwrap(),
+            "[::1]:8765".parse().unwrap()
+        );
     }
 
     #[test]
     fn bad_addresses_are_described() {
-        for bad in ["", "65536", "127.0.0.1", "127.0.0.1:http", "host:80", "::1:8765"] {
+        for bad in [
+            "",
+            "65536",
+            "127.0.0.1",
+            "127.0.0.1:http",
+            "host:80",
+            "::1:8765",
+        ] {
             let e = parse_addr(bad).unwrap_err();
             assert!(e.contains("expected PORT"), "{bad}: {e}");
         }

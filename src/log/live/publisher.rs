@@ -160,7 +160,10 @@ impl Publisher {
                 publish_point(&d.channel, &d.keys, p, buf, stats);
             });
         }
-        self.stats.skipped_blocks = self.daq.as_ref().map_or(0, |d| d.decimator.skipped_blocks());
+        self.stats.skipped_blocks = self
+            .daq
+            .as_ref()
+            .map_or(0, |d| d.decimator.skipped_blocks());
         self.stats
     }
 
@@ -183,7 +186,7 @@ impl Publisher {
             }
             Record::Control(c) => self.publish(TopicOf::Control, c.time, &c),
             Record::Event(e) => self.publish(TopicOf::Events, e.time, &e),
-            Record::Status(s) => self.publish(TopicOf::Status, s.time, &s),
+            Record::Status(s) => self.publish(TopicOf::Status, s.block_time, &s),
             Record::Step(time, s) => self.publish(TopicOf::Steps, time, &s),
             Record::Close => {}
         }
@@ -221,10 +224,7 @@ impl Publisher {
         if self.buf.is_empty() || !ch.has_sinks() {
             return;
         }
-        ch.log_with_meta(
-            &self.buf,
-            PartialMetadata::with_log_time(log_time_ns(time)),
-        );
+        ch.log_with_meta(&self.buf, PartialMetadata::with_log_time(log_time_ns(time)));
         *self.stats.sent.entry(ch.topic().to_string()).or_insert(0) += 1;
     }
 
@@ -412,8 +412,11 @@ mod tests {
             max: &[2.0, 0.5],
             mean: &[0.25, 0.1],
         };
-        let json: serde_json::Value =
-            serde_json::to_value(PointJson { keys: &keys, point: &point }).unwrap();
+        let json: serde_json::Value = serde_json::to_value(PointJson {
+            keys: &keys,
+            point: &point,
+        })
+        .unwrap();
         assert_eq!(json["time"], 0.04);
         assert_eq!(json["first_sample"], 40);
         assert_eq!(json["upper_tip"]["max"], 2.0);

@@ -109,7 +109,7 @@ impl SessionRecorder for LiveRecorder {
     fn status(&mut self, time: f64, status: &RigStatus) -> Result<(), String> {
         self.offer(|| {
             Record::Status(StatusMessage {
-                time,
+                block_time: time,
                 status: status.clone(),
             })
         });
@@ -194,7 +194,7 @@ impl LiveView {
                     .start(),
             )
             .map_err(|e| match e {
-                foxglove::FoxgloveError::Bind(source) => LiveError::Bind { addr, source },
+                foxglove::FoxgloveError::Bind(io) => LiveError::Bind { addr, io },
                 other => LiveError::Start {
                     what: "cannot start the server",
                     detail: other.to_string(),
@@ -272,9 +272,7 @@ impl LiveView {
                 .block_on(async { tokio::time::timeout(timeout, shutdown.wait()).await })
                 .is_err()
             {
-                tracing::warn!(
-                    "live view: connections still open after {timeout:?}; closing them"
-                );
+                tracing::warn!("live view: connections still open after {timeout:?}; closing them");
             }
         }
         if let Some(runtime) = self.runtime.take() {

@@ -333,6 +333,19 @@ mod tests {
     }
 
     #[test]
+    fn an_ipv6_address_binds_when_the_machine_has_ipv6() {
+        let addr: SocketAddr = "[::1]:0".parse().unwrap();
+        match LiveView::start(addr, LiveOptions::default()) {
+            Ok((_, view)) => {
+                assert!(view.ws_url().starts_with("ws://[::1]:"), "{}", view.ws_url());
+                view.close();
+            }
+            // No IPv6 loopback here: the error says so.
+            Err(e) => assert!(e.to_string().contains("[::1]:0"), "{e}"),
+        }
+    }
+
+    #[test]
     fn a_view_starts_on_a_free_port_and_stops_cleanly() {
         let addr: SocketAddr = "127.0.0.1:0".parse().unwrap();
         let (mut recorder, view) = LiveView::start(addr, LiveOptions::default()).unwrap();

@@ -337,7 +337,11 @@ mod tests {
         let addr: SocketAddr = "[::1]:0".parse().unwrap();
         match LiveView::start(addr, LiveOptions::default()) {
             Ok((_, view)) => {
-                assert!(view.ws_url().starts_with("ws://[::1]:"), "{}", view.ws_url());
+                assert!(
+                    view.ws_url().starts_with("ws://[::1]:"),
+                    "{}",
+                    view.ws_url()
+                );
                 view.close();
             }
             // No IPv6 loopback here: the error says so.

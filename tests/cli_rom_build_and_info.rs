@@ -47,6 +47,19 @@ fn build_then_info_writes_the_documented_json() {
         "rom info failed: {}",
         String::from_utf8_lossy(&out.stderr)
     );
+    // Into a pipe whose reader is gone (`rigtwin rom info FILE | true`; the reader closes
+    // before the ROM is read and anything printed): ends quietly, no panic message.
+    let mut child = rigtwin()
+        .args(["rom", "info"])
+        .arg(&rom)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!stderr.contains("panicked"), "{stderr}");
     let built: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     let info: serde_json::Value =

@@ -48,9 +48,25 @@ pub enum Command {
     Report(report::ReportArgs),
 }
 
+/// A command whose output goes into a closed pipe (`rigtwin rom info FILE | head`) ends
+/// quietly, as Unix tools do, instead of panicking in `println!`. Not for `run` and `demo`:
+/// a session must ramp its drive down and close its log whatever happens to stdout (they
+/// print after the log is closed).
+fn default_sigpipe() {
+    #[cfg(unix)]
+    // SAFETY: restores the default disposition of SIGPIPE before any thread starts; no
+    // handler is installed.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
+}
+
 /// Entry point of the binary.
 pub fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
+    if !matches!(cli.command, Command::Run(_) | Command::Demo(_)) {
+        default_sigpipe();
+    }
     let filter = tracing_subscriber::EnvFilter::try_new(&cli.log)
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn"));
     tracing_subscriber::fmt()

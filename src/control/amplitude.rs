@@ -270,7 +270,10 @@ mod tests {
             let worst = (0..12)
                 .map(|i| window_error_under_a_beat(TAU * f64::from(i) / 12.0, record).abs())
                 .fold(0.0, f64::max);
-            assert!(worst < 0.004, "{record}-period windows: worst error {worst:.4}");
+            assert!(
+                worst < 0.004,
+                "{record}-period windows: worst error {worst:.4}"
+            );
         }
     }
 }

@@ -96,7 +96,7 @@ pub struct TwinStatus {
     pub behind: bool,
     /// Blocks offered to the task.
     pub blocks_offered: u64,
-    /// Blocks the twin has processed.
+    /// Blocks the twin has processed (in this task).
     pub blocks_processed: u64,
     /// Blocks skipped because the twin was behind.
     pub blocks_skipped: u64,
@@ -108,7 +108,7 @@ pub struct TwinStatus {
     pub gaps: u64,
     /// Blocks still queued when the task was aborted (dropped unprocessed).
     pub blocks_discarded: u64,
-    /// Twin steps done.
+    /// Twin steps done (in this task).
     pub steps: u64,
     /// Twin steps per wall second of the twin thread's busy time (including any throttle).
     pub steps_per_s: f64,

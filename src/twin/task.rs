@@ -341,6 +341,8 @@ fn run(
     throttle: f64,
 ) {
     let fs = twin.sample_rate();
+    // The twin may have run before (e.g. settled): the status counts this task's work.
+    let base = twin.counters();
     while let Ok(q) = rx.recv() {
         shared.taken.fetch_add(1, Ordering::AcqRel);
         if shared.stop.load(Ordering::Acquire) {
@@ -367,12 +369,12 @@ fn run(
             let mut p = shared.progress();
             p.busy += busy;
             p.twin_time = twin.time();
-            p.processed = c.blocks;
-            p.steps = c.steps;
+            p.processed = c.blocks - base.blocks;
+            p.steps = c.steps - base.steps;
             p.data_s += data_s;
-            p.solver_failures = c.solver_failures;
-            p.restarts = c.restarts;
-            p.gaps = c.gaps;
+            p.solver_failures = c.solver_failures - base.solver_failures;
+            p.restarts = c.restarts - base.restarts;
+            p.gaps = c.gaps - base.gaps;
         }
         let event = match result {
             Ok(block) => TwinEvent::Block(block),

@@ -515,3 +515,27 @@ fn abort_discards_the_queue_and_drop_joins() {
     assert!(task.push(&b).unwrap_err().to_string().contains("10 counts"));
     drop(task);
 }
+
+#[test]
+fn task_status_counts_only_its_own_work() {
+    // A twin that ran (settled) before it was handed to the task.
+    let rom = stub_rom(&[50.0], 0.01, 0.5, 1.0);
+    let lay = layout();
+    let a = sine(2.0, 50.0);
+    let mut twin = Twin::new(&rom, &TwinSpec::default(), &lay, 1.0).unwrap();
+    for s in 0..5 {
+        twin.push_block(&block(&lay, s, &a)).unwrap();
+    }
+    let spec = TwinSpec::default();
+    let (mut task, mut rx) = TwinTask::spawn(twin, &spec).unwrap();
+    for s in 5..8 {
+        task.push(&block(&lay, s, &a)).unwrap();
+    }
+    let status = task.finish().unwrap();
+    assert_eq!(status.blocks_processed, 3);
+    assert_eq!(status.steps, 3 * 256 * 5);
+    assert_eq!(status.gaps, 0);
+    assert_eq!(status.twin_time, 8.0 * 256.0 / FS);
+    assert_eq!(status.input_time, 8.0 * 256.0 / FS);
+    assert_eq!(collect(&mut rx).len(), 3);
+}

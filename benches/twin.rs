@@ -4,7 +4,10 @@
 //! platform accelerometers) carrying a synthesised sine base acceleration, at the twin's
 //! default step (5 steps per sample, about 1000 per 1FU period):
 //! - `open`: Omega = 0.90 omega_2, base level 2e-5 l, clearance 2.78e-3 l (no contact);
-//! - `impacts`: Omega = omega_2, high level 6e-5 l, clearance 2.78e-3 l (sustained impacts).
+//! - `impacts`: Omega = omega_2, high level 6e-5 l, clearance 2.78e-3 l (sustained impacts);
+//! - `touching`: Omega = omega_2, low level 0.5e-5 l, clearance 0 (the probes touch at rest:
+//!   most pairs closed at once in the contact phases, the worst case; runs a tenth of the
+//!   data of the others).
 //!
 //! Each case settles for `--settle` periods, then runs `--seconds` of data `--repeat` times
 //! from the settled twin (sync core, `Twin::push_block`, one JSON line per run), then once
@@ -95,6 +98,8 @@ struct Case {
     omega_ratio: f64,
     level: f64,
     clearance: f64,
+    /// Fraction of `--seconds` and `--settle` the case runs (the slow case runs less).
+    share: f64,
 }
 
 fn main() {
@@ -130,12 +135,21 @@ fn main() {
             omega_ratio: 0.90,
             level: 2e-5,
             clearance: 2.78e-3,
+            share: 1.0,
         },
         Case {
             name: "impacts",
             omega_ratio: 1.0,
             level: 6e-5,
             clearance: 2.78e-3,
+            share: 1.0,
+        },
+        Case {
+            name: "touching",
+            omega_ratio: 1.0,
+            level: 0.5e-5,
+            clearance: 0.0,
+            share: 0.1,
         },
     ];
     let mut summary = Vec::new();
@@ -143,8 +157,8 @@ fn main() {
         let omega = case.omega_ratio * w2;
         let clearance = case.clearance * l;
         let mut twin = Twin::new(&rom, &spec, &layout, clearance).expect("twin");
-        let settle_blocks = (args.settle * 2.0 * PI / omega / block_s).ceil() as u64;
-        let run_blocks = (args.seconds / block_s).ceil() as u64;
+        let settle_blocks = (case.share * args.settle * 2.0 * PI / omega / block_s).ceil() as u64;
+        let run_blocks = (case.share * args.seconds / block_s).ceil() as u64;
         for b in blocks(&layout, 0, settle_blocks, case.level * l, omega) {
             twin.push_block(&b).expect("settle");
         }
@@ -155,6 +169,7 @@ fn main() {
         for run in 0..args.repeat {
             let mut t = twin.clone();
             let before = t.counters();
+            let solver_before = t.solver_counters();
             let start = Instant::now();
             let mut contact = 0usize;
             for b in &input {
@@ -163,16 +178,23 @@ fn main() {
             }
             let secs = start.elapsed().as_secs_f64();
             let c = t.counters();
+            let sc = t.solver_counters();
+            let solves = sc.solves - solver_before.solves;
+            let sweeps = sc.iterations - solver_before.iterations;
+            let closed_steps = sc.closed_steps - solver_before.closed_steps;
             let steps = c.steps - before.steps;
             factors.push(data_s / secs);
             rates.push(steps as f64 / secs);
             println!(
-                "{{\"case\":\"{}\",\"run\":{run},\"data_seconds\":{data_s:.3},\"wall_seconds\":{secs:.4},\"realtime_factor\":{:.2},\"steps_per_second\":{:.0},\"steps_per_sample\":{},\"contact_sample_fraction\":{:.4},\"solver_failures\":{}}}",
+                "{{\"case\":\"{}\",\"run\":{run},\"data_seconds\":{data_s:.3},\"wall_seconds\":{secs:.4},\"realtime_factor\":{:.2},\"steps_per_second\":{:.0},\"steps_per_sample\":{},\"contact_sample_fraction\":{:.4},\"solves_per_step\":{:.4},\"closed_step_fraction\":{:.4},\"sweeps_per_solve\":{:.1},\"solver_failures\":{}}}",
                 case.name,
                 data_s / secs,
                 steps as f64 / secs,
                 t.steps_per_sample(),
                 contact as f64 / (run_blocks as f64 * layout.block_size as f64),
+                solves as f64 / steps as f64,
+                closed_steps as f64 / steps as f64,
+                sweeps as f64 / solves.max(1) as f64,
                 c.solver_failures - before.solver_failures,
             );
         }
@@ -204,8 +226,10 @@ fn main() {
         ));
     }
     eprintln!(
-        "median over {} runs of {} s of data (sync core; task: one run):",
-        args.repeat, args.seconds
+        "median over {} runs of {} s of data ({} s touching; sync core; task: one run):",
+        args.repeat,
+        args.seconds,
+        0.1 * args.seconds
     );
     for (c, f, r, tf) in summary {
         eprintln!("  {c:>8}: {f:>6.2} x real time, {r:>9.0} steps/s (task: {tf:.2} x real time)");

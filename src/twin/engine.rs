@@ -217,6 +217,12 @@ impl Twin {
         self.counters
     }
 
+    /// The contact solver's cumulative counters (solves, sweeps, failures) since the twin
+    /// was created or last restarted at rest.
+    pub fn solver_counters(&self) -> crate::sim::SolverCounters {
+        self.state.counters()
+    }
+
     /// The clearance in use, m.
     pub fn clearance(&self) -> f64 {
         self.integrator.clearance()

@@ -9,7 +9,7 @@
 //! - [`task`]: [`TwinTask`], the core on a dedicated thread behind a bounded queue that never
 //!   blocks the producer, with lag and skipped blocks in its status.
 //! - [`output`]: the logged types ([`TwinBlock`], [`TwinStatus`], [`TwinEvent`]).
-//! - [`error`]: [`TwinError`].
+//! - [`error`]: the error type [`TwinError`].
 
 // NOTE: validation uses negated comparisons such as `!(dt < limit)` on purpose: they reject
 // NaN together with out-of-range values.

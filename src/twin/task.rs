@@ -47,7 +47,9 @@ use super::output::TwinBlock;
 pub type TwinReceiver = tokio::sync::mpsc::UnboundedReceiver<TwinEvent>;
 
 /// What became of a block offered to the twin task.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize, schemars::JsonSchema,
+)]
 #[serde(tag = "kind", rename_all = "snake_case")]
 pub enum Pushed {
     /// Queued for the twin.

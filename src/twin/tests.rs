@@ -539,3 +539,52 @@ fn task_status_counts_only_its_own_work() {
     assert_eq!(status.input_time, 8.0 * 256.0 / FS);
     assert_eq!(collect(&mut rx).len(), 3);
 }
+
+#[test]
+fn outputs_round_trip_through_json_and_have_schemas() {
+    let rom = stub_rom(&[50.0], 0.01, 0.5, 1.0);
+    let lay = layout();
+    let a = sine(2.0, 50.0);
+    let mut twin = Twin::new(&rom, &TwinSpec::default(), &lay, 1.0).unwrap();
+    twin.push_block(&block(&lay, 0, &a)).unwrap();
+    let b = twin.push_block(&block(&lay, 2, &a)).unwrap();
+    assert!(b.gap.is_some());
+    for ev in [
+        TwinEvent::Block(b),
+        TwinEvent::Error {
+            seq: 3,
+            message: "bad".into(),
+        },
+    ] {
+        let json = serde_json::to_string(&ev).unwrap();
+        assert_eq!(serde_json::from_str::<TwinEvent>(&json).unwrap(), ev);
+    }
+    let status = TwinStatus {
+        lag_s: 0.5,
+        last_skipped_seq: Some(7),
+        ..TwinStatus::default()
+    };
+    let json = serde_json::to_string(&status).unwrap();
+    assert_eq!(serde_json::from_str::<TwinStatus>(&json).unwrap(), status);
+
+    let block_schema = serde_json::to_string(&schemars::schema_for!(TwinBlock)).unwrap();
+    for key in [
+        "velocity",
+        "contact",
+        "normal_force",
+        "solver_failures",
+        "gap",
+        "from_sample",
+    ] {
+        assert!(
+            block_schema.contains(&format!("\"{key}\"")),
+            "{key}: {block_schema}"
+        );
+    }
+    let status_schema = serde_json::to_string(&schemars::schema_for!(TwinStatus)).unwrap();
+    for key in ["lag_s", "queue_depth", "blocks_skipped", "steps_per_s"] {
+        assert!(status_schema.contains(&format!("\"{key}\"")), "{key}");
+    }
+    let event_schema = serde_json::to_string(&schemars::schema_for!(TwinEvent)).unwrap();
+    assert!(event_schema.contains("\"kind\""), "{event_schema}");
+}

@@ -1,8 +1,9 @@
 //! Guards the rig description's error reporting: every bad input (TOML syntax, unknown or
 //! mistyped keys, non-positive dimensions, unknown materials, a contact patch that does not
 //! fit the probe or the beam, bad node counts, clearance, friction, damping, reduction,
-//! sensors, unreadable file) is rejected with a message that names the file, the key (or
-//! line:column) and what was expected. Also guards the canonical hash.
+//! sensors, the simulated rig's truth variants, unreadable file) is rejected with a message
+//! that names the file, the key (or line:column) and what was expected. Also guards the
+//! canonical hash (sim-only tables such as `[truth.variants]` stay out of it).
 
 use std::path::{Path, PathBuf};
 
@@ -339,4 +340,134 @@ fn canonical_hash_ignores_layout_but_not_values() {
     // A changed value does.
     let changed = set("contact", "clearance", "0.0007");
     assert_ne!(parse(&changed).unwrap().canonical_hash(), h);
+}
+
+/// The reference text with the simulated rig's hidden physics appended.
+fn with_variants(tables: &str) -> String {
+    format!("{}\n{tables}", reference_text())
+}
+
+#[test]
+fn truth_variants_parse_and_stay_out_of_the_hash() {
+    let h = parse(&reference_text()).unwrap().canonical_hash();
+    let cfg = parse(&with_variants(
+        "[truth.variants]\n\
+         sensor_gains = [{ channel = \"upper_tip\", gain = 1.03 }]\n\
+         [truth.variants.clamp_friction]\n\
+         stiffness_fraction = 0.1\n\
+         half_slip_tip_amplitude = 2e-4\n\
+         beams = [\"upper\"]\n\
+         [truth.variants.wear]\n\
+         coefficient = 1e-6\n\
+         max_growth = 5e-5\n\
+         [truth.variants.tilt]\n\
+         angle = 2e-3\n",
+    ))
+    .unwrap();
+    let v = &cfg.sim_rig_spec().truth.variants;
+    assert!(v.any());
+    assert_eq!(v.clamp_friction.as_ref().unwrap().sliders, 64);
+    assert_eq!(v.wear.as_ref().unwrap().max_growth, Some(5e-5));
+    assert_eq!(v.tilt.as_ref().unwrap().axis, [0.0, 1.0]);
+    // Sim-only: the ROM identity does not change.
+    assert_eq!(cfg.canonical_hash(), h);
+    // The embedded default has no hidden physics.
+    assert!(!RigConfig::default_rig().truth.variants.any());
+}
+
+#[test]
+fn truth_variants_bad_input_names_the_key() {
+    // A misspelled key: a schema error with its dotted path and line.
+    let text = with_variants("[truth.variants.wear]\ncoeficient = 1e-6\n");
+    let err = parse(&text).unwrap_err();
+    let msg = err.to_string();
+    assert!(matches!(err, ConfigError::Schema { .. }), "{msg}");
+    assert_eq!(err.key(), Some("truth.variants.wear.coeficient"), "{msg}");
+    let line = text
+        .lines()
+        .position(|l| l.starts_with("coeficient"))
+        .unwrap()
+        + 1;
+    assert!(msg.starts_with(&format!("{FILE}:{line}:")), "{msg}");
+    assert!(
+        msg.contains("expected `coefficient` or `max_growth`"),
+        "{msg}"
+    );
+
+    let err = parse(&with_variants("[truth.variants]\nclamp = 1\n")).unwrap_err();
+    assert_eq!(err.key(), Some("truth.variants.clamp"), "{err}");
+
+    let err = parse(&with_variants(
+        "[truth.variants]\nsensor_gains = [{ channel = \"upper_tip\", gain = \"high\" }]\n",
+    ))
+    .unwrap_err();
+    assert!(err.to_string().contains("expected f64"), "{err}");
+
+    // Out-of-range values and an unknown channel: the key, the value and what was expected.
+    for (tables, expect) in [
+        (
+            "[truth.variants.clamp_friction]\nstiffness_fraction = 1.5\n\
+             half_slip_tip_amplitude = 2e-4\n",
+            "truth.variants.clamp_friction.stiffness_fraction = 1.5: expected a share of the \
+             modal stiffness in [0, 1)",
+        ),
+        (
+            "[truth.variants.clamp_friction]\nstiffness_fraction = 0.1\n\
+             half_slip_tip_amplitude = -2e-4\n",
+            "truth.variants.clamp_friction.half_slip_tip_amplitude = -0.0002: expected",
+        ),
+        (
+            "[truth.variants.wear]\ncoefficient = nan\n",
+            "truth.variants.wear.coefficient = NaN: expected",
+        ),
+        (
+            "[truth.variants.tilt]\nangle = -0.2\n",
+            "truth.variants.tilt.angle = -0.2: expected a tilt angle with |angle| <= 0.1 rad",
+        ),
+        (
+            "[truth.variants]\nsensor_gains = [{ channel = \"upper_tipp\", gain = 1.03 }]\n",
+            "truth.variants.sensor_gains[0].channel = \"upper_tipp\": expected a DAQ channel \
+             name (channels: platform_1",
+        ),
+    ] {
+        let err = parse(&with_variants(tables)).unwrap_err();
+        let msg = err.to_string();
+        assert!(matches!(err, ConfigError::Service { .. }), "{msg}");
+        assert!(msg.starts_with(FILE), "{msg}");
+        assert!(msg.contains(expect), "{tables}\n-> {msg}");
+    }
+}
+
+#[test]
+fn documented_truth_variants_examples_are_valid() {
+    // The commented example at the end of two-beam.toml, uncommented.
+    let text = reference_text();
+    let start = text
+        .find("# [truth.variants]\n")
+        .expect("example in two-beam.toml");
+    let example: String = text[start..]
+        .lines()
+        .map(|l| l.strip_prefix("# ").unwrap_or(l.trim_start_matches('#')))
+        .collect::<Vec<_>>()
+        .join("\n");
+    let cfg = parse(&format!("{}\n{example}\n", &text[..start])).unwrap();
+    let v = cfg.sim_rig_spec().truth.variants;
+    assert!(v.clamp_friction.is_some() && v.wear.is_some() && v.tilt.is_some());
+    assert_eq!(v.sensor_gains.len(), 1);
+    // The example in rig-config/README.md.
+    let readme = std::fs::read_to_string(
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("rig-config/README.md"),
+    )
+    .unwrap();
+    let block = readme
+        .split("```toml\n")
+        .nth(1)
+        .and_then(|b| b.split("```").next())
+        .expect("a toml block in rig-config/README.md");
+    let from_readme = parse(&with_variants(block))
+        .unwrap()
+        .sim_rig_spec()
+        .truth
+        .variants;
+    assert_eq!(from_readme, v);
 }

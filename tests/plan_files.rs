@@ -69,7 +69,7 @@ fn demo_is_a_short_down_up_pair_at_the_high_level() {
         assert_eq!(t.level, 6.0e-5);
         assert_eq!(t.clearance, 2.78e-3);
         assert_eq!(t.steps, 13);
-        assert_eq!((t.settle_periods, t.record_periods), (100, 50));
+        assert_eq!((t.settle_periods, t.record_periods), (100, 100));
     }
     let wd = down.omega_ratios();
     let mut wu = up.omega_ratios();

@@ -99,6 +99,7 @@ pub(crate) fn run(a: DemoArgs) -> anyhow::Result<()> {
         inject: &[],
         rebuild: false,
         quiet: a.quiet,
+        foxglove: None,
     })?;
     super::run::print_session(&o);
     let json = a.out.join("session.json");

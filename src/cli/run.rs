@@ -1,15 +1,18 @@
 //! `rigtwin run`: a stepped-sine session on a rig backend (the simulated rig today), logged to
-//! MCAP, with a JSON summary; `rigtwin replay`: the summary recomputed from a recording.
+//! MCAP, with a JSON summary and optionally served live to the Foxglove app (`--foxglove`);
+//! `rigtwin replay`: the summary recomputed from a recording.
 
 use anyhow::{bail, Context};
 use clap::{Args, ValueEnum};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::collections::BTreeMap;
+use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use crate::config::RigConfig;
-use crate::control::{run_session, SessionProgress, SessionSetup, SessionSummary};
+use crate::control::{run_session, SessionProgress, SessionSetup, SessionSummary, Tee};
+use crate::log::live::{LiveOptions, LiveStats, LiveView};
 use crate::log::recorder::McapRecorder;
 use crate::log::{Attachment, LogOptions, SessionLog};
 use crate::plan::Plan;
@@ -44,6 +47,13 @@ pub struct RunArgs {
     /// Pace the simulated rig to the wall clock (default: virtual time, as fast as it runs).
     #[arg(long)]
     pub realtime: bool,
+    /// Serve the session live to the Foxglove app (Open connection > Foxglove WebSocket) on
+    /// ADDR: PORT (binds 127.0.0.1 only), IP:PORT (0.0.0.0:PORT for every interface) or
+    /// [IPv6]:PORT; port 0 picks a free port. Off by default. Topics as in the MCAP log, the
+    /// DAQ decimated for plotting on /live/daq (min/max/mean per channel, 200 points per rig
+    /// second; plot e.g. /live/daq.upper_tip.max). The server stops when the session ends.
+    #[arg(long, value_name = "ADDR", value_parser = crate::log::live::parse_addr)]
+    pub foxglove: Option<SocketAddr>,
     /// Inject a fault into the simulated rig, as JSON, e.g.
     /// '{"kind":"dead_channel","at_s":3.0,"channel":"upper_tip"}' (repeatable). Kinds:
     /// daq_stall, dead_channel, drive_saturation, clearance_change.
@@ -90,6 +100,8 @@ pub(crate) struct RunOutcome {
     pub wall_seconds: f64,
     pub messages: u64,
     pub overruns: u64,
+    /// What the live view did (with `--foxglove`).
+    pub live: Option<LiveStats>,
 }
 
 /// A session on the simulated rig.
@@ -110,6 +122,31 @@ pub(crate) struct SimSession<'a> {
     pub rebuild: bool,
     /// No progress display.
     pub quiet: bool,
+    /// Serve the session live to the Foxglove app on this address.
+    pub foxglove: Option<SocketAddr>,
+}
+
+/// Starts the live view on `addr` and prints where to connect.
+fn start_live_view(addr: SocketAddr) -> anyhow::Result<(crate::log::live::LiveRecorder, LiveView)> {
+    let (recorder, view) = LiveView::start(addr, LiveOptions::default())
+        .with_context(|| format!("--foxglove {addr}"))?;
+    let bound = view.local_addr();
+    if bound.ip().is_unspecified() {
+        println!(
+            "live view: open Foxglove, connect to ws://{}:{} (this machine) or \
+             ws://HOST:{} (HOST: this machine's name or address, from another one)",
+            if bound.is_ipv4() {
+                "127.0.0.1"
+            } else {
+                "[::1]"
+            },
+            bound.port(),
+            bound.port()
+        );
+    } else {
+        println!("live view: open Foxglove, connect to {}", view.ws_url());
+    }
+    Ok((recorder, view))
 }
 
 /// Runs the plan on the simulated rig, logging to the session's file.
@@ -123,7 +160,10 @@ pub(crate) fn run_sim_session(session: &SimSession<'_>) -> anyhow::Result<RunOut
         inject,
         rebuild,
         quiet,
+        foxglove,
     } = *session;
+    // First, so that a port in use fails before the ROMs are built.
+    let (live_recorder, live_view) = foxglove.map(start_live_view).transpose()?.unzip();
     let (twin, truth, twin_path) = roms(cfg, rebuild, quiet)?;
     let l = cfg.rig.beam_length;
     let spec = cfg.sim_rig_spec();
@@ -149,6 +189,9 @@ pub(crate) fn run_sim_session(session: &SimSession<'_>) -> anyhow::Result<RunOut
         format!("{:e}", twin.omega_ref()),
     );
     session_meta.insert("beam_length_m".to_string(), format!("{l:e}"));
+    // The simulated rig's hidden physics (`[truth.variants]`, also in the rig.toml
+    // attachment), parsed: `{}` when none is on.
+    session_meta.insert("truth_variants".to_string(), spec.truth.variants.to_json());
     session_meta.insert(
         "started_unix_s".to_string(),
         std::time::SystemTime::now()
@@ -189,7 +232,7 @@ pub(crate) fn run_sim_session(session: &SimSession<'_>) -> anyhow::Result<RunOut
         attachments,
     )
     .with_context(|| format!("creating the session log {}", out.display()))?;
-    let mut recorder = McapRecorder::new(handle)?;
+    let mut recorder = Tee(McapRecorder::new(handle)?, live_recorder);
 
     let bar = if quiet {
         ProgressBar::hidden()
@@ -227,14 +270,17 @@ pub(crate) fn run_sim_session(session: &SimSession<'_>) -> anyhow::Result<RunOut
     })?;
     let (summary, overruns) = summary;
     bar.finish_and_clear();
-    let messages = recorder.messages();
+    let messages = recorder.0.messages();
     drop(recorder);
     join.close().context("closing the session log")?;
+    let wall_seconds = t0.elapsed().as_secs_f64();
+    let live = live_view.map(LiveView::close);
     Ok(RunOutcome {
         summary,
-        wall_seconds: t0.elapsed().as_secs_f64(),
+        wall_seconds,
         messages,
         overruns,
+        live,
     })
 }
 
@@ -249,6 +295,15 @@ pub(crate) fn print_session(o: &RunOutcome) {
         o.messages,
         o.overruns
     );
+    if let Some(l) = &o.live {
+        println!(
+            "live view: stopped; {} messages sent to clients ({} on /live/daq), {} decimated DAQ points, {} records dropped",
+            l.sent_total(),
+            l.sent.get(crate::log::live::TOPIC_LIVE_DAQ).copied().unwrap_or(0),
+            l.points,
+            l.dropped_records
+        );
+    }
     print_summary(&o.summary);
 }
 
@@ -293,6 +348,12 @@ pub(crate) fn run(a: RunArgs) -> anyhow::Result<()> {
         ),
     };
     let plan = Plan::from_path(&a.plan)?;
+    if cfg.truth.variants.any() {
+        println!(
+            "simulated rig: hidden physics on ([truth.variants]): {}",
+            cfg.truth.variants.to_json()
+        );
+    }
     let inject: Vec<InjectedFault> = a
         .inject
         .iter()
@@ -310,6 +371,7 @@ pub(crate) fn run(a: RunArgs) -> anyhow::Result<()> {
         inject: &inject,
         rebuild: a.rebuild,
         quiet: a.quiet,
+        foxglove: a.foxglove,
     })?;
     print_session(&o);
     println!("log: {}", a.out.display());

@@ -111,6 +111,14 @@ pub enum EventKind {
         /// The step.
         info: StepInfo,
     },
+    /// A record window missed `[control] record_tolerance` and is recorded again from the
+    /// next sample (the step's summary comes from a later window).
+    RecordRejected {
+        /// The rejected window.
+        info: StepInfo,
+        /// Relative error of its fundamental base-displacement amplitude, -.
+        base_amp_error: f64,
+    },
     /// A test ended.
     TestEnd {
         /// Test name.

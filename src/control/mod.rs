@@ -19,7 +19,7 @@ pub use events::{ControlState, EventKind, Phase, SessionEvent};
 pub use procedure::{Procedure, SessionSetup};
 pub use safety::{AbortReason, SafetyMonitor};
 pub use session::{
-    run_session, NullRecorder, SessionError, SessionProgress, SessionRecorder, SessionSummary,
+    run_session, NullRecorder, SessionError, SessionProgress, SessionRecorder, SessionSummary, Tee,
     TestSummary,
 };
 pub use spec::{ControlSpec, SafetySpec};

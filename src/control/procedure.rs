@@ -88,6 +88,8 @@ pub struct Procedure {
     drive_v: f64,
     /// Blocks received while waiting for the drive to take a step's frequency.
     pending_blocks: u32,
+    /// Record window of the step (1-based).
+    record_attempt: u32,
 }
 
 /// Blocks a step waits for the drive to take its frequency before the session aborts.
@@ -135,6 +137,7 @@ impl Procedure {
             last_update: None,
             drive_v: initial.min(setup.safety.max_drive_v),
             pending_blocks: 0,
+            record_attempt: 1,
         })
     }
 
@@ -267,6 +270,7 @@ impl Procedure {
                 self.spec().settle_periods,
             ));
             self.step_start_sample = block.first_sample;
+            self.record_attempt = 1;
             self.stage = Stage::Settle;
         }
         let inv = 1.0 / self.platform.len() as f64;
@@ -355,7 +359,9 @@ impl Procedure {
         self.recorded = 0;
         self.record_first = first;
         self.settled = settled;
-        self.settle_seconds = (first - self.step_start_sample) as f64 * dt;
+        if self.record_attempt == 1 {
+            self.settle_seconds = (first - self.step_start_sample) as f64 * dt;
+        }
         self.stage = Stage::Record;
         out.events.push(SessionEvent {
             time: first as f64 * dt,
@@ -387,11 +393,29 @@ impl Procedure {
             record_first_sample: self.record_first,
             record_samples: self.record_len,
             contact_threshold_v: self.setup.control.contact_threshold_v,
+            record_attempt: self.record_attempt,
         };
         let summary =
             summarize(&self.layout, &info, &self.record).map_err(|e| AbortReason::Backend {
                 message: format!("step summary: {e}"),
             })?;
+        let base_amp_error = summary.base_amp_measured / info.base_amp_target - 1.0;
+        // NaN (a broken window) is never within tolerance.
+        let within = base_amp_error.abs() <= self.setup.control.record_tolerance;
+        if !within && self.record_attempt < self.setup.control.record_attempts {
+            out.events.push(SessionEvent {
+                time,
+                sample,
+                kind: EventKind::RecordRejected {
+                    info,
+                    base_amp_error,
+                },
+            });
+            self.record_attempt += 1;
+            let settled = self.settled;
+            self.begin_record(out, sample, settled);
+            return Ok(());
+        }
         out.events.push(SessionEvent {
             time,
             sample,

@@ -1,6 +1,7 @@
 //! The async stepped-sine session: drives a [`RigBackend`] through the [`Procedure`], checks
 //! the safety limits on every block, hands every record to a [`SessionRecorder`] (the MCAP
-//! log) and ramps the drive down at the end or on an abort, recording the blocks of the ramp.
+//! log, teed with the live view by [`Tee`]) and ramps the drive down at the end or on an
+//! abort, recording the blocks of the ramp.
 //!
 //! Shutdown (Ctrl-C) is a future passed in: when it completes, the session aborts with
 //! [`AbortReason::Operator`]. The DAQ watchdog is a wall-clock timeout on every block.
@@ -54,6 +55,62 @@ impl SessionRecorder for NullRecorder {
     }
     fn step(&mut self, _: f64, _: &StepInfo, _: &StepSummary) -> Result<(), String> {
         Ok(())
+    }
+}
+
+/// No recorder: `None` keeps nothing (e.g. the live view when `--foxglove` is not given).
+impl<R: SessionRecorder> SessionRecorder for Option<R> {
+    fn layout(&mut self, layout: &DaqLayout) -> Result<(), String> {
+        self.as_mut().map_or(Ok(()), |r| r.layout(layout))
+    }
+    fn block(&mut self, block: &DaqBlock) -> Result<(), String> {
+        self.as_mut().map_or(Ok(()), |r| r.block(block))
+    }
+    fn control(&mut self, state: &ControlState) -> Result<(), String> {
+        self.as_mut().map_or(Ok(()), |r| r.control(state))
+    }
+    fn event(&mut self, event: &SessionEvent) -> Result<(), String> {
+        self.as_mut().map_or(Ok(()), |r| r.event(event))
+    }
+    fn status(&mut self, time: f64, status: &RigStatus) -> Result<(), String> {
+        self.as_mut().map_or(Ok(()), |r| r.status(time, status))
+    }
+    fn step(&mut self, time: f64, info: &StepInfo, summary: &StepSummary) -> Result<(), String> {
+        self.as_mut()
+            .map_or(Ok(()), |r| r.step(time, info, summary))
+    }
+}
+
+/// Hands every record to two recorders, the first then the second (e.g. the MCAP log, then the
+/// live view). Both always get the record; the first error (the first recorder's when both
+/// fail) is returned.
+#[derive(Debug, Default, Clone, Copy)]
+pub struct Tee<A, B>(pub A, pub B);
+
+impl<A: SessionRecorder, B: SessionRecorder> SessionRecorder for Tee<A, B> {
+    fn layout(&mut self, layout: &DaqLayout) -> Result<(), String> {
+        let a = self.0.layout(layout);
+        a.and(self.1.layout(layout))
+    }
+    fn block(&mut self, block: &DaqBlock) -> Result<(), String> {
+        let a = self.0.block(block);
+        a.and(self.1.block(block))
+    }
+    fn control(&mut self, state: &ControlState) -> Result<(), String> {
+        let a = self.0.control(state);
+        a.and(self.1.control(state))
+    }
+    fn event(&mut self, event: &SessionEvent) -> Result<(), String> {
+        let a = self.0.event(event);
+        a.and(self.1.event(event))
+    }
+    fn status(&mut self, time: f64, status: &RigStatus) -> Result<(), String> {
+        let a = self.0.status(time, status);
+        a.and(self.1.status(time, status))
+    }
+    fn step(&mut self, time: f64, info: &StepInfo, summary: &StepSummary) -> Result<(), String> {
+        let a = self.0.step(time, info, summary);
+        a.and(self.1.step(time, info, summary))
     }
 }
 

@@ -41,6 +41,14 @@ pub struct StepInfo {
     pub record_samples: usize,
     /// Contact-voltage threshold used, V.
     pub contact_threshold_v: f64,
+    /// Which record window of the step this is (1 = the first; a window whose fundamental
+    /// base amplitude misses `[control] record_tolerance` is recorded again).
+    #[serde(default = "first_attempt")]
+    pub record_attempt: u32,
+}
+
+fn first_attempt() -> u32 {
+    1
 }
 
 /// One step of a measured stepped sine: the metric keys of `rigtwin simulate` plus the
@@ -64,6 +72,10 @@ pub struct StepSummary {
     pub settled: bool,
     /// Rig time of the first recorded sample, s.
     pub record_start_s: f64,
+    /// Which record window of the step this is (1 = the first; see
+    /// [`StepInfo::record_attempt`]).
+    #[serde(default = "first_attempt")]
+    pub record_attempt: u32,
 }
 
 /// Errors of a step summary.
@@ -239,5 +251,6 @@ pub fn summarize(
         settle_seconds: info.settle_seconds,
         settled: info.settled,
         record_start_s: info.record_first_sample as f64 * w.dt,
+        record_attempt: info.record_attempt,
     })
 }

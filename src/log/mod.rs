@@ -12,11 +12,14 @@
 //! - `scan` (private): the record walk that recovers truncated files.
 //! - [`recorder`]: the topics of a stepped-sine session and the recorder that logs them.
 //! - [`replay`]: a session's summary recomputed from its raw recording.
+//! - [`live`]: the live view, the session's channels served to the Foxglove app over
+//!   WebSocket (`rigtwin run --foxglove ADDR`), the DAQ decimated for plotting.
 //!
 //! Every file carries a metadata record named [`RIGTWIN_METADATA`] with the crate version and
 //! [`FORMAT_VERSION`]; [`SessionRead::require_rigtwin`] checks it.
 
 mod error;
+pub mod live;
 mod options;
 pub mod reader;
 pub mod recorder;

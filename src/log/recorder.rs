@@ -37,8 +37,9 @@ pub struct StepMessage {
 /// Rig status as logged.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
 pub struct StatusMessage {
-    /// Rig time, s.
-    pub time: f64,
+    /// Rig time of the first sample of the block after which the status was read, s (the
+    /// message's log time). The status's own `time` is that of the last delivered sample.
+    pub block_time: f64,
     /// The status.
     #[serde(flatten)]
     pub status: RigStatus,
@@ -119,7 +120,7 @@ impl SessionRecorder for McapRecorder {
     }
     fn status(&mut self, time: f64, status: &RigStatus) -> Result<(), String> {
         let m = StatusMessage {
-            time,
+            block_time: time,
             status: status.clone(),
         };
         self.put(|r| &r.status, time, &m)
@@ -130,5 +131,34 @@ impl SessionRecorder for McapRecorder {
             summary: summary.clone(),
         };
         self.put(|r| &r.steps, time, &m)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Flattening must not repeat a key: JSON with duplicate keys, and a schema whose
+    /// `required` repeats a name, are invalid for the Foxglove app and JSON Schema validators.
+    #[test]
+    fn logged_messages_have_unique_keys_and_valid_required_lists() {
+        let m = StatusMessage {
+            block_time: 1.0,
+            status: RigStatus::default(),
+        };
+        let json = serde_json::to_string(&m).unwrap();
+        let value: serde_json::Map<String, serde_json::Value> =
+            serde_json::from_str(&json).unwrap();
+        assert_eq!(json.matches("\"time\"").count(), 1, "{json}");
+        assert!(value.contains_key("block_time"));
+        let schema = serde_json::to_value(schemars::schema_for!(StatusMessage)).unwrap();
+        let required: Vec<&str> = schema["required"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_str().unwrap())
+            .collect();
+        let unique: std::collections::BTreeSet<&str> = required.iter().copied().collect();
+        assert_eq!(unique.len(), required.len(), "{required:?}");
     }
 }

@@ -7,7 +7,9 @@
 //! drive generator ([`drive`]) -> amplifier, coil, base and ROM ([`shaker`], [`truth`]) ->
 //! channel values ([`sensors`]) -> anti-alias filter at the truth rate ([`filter`]) ->
 //! decimation, noise and ADC ([`daq`]). Parameters live in [`spec`]; faults can be injected
-//! at given rig times ([`InjectedFault`]).
+//! at given rig times ([`InjectedFault`]). Physics the twin does not know (clamp friction,
+//! wear, a tilted protrusion, sensor sensitivity errors) is switched on per variant in
+//! `[truth.variants]` ([`variants`]); all off by default.
 //!
 //! Deterministic: the same ROM, spec, clearance, commands and injected faults give
 //! bit-identical blocks. No clock, no I/O; the per-step loop does not allocate.
@@ -23,11 +25,13 @@ pub mod sensors;
 pub mod shaker;
 pub mod spec;
 pub mod truth;
+pub mod variants;
 
 pub use shaker::{base_acceleration_frf, BaseMode, Complex};
 pub use spec::{
     ChannelNoise, ChannelRanges, ContactCircuitSpec, DaqSpec, ShakerSpec, SimRigSpec, TruthSpec,
 };
+pub use variants::{Beam, ClampFrictionSpec, SensorGainSpec, TiltSpec, TruthVariants, WearSpec};
 
 use serde::{Deserialize, Serialize};
 
@@ -141,8 +145,15 @@ pub struct TruthSnapshot {
     pub contact_closed: bool,
     /// Pairs closed in the last truth step.
     pub closed_pairs: usize,
-    /// Clearance in force, m.
+    /// Clearance in force, m (with the wear variant: the nominal clearance plus
+    /// `clearance_growth`).
     pub clearance: f64,
+    /// Wear variant: clearance growth so far, m (0 when off).
+    pub clearance_growth: f64,
+    /// Wear variant: dissipated contact work that drove it, J (0 when off).
+    pub wear_work: f64,
+    /// Clamp-friction variant: energy dissipated in the clamping joints, J (0 when off).
+    pub joint_dissipation: f64,
     /// Contact solves that stopped at the sweep limit or diverged.
     pub solver_failures: u64,
     /// Whether the truth stopped (non-finite state or solver error; see the Device fault).
@@ -165,6 +176,8 @@ pub struct TruthTrace {
     pub amplifier_output: Vec<f64>,
     /// Truth steps of the sample period with at least one closed pair.
     pub closed_steps: Vec<u32>,
+    /// Clearance in force after the sample period's truth steps, m.
+    pub clearance: Vec<f64>,
 }
 
 /// The simulated rig's deterministic core. See the module docs.
@@ -174,6 +187,10 @@ pub struct SimRig {
     oversampling: u32,
     truth: Truth,
     sensors: Sensors,
+    /// Hidden physics in use (for status and logs).
+    variants: TruthVariants,
+    /// Sensor-gain variant: `(channel, gain)`; empty when off.
+    gains: Vec<(usize, f64)>,
     daq: Daq,
     drive: DriveGenerator,
     /// Channel values of the current truth step (layout order).
@@ -193,8 +210,9 @@ pub struct SimRig {
 
 impl SimRig {
     /// The simulated rig with `truth` as the real structure, at rest, drive off, clearance
-    /// `clearance_m` (m) between the probes. Checks the spec, the ROM (outputs named by the
-    /// beam sensors), the moving mass against the beams' modal mass and the truth step
+    /// `clearance_m` (m) between the probes, with the truth variants of `spec.truth.variants`.
+    /// Checks the spec, the ROM (outputs named by the beam sensors; with clamp friction the
+    /// 1FL/1FU labels), the moving mass against the beams' modal mass and the truth step
     /// against the open stability limit of the ROM with the shaker attached.
     pub fn new(truth: &Rom, spec: &SimRigSpec, clearance_m: f64) -> Result<SimRig, SimRigError> {
         spec.validate()?;
@@ -205,7 +223,8 @@ impl SimRig {
         }
         let fs = spec.daq.sample_rate;
         let mut oversampling = 1;
-        let truth_model = Truth::new(truth, &spec.shaker, clearance_m, |limits| {
+        let hidden = &spec.truth.variants;
+        let truth_model = Truth::new(truth, &spec.shaker, clearance_m, hidden, |limits| {
             oversampling = spec
                 .truth
                 .oversampling_for(fs, limits.dt_max_open(), limits.omega_ref);
@@ -223,6 +242,7 @@ impl SimRig {
             Ok(dt)
         })?;
         let layout = daq::layout(&spec.daq);
+        let gains = variants::sensor_gain::resolve(&hidden.sensor_gains, &layout)?;
         let sensors = Sensors::new(
             spec.daq.platform_accelerometers.len(),
             truth_model.dt(),
@@ -238,6 +258,8 @@ impl SimRig {
             oversampling,
             truth: truth_model,
             sensors,
+            variants: hidden.clone(),
+            gains,
             daq,
             drive: DriveGenerator::default(),
             values: rest,
@@ -260,6 +282,11 @@ impl SimRig {
     /// Truth steps per DAQ sample.
     pub fn oversampling(&self) -> u32 {
         self.oversampling
+    }
+
+    /// The hidden physics switched on in the truth (`[truth.variants]`).
+    pub fn variants(&self) -> &TruthVariants {
+        &self.variants
     }
 
     /// Sets the drive; applies from the next sample (phase-continuous frequency change,
@@ -353,6 +380,9 @@ impl SimRig {
             contact_closed: last.any_closed,
             closed_pairs: self.truth.closed_pairs(),
             clearance: self.truth.clearance(),
+            clearance_growth: self.truth.wear().map_or(0.0, |w| w.1),
+            wear_work: self.truth.wear().map_or(0.0, |w| w.0),
+            joint_dissipation: self.truth.joint_dissipation().unwrap_or(0.0),
             solver_failures: self.truth.solver_failures(),
             failed: self.truth.failure().is_some(),
         }
@@ -386,6 +416,7 @@ impl SimRig {
             tr.coil_current.reserve(len);
             tr.amplifier_output.reserve(len);
             tr.closed_steps.reserve(len);
+            tr.clearance.reserve(len);
         }
         for i in 0..len {
             let t = self.sample_time(first_sample + i as u64);
@@ -402,6 +433,7 @@ impl SimRig {
                 }
                 closed_steps += u32::from(v.any_closed);
                 self.sensors.read(&v, &mut self.values);
+                variants::sensor_gain::apply(&self.gains, &mut self.values);
                 self.daq.filter(&self.values, sub == 0);
                 if sub == 0 {
                     at_sample = Some(v);
@@ -415,6 +447,7 @@ impl SimRig {
                 tr.coil_current.push(v.current);
                 tr.amplifier_output.push(v.amplifier_output);
                 tr.closed_steps.push(closed_steps);
+                tr.clearance.push(self.truth.clearance());
             }
         }
         self.latch_block_faults();

@@ -1,7 +1,8 @@
 //! The simulated rig's parameters (TOML tables `[shaker]`, `[daq]`, `[truth]`): the
 //! electrodynamic shaker and its amplifier, the DAQ (rate, ADC, anti-alias filter, ranges,
-//! noise, contact circuit) and the truth model's time step. Every field states its unit and
-//! default; [`SimRigSpec::validate`] names the key of a bad value.
+//! noise, contact circuit), the truth model's time step and its hidden physics
+//! (`[truth.variants]`, see [`super::variants`]). Every field states its unit and default;
+//! [`SimRigSpec::validate`] names the key of a bad value.
 //!
 //! The defaults model a large electrodynamic shaker carrying the small two-beam rig
 //! (reference section 5: the total moving mass is large compared with the beams' modal mass,
@@ -15,6 +16,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::variants::TruthVariants;
 use super::SimRigError;
 
 /// The simulated rig: shaker, DAQ and truth model.
@@ -234,6 +236,9 @@ pub struct TruthSpec {
     /// Automatic choice: at least this many truth steps per 1FU period (> 0). Default 1000
     /// (the reference's resolution).
     pub min_steps_per_reference_period: f64,
+    /// Physics the twin does not know (`[truth.variants]`): clamp friction, wear, a tilted
+    /// protrusion, sensor sensitivity errors. Default: all off.
+    pub variants: TruthVariants,
 }
 
 impl Default for TruthSpec {
@@ -243,6 +248,7 @@ impl Default for TruthSpec {
             oversampling: None,
             stability_margin: 0.5,
             min_steps_per_reference_period: 1000.0,
+            variants: TruthVariants::default(),
         }
     }
 }
@@ -393,6 +399,7 @@ impl SimRigSpec {
             "truth.min_steps_per_reference_period",
             t.min_steps_per_reference_period,
         )?;
+        t.variants.validate(d)?;
         Ok(())
     }
 }

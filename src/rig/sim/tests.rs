@@ -6,6 +6,7 @@ use faer::Mat;
 
 use super::*;
 use crate::rig::daq::ChannelKind;
+use crate::rig::sim::variants::{Beam, ClampFrictionSpec, SensorGainSpec, TiltSpec, WearSpec};
 use crate::rom::{RomMeta, RomOutput};
 use crate::signal::demodulate;
 
@@ -350,4 +351,122 @@ fn injected_faults_read_from_json() {
         r#"{"kind": "daq_stall", "at_s": 1.0, "extra": 1}"#
     )
     .is_err());
+}
+
+#[test]
+fn truth_variants_check_the_rom_and_name_bad_input() {
+    let rom = stub_rom(55.0, 0.01, 0.1);
+    let clamp = |beams: Vec<Beam>| {
+        let mut s = spec(4);
+        s.truth.variants.clamp_friction = Some(ClampFrictionSpec {
+            stiffness_fraction: 0.1,
+            half_slip_tip_amplitude: 1e-4,
+            sliders: 8,
+            beams,
+        });
+        s
+    };
+    // The stub has a 1FU mode only.
+    let msg = SimRig::new(&rom, &clamp(vec![Beam::Lower, Beam::Upper]), 1.0)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        msg.contains("truth.variants.clamp_friction") && msg.contains("no mode labelled 1FL"),
+        "{msg}"
+    );
+    let rig = SimRig::new(&rom, &clamp(vec![Beam::Upper]), 1.0).unwrap();
+    assert!(rig.variants().clamp_friction.is_some());
+    // A mode that does not move the tip cannot take a tip slip amplitude.
+    let mut still = rom.clone();
+    still.outputs[2].c_eta[0] = 0.0;
+    let msg = SimRig::new(&still, &clamp(vec![Beam::Upper]), 1.0)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        msg.contains("does not move the output \"upper_tip\""),
+        "{msg}"
+    );
+
+    let mut s = spec(4);
+    s.truth.variants.sensor_gains = vec![SensorGainSpec {
+        channel: "upper_tipp".into(),
+        gain: 1.03,
+    }];
+    let msg = SimRig::new(&rom, &s, 1.0).unwrap_err().to_string();
+    assert!(
+        msg.contains("truth.variants.sensor_gains[0].channel = \"upper_tipp\"")
+            && msg.contains("upper_tip,"),
+        "{msg}"
+    );
+    let mut s = spec(4);
+    s.truth.variants.tilt = Some(TiltSpec {
+        angle: f64::NAN,
+        axis: [0.0, 1.0],
+    });
+    let msg = SimRig::new(&rom, &s, 1.0).unwrap_err().to_string();
+    assert!(msg.contains("truth.variants.tilt.angle = NaN"), "{msg}");
+    let mut s = spec(4);
+    s.truth.variants.wear = Some(WearSpec {
+        coefficient: -1.0,
+        max_growth: None,
+    });
+    let msg = SimRig::new(&rom, &s, 1.0).unwrap_err().to_string();
+    assert!(
+        msg.contains("truth.variants.wear.coefficient = -1"),
+        "{msg}"
+    );
+}
+
+#[test]
+fn clamp_friction_on_one_mode_is_inert_below_the_first_slip_and_damps_above() {
+    // One 1FU mode; the joint carries 30 % of its stiffness, half its 32 sliders slip at a tip
+    // amplitude of 0.1 mm (the first at 3.1 um).
+    let f1 = 55.0;
+    let rom = stub_rom(f1, 0.002, 0.3);
+    let mut with = spec(4);
+    with.truth.variants.clamp_friction = Some(ClampFrictionSpec {
+        stiffness_fraction: 0.3,
+        half_slip_tip_amplitude: 1e-4,
+        sliders: 32,
+        beams: vec![Beam::Upper],
+    });
+    // Tip amplitude at resonance (the tip outputs read the mode with unit participation)
+    // from the upper-tip accelerometer over the last second of a 3 s dwell.
+    let tip = |s: &SimRigSpec, amp: f64| {
+        let mut rig = SimRig::new(&rom, s, 1.0).unwrap();
+        rig.set_drive(DriveCommand {
+            frequency_hz: f1,
+            amplitude_v: amp,
+            ramp_s: 0.2,
+        })
+        .unwrap();
+        let k = rig.layout().index("upper_tip").unwrap();
+        let mut x = Vec::new();
+        for b in 0..120 {
+            let block = rig.next_block();
+            if b >= 80 {
+                let ch = &rig.layout().channels[k];
+                x.extend(block.channel(k).iter().map(|&c| ch.value(c)));
+            }
+        }
+        let w = 2.0 * std::f64::consts::PI * f1;
+        let h = demodulate(&x, 1.0 / 10240.0, w, 80.0 * 256.0 / 10240.0).unwrap();
+        (h.magnitude / (w * w), rig.truth().joint_dissipation)
+    };
+    // Low level: below the first slip the joint is stuck, the rig records what the plain rig
+    // records.
+    let (lin_low, _) = tip(&spec(4), 1e-4);
+    let (joint_low, e_low) = tip(&with, 1e-4);
+    println!("low level: plain {lin_low:.4e} m, joint {joint_low:.4e} m (dissipated {e_low:e} J)");
+    assert!(lin_low < 3e-6, "{lin_low}");
+    assert_eq!(e_low, 0.0);
+    assert_eq!(joint_low, lin_low);
+    // High level: the slipping joint dissipates and holds the resonance far down.
+    let (lin_high, _) = tip(&spec(4), 0.02);
+    let (joint_high, e_high) = tip(&with, 0.02);
+    println!(
+        "high level: plain {lin_high:.4e} m, joint {joint_high:.4e} m (dissipated {e_high:.3e} J)"
+    );
+    assert!(joint_high < 0.5 * lin_high, "{joint_high} vs {lin_high}");
+    assert!(e_high > 0.0);
 }

@@ -18,6 +18,12 @@
 // zero as the modes become complete (~0 for the truth ROM). It is kept for consistency with
 // the truncated modal reaction but taken from the previous step (`lambda` of this step is only
 // known after the modal step): a one-step lag on a term that is nearly zero.
+//
+// NOTE (truth variants): the clamp joint's modal load `f_load` (see `variants::iwan`) is
+// evaluated at `eta^j` before the step and enters both the modal step and `F_i` above, so the
+// base sees the modal acceleration the integrator applies. Wear moves the clearance after a
+// step (from that step's dissipated contact work); a tilt sets per-pair gap offsets once.
+// With every variant off the step does exactly what it did without them.
 
 use crate::rom::Rom;
 use crate::sim::{
@@ -25,6 +31,10 @@ use crate::sim::{
 };
 
 use super::shaker::Shaker;
+use super::variants::iwan::ClampJoint;
+use super::variants::tilt;
+use super::variants::wear::Wear;
+use super::variants::TruthVariants;
 use super::{ShakerSpec, SimRigError};
 
 /// The ROM outputs the beam sensors read, in channel order.
@@ -57,12 +67,15 @@ pub struct StepValues {
     pub any_closed: bool,
 }
 
-/// Copies what the sensors need from the integrator's step output.
+/// Copies what the sensors (and the wear variant) need from the integrator's step output.
 #[derive(Clone, Copy, Debug, Default)]
 struct Capture {
     index: [usize; 4],
     velocity: [f64; 4],
     any_closed: bool,
+    /// Cumulative contact work on the modes and boundary energy after the step, J.
+    contact_work: f64,
+    boundary: f64,
 }
 
 impl StepSink for Capture {
@@ -72,6 +85,8 @@ impl StepSink for Capture {
             *v = out.velocity[i];
         }
         self.any_closed = out.contact.any_closed;
+        self.contact_work = out.energy.accounts.contact_work;
+        self.boundary = out.energy.boundary;
     }
 }
 
@@ -96,6 +111,12 @@ pub struct Truth {
     steps: u64,
     failure: Option<String>,
     solver_failures: u64,
+    /// Clearance set at start or by [`Truth::set_clearance`], m (wear grows on top of it).
+    nominal_clearance: f64,
+    /// Variant: friction in the clamping joint.
+    joint: Option<ClampJoint>,
+    /// Variant: clearance growth from wear.
+    wear: Option<Wear>,
 }
 
 /// The ROM's stability limits with the base attached: the open bound becomes a bound on the
@@ -131,13 +152,15 @@ fn coupled_limits(
 }
 
 impl Truth {
-    /// The truth for ROM `rom`, shaker `shaker` and clearance `clearance_m` (m), at rest. The
-    /// truth step (s) is chosen by `choose_dt` from the ROM's stability limits (the ROM is
-    /// checked by the integrator before its limits are computed).
+    /// The truth for ROM `rom`, shaker `shaker`, clearance `clearance_m` (m) and the hidden
+    /// physics `variants` (valid), at rest. The truth step (s) is chosen by `choose_dt` from
+    /// the ROM's stability limits (the ROM is checked by the integrator before its limits are
+    /// computed).
     pub fn new(
         rom: &Rom,
         shaker: &ShakerSpec,
         clearance_m: f64,
+        variants: &TruthVariants,
         choose_dt: impl FnOnce(&StabilityLimits) -> Result<f64, SimRigError>,
     ) -> Result<Truth, SimRigError> {
         let mut index = [0; 4];
@@ -174,6 +197,19 @@ impl Truth {
         let dt = choose_dt(&limits)?;
         integrator.set_time_step(TimeStep::Dt { dt })?;
         integrator.set_clearance(clearance_m)?;
+        if let Some(t) = &variants.tilt {
+            let offsets = tilt::gap_offsets(&rom.pair_position, &rom.pair_area, t);
+            integrator.set_gap_offsets(Some(&offsets))?;
+        }
+        let joint = variants
+            .clamp_friction
+            .as_ref()
+            .map(|c| ClampJoint::new(rom, c))
+            .transpose()?;
+        let wear = variants
+            .wear
+            .as_ref()
+            .map(|w| Wear::new(w.coefficient, w.max_growth));
         let state = integrator.state_at_rest();
 
         let m = rom.n_modes();
@@ -214,6 +250,9 @@ impl Truth {
             steps: 0,
             failure: None,
             solver_failures: 0,
+            nominal_clearance: clearance_m,
+            joint,
+            wear,
         })
     }
 
@@ -236,12 +275,21 @@ impl Truth {
         }
         let (u, clipped) = self.shaker.amplifier(drive_v);
 
+        // Clamp joint (variant): its modal load at eta^j.
+        let load: &[(usize, f64)] = match &mut self.joint {
+            Some(j) => j.update(self.state.eta()),
+            None => &[],
+        };
+
         // Base acceleration from the base equation (see the module docs).
         let eta = self.state.eta();
         let v = self.state.eta_dot();
         let mut modal = 0.0;
         for i in 0..eta.len() {
             let f = -self.damping[i] * v[i] - self.omega2[i] * eta[i];
+            modal += self.alpha_beta[i] * f;
+        }
+        for &(i, f) in load {
             modal += self.alpha_beta[i] * f;
         }
         let lambda = self.state.lambda();
@@ -263,7 +311,7 @@ impl Truth {
         let before = self.capture.velocity;
         match self
             .integrator
-            .step(&mut self.state, a_b, &mut self.capture)
+            .step_loaded(&mut self.state, a_b, load, &mut self.capture)
         {
             Ok(report) => {
                 self.solver_failures += report.counters.max_iterations + report.counters.diverged;
@@ -284,6 +332,14 @@ impl Truth {
         self.shaker.advance(a_b, u);
         if !self.shaker.is_finite() {
             return self.fail(time, "the shaker state");
+        }
+        if let Some(w) = &mut self.wear {
+            if let Some(growth) = w.update(self.capture.contact_work, self.capture.boundary) {
+                // Finite: the nominal clearance is finite and the growth is capped or finite.
+                let _ = self
+                    .integrator
+                    .set_clearance(self.nominal_clearance + growth);
+            }
         }
         self.last = StepValues {
             time,
@@ -331,14 +387,44 @@ impl Truth {
         self.solver_failures
     }
 
-    /// The clearance in use, m.
+    /// The clearance in use, m (the nominal one plus the wear growth).
     pub fn clearance(&self) -> f64 {
         self.integrator.clearance()
     }
 
-    /// Changes the clearance (finite, m).
+    /// Changes the nominal clearance (finite, m); wear grown so far stays on top of it.
     pub fn set_clearance(&mut self, clearance_m: f64) -> Result<(), SimRigError> {
-        Ok(self.integrator.set_clearance(clearance_m)?)
+        let growth = self.wear.as_ref().map_or(0.0, Wear::growth);
+        let effective = if growth > 0.0 {
+            clearance_m + growth
+        } else {
+            clearance_m
+        };
+        self.integrator.set_clearance(effective)?;
+        self.nominal_clearance = clearance_m;
+        Ok(())
+    }
+
+    /// Wear (variant): the dissipated contact work `W` (J) and the clearance growth (m) so
+    /// far; `None` when the variant is off.
+    pub fn wear(&self) -> Option<(f64, f64)> {
+        self.wear.as_ref().map(|w| (w.work(), w.growth()))
+    }
+
+    /// Clamp friction (variant): energy dissipated in the joints so far, J; `None` when the
+    /// variant is off.
+    pub fn joint_dissipation(&self) -> Option<f64> {
+        self.joint.as_ref().map(ClampJoint::dissipated)
+    }
+
+    /// The integrator (gap offsets, clearance, limits), for tests and diagnostics.
+    pub fn integrator(&self) -> &crate::sim::Integrator {
+        &self.integrator
+    }
+
+    /// The integrator state, for tests and diagnostics.
+    pub fn state(&self) -> &State {
+        &self.state
     }
 
     /// The shaker (state and amplifier limit).

@@ -1,8 +1,9 @@
 //! The leapfrog time integrator with an implicit contact boundary on the MacNeal ROM
 //! (DESIGN.md "The model" 3-4, reference section 3.3.2).
 //!
-//! The ROM: `g = Phi_g eta + G_res lambda + g0` (`g0 = [clearance, 0, 0]` per pair, positive
-//! normal gap = open) and `eta'' + D eta' + Omega^2 eta = Phi_g^T lambda - beta a_base`,
+//! The ROM: `g = Phi_g eta + G_res lambda + g0` (`g0 = [clearance, 0, 0]` per pair, or
+//! `[clearance + offset_k, 0, 0]` with per-pair gap offsets, [`Integrator::set_gap_offsets`];
+//! positive normal gap = open) and `eta'' + D eta' + Omega^2 eta = Phi_g^T lambda - beta a_base`,
 //! `D = diag(2 zeta_i w_i)`. Leapfrog with a fixed `dt`, modal velocities at half steps, modal
 //! damping averaged over the half steps (`a = 1/dt + D/2`, `b = 1/dt - D/2`):
 //!
@@ -309,6 +310,9 @@ pub(crate) struct Model {
     pub(crate) kappa: f64,
     pub(crate) report_gaps: bool,
     pub(crate) clearance: f64,
+    /// Per-pair normal gap offsets added to the clearance (`C`), m; `None`: none (the
+    /// default, the scalar code path).
+    pub(crate) gap_offset: Option<Vec<f64>>,
     /// Omega^2, D = 2 zeta w, beta, per mode.
     pub(crate) omega2: Vec<f64>,
     pub(crate) damping: Vec<f64>,
@@ -416,6 +420,7 @@ impl Integrator {
             kappa: params.open_margin_steps,
             report_gaps: params.report_gaps,
             clearance: rom.clearance,
+            gap_offset: None,
             omega2: rom.omega.iter().map(|w| w * w).collect(),
             damping,
             beta: rom.beta.clone(),
@@ -505,6 +510,36 @@ impl Integrator {
     /// The clearance in use, m.
     pub fn clearance(&self) -> f64 {
         self.model.clearance
+    }
+
+    /// Sets per-pair offsets of the initial normal gap, `g0_k = [clearance + offset_k, 0, 0]`
+    /// (m, one per pair, finite), e.g. a tilted contact face; `None` removes them. The
+    /// clearance stays separate ([`Integrator::set_clearance`] changes it under the offsets).
+    /// Zero offsets give the same results bit for bit as none.
+    pub fn set_gap_offsets(&mut self, offsets: Option<&[f64]>) -> Result<(), SimError> {
+        if let Some(off) = offsets {
+            if off.len() != self.model.n_pairs {
+                return Err(SimError::StateDimension {
+                    what: "gap offsets (one per contact pair)",
+                    found: off.len(),
+                    expected: self.model.n_pairs,
+                });
+            }
+            if let Some(&value) = off.iter().find(|x| !x.is_finite()) {
+                return Err(SimError::InvalidParameter {
+                    field: "gap offset (m)",
+                    value,
+                    expected: "a finite normal gap offset",
+                });
+            }
+        }
+        self.model.gap_offset = offsets.map(<[f64]>::to_vec);
+        Ok(())
+    }
+
+    /// The per-pair gap offsets in use, m (`None`: none).
+    pub fn gap_offsets(&self) -> Option<&[f64]> {
+        self.model.gap_offset.as_deref()
     }
 
     /// The contact solver (e.g. to capture the problem of the last step with
@@ -622,6 +657,29 @@ impl Integrator {
         a_base: f64,
         sink: &mut S,
     ) -> Result<RunReport, SimError> {
+        self.step_loaded(state, a_base, &[], sink)
+    }
+
+    /// [`Integrator::step`] with extra generalised forces on a few modes, `(mode index,
+    /// force)` in N kg^-0.5 (the modal equation's right-hand side), evaluated by the caller at
+    /// the state's displacement `eta^j`: `a .* v^{j+1/2} = b .* v^{j-1/2} - Omega^2 eta^j +
+    /// f_load + Phi_g^T lambda - beta a_base`. For physics the ROM does not hold (e.g. a
+    /// hysteretic joint, see `rig::sim::variants`); an empty load is [`Integrator::step`].
+    /// The load's work is not in the state's energy accounts (the caller owns that physics).
+    pub fn step_loaded<S: StepSink>(
+        &mut self,
+        state: &mut State,
+        a_base: f64,
+        load: &[(usize, f64)],
+        sink: &mut S,
+    ) -> Result<RunReport, SimError> {
+        if let Some(&(i, _)) = load.iter().find(|(i, _)| *i >= self.model.m) {
+            return Err(SimError::StateDimension {
+                what: "modal load index",
+                found: i,
+                expected: self.model.m,
+            });
+        }
         if !a_base.is_finite() {
             return Err(SimError::BaseAcceleration {
                 value: a_base,
@@ -634,12 +692,12 @@ impl Integrator {
         #[cfg(target_arch = "x86_64")]
         let finite = if self.use_avx2 {
             // SAFETY: `use_avx2` is true only if the CPU reports AVX2 (`kernels::has_avx2`).
-            unsafe { self.step_avx2(state, a_base, t, sink)? }
+            unsafe { self.step_avx2(state, a_base, load, t, sink)? }
         } else {
-            self.step_impl(state, a_base, t, sink)?
+            self.step_impl(state, a_base, load, t, sink)?
         };
         #[cfg(not(target_arch = "x86_64"))]
-        let finite = self.step_impl(state, a_base, t, sink)?;
+        let finite = self.step_impl(state, a_base, load, t, sink)?;
         state.time = t + self.model.dt;
         Ok(RunReport {
             steps: 1,
@@ -675,7 +733,11 @@ impl Integrator {
                 .collect(),
         };
         for (r, g) in out.iter_mut().enumerate() {
-            let offset = if r % 3 == 0 { md.clearance } else { 0.0 };
+            let offset = match (r % 3, &md.gap_offset) {
+                (0, None) => md.clearance,
+                (0, Some(off)) => md.clearance + off[r / 3],
+                _ => 0.0,
+            };
             let gl = if state.closed.is_empty() {
                 0.0
             } else {
@@ -711,10 +773,11 @@ impl Integrator {
         &mut self,
         state: &mut State,
         a_base: f64,
+        load: &[(usize, f64)],
         t: f64,
         sink: &mut S,
     ) -> Result<bool, SimError> {
-        self.step_impl(state, a_base, t, sink)
+        self.step_impl(state, a_base, load, t, sink)
     }
 
     #[inline(always)]
@@ -733,7 +796,7 @@ impl Integrator {
         for i in 0..n_steps {
             let t = t0 + i as f64 * dt;
             let a = excitation.accel_at(t);
-            let finite = self.step_impl(state, a, t, sink)?;
+            let finite = self.step_impl(state, a, &[], t, sink)?;
             done += 1;
             state.time = t0 + (i + 1) as f64 * dt;
             if !finite {

@@ -2,11 +2,12 @@
 //!
 //! A pair is a *candidate* when it was closed in the previous step (`lambda_n > 0`), or when
 //! its free normal gap (no contact force in this step) at the contact time level,
-//! `p_k = Phi_n,k x_p + clearance`, or that gap extrapolated `kappa` further steps at the
+//! `p_k = Phi_n,k x_p + g0_n,k`, or that gap extrapolated `kappa` further steps at the
 //! step's closing rate, `q_k = p_k + kappa (p_k - g_n,k^start)`, is closed (`<= 0`).
 //! With `g^start = Phi_g (x_p - dt v_c) + g0 + G_res lambda^prev` this is
-//! `q_k = Phi_n,k x_q + clearance - kappa (G_res lambda^prev)_n,k`, `x_q = x_p + kappa dt v_c`.
-//! All other pairs are open (`lambda = 0`) without a solve.
+//! `q_k = Phi_n,k x_q + g0_n,k - kappa (G_res lambda^prev)_n,k`, `x_q = x_p + kappa dt v_c`.
+//! All other pairs are open (`lambda = 0`) without a solve. The initial normal gap `g0_n,k`
+//! is the clearance, plus a per-pair offset when one is set ([`InitialGap`]).
 //!
 //! Computing `p` and `q` for all pairs costs two passes over the `C x m` normal rows of
 //! `Phi_g`, which alone would cap the open-contact step rate well below the goal. Instead the
@@ -56,6 +57,36 @@ pub(crate) struct Predictor {
     /// Work arrays, `C` each.
     lo_p: Vec<f64>,
     lo_q: Vec<f64>,
+}
+
+/// The initial normal gap `g0_n,k` of every pair. The prediction is generic over it so that
+/// the uniform case (one clearance, the default) compiles to exactly the scalar code.
+pub(crate) trait InitialGap: Copy {
+    /// `g0_n,k` of pair `k`, m.
+    fn at(self, k: usize) -> f64;
+}
+
+impl InitialGap for f64 {
+    #[inline(always)]
+    fn at(self, _k: usize) -> f64 {
+        self
+    }
+}
+
+/// The clearance plus a per-pair offset (e.g. a tilted contact face).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct OffsetGap<'a> {
+    /// Clearance, m.
+    pub clearance: f64,
+    /// Offset per pair (`C`), m.
+    pub offset: &'a [f64],
+}
+
+impl InitialGap for OffsetGap<'_> {
+    #[inline(always)]
+    fn at(self, k: usize) -> f64 {
+        self.clearance + self.offset[k]
+    }
 }
 
 /// Where the prediction writes its result.
@@ -108,18 +139,18 @@ impl Predictor {
     /// Predicts the candidates of one step.
     ///
     /// - `x_p`, `x_q`: modal displacements of the free gap and of the extrapolated gap (`m`);
-    /// - `clearance`: normal gap offset, m;
+    /// - `g0`: initial normal gap per pair, m;
     /// - `lambda_prev`: forces of the previous step (`3C`), pairs with `lambda_n > 0` are
     ///   always candidates;
     /// - `r_prev`: `G_res lambda^prev` (`3C`) when the previous step had closed pairs;
     /// - `kappa`: extrapolation in steps.
     #[inline(always)]
     #[allow(clippy::too_many_arguments)]
-    pub(crate) fn predict(
+    pub(crate) fn predict<G: InitialGap>(
         &mut self,
         x_p: &[f64],
         x_q: &[f64],
-        clearance: f64,
+        g0: G,
         lambda_prev: &[f64],
         r_prev: Option<&[f64]>,
         kappa: f64,
@@ -134,11 +165,11 @@ impl Predictor {
             // Exact mode: both gaps of every pair.
             for k in 0..n {
                 let row = &self.phi_n[k * m..(k + 1) * m];
-                let p = clearance + dot(row, x_p);
+                let p = g0.at(k) + dot(row, x_p);
                 p_all[k] = p;
                 let closed_prev = lambda_prev[3 * k] > 0.0;
                 let rn = r_prev.map_or(0.0, |r| r[3 * k]);
-                let q = clearance + dot(row, x_q) - kappa * rn;
+                let q = g0.at(k) + dot(row, x_q) - kappa * rn;
                 if closed_prev || candidate(p, q) {
                     out.cand.push(k);
                     out.p_cand.push(p);
@@ -149,8 +180,10 @@ impl Predictor {
 
         // Lower bounds: exact low-mode part for all pairs (columns, vectorised over pairs).
         let low = self.low;
-        self.lo_p.fill(clearance);
-        self.lo_q.fill(clearance);
+        for (k, (lp, lq)) in self.lo_p.iter_mut().zip(self.lo_q.iter_mut()).enumerate() {
+            *lp = g0.at(k);
+            *lq = g0.at(k);
+        }
         for i in 0..low {
             let col = &self.phi_low[i * n..(i + 1) * n];
             let (xp, xq) = (x_p[i], x_q[i]);
@@ -171,7 +204,6 @@ impl Predictor {
             nx_q += xq * xq;
         }
         let (nx_p, nx_q) = (nx_p.sqrt(), nx_q.sqrt());
-        let c_abs = clearance.abs();
 
         for k in 0..n {
             let closed_prev = lambda_prev[3 * k] > 0.0;
@@ -180,6 +212,7 @@ impl Predictor {
                 let (a, b) = (self.a_low[k], self.b_high[k]);
                 let lb_p = self.lo_p[k] - b * e_p;
                 let lb_q = self.lo_q[k] - kappa * rn - b * e_q;
+                let c_abs = g0.at(k).abs();
                 let sl_p = BOUND_SLACK * (a * nx_p + b * e_p + c_abs);
                 let sl_q = BOUND_SLACK * (a * nx_q + b * e_q + c_abs + (kappa * rn).abs());
                 if lb_p > sl_p && lb_q > sl_q {
@@ -187,13 +220,13 @@ impl Predictor {
                 }
             }
             let row = &self.phi_n[k * m..(k + 1) * m];
-            let p = clearance + dot(row, x_p);
+            let p = g0.at(k) + dot(row, x_p);
             if closed_prev {
                 out.cand.push(k);
                 out.p_cand.push(p);
                 continue;
             }
-            let q = clearance + dot(row, x_q) - kappa * rn;
+            let q = g0.at(k) + dot(row, x_q) - kappa * rn;
             if candidate(p, q) {
                 out.cand.push(k);
                 out.p_cand.push(p);

@@ -5,7 +5,8 @@
 //! `a = 1/dt + D/2`, `b = 1/dt - D/2` (per mode), `g0 = [clearance, 0, 0]` per pair.
 //!
 //! Free modal velocity (everything but the contact force of this step):
-//! `v_free = (b .* v^{j-1/2} - Omega^2 eta^j - beta a_base(t^j)) ./ a`, and with the contact
+//! `v_free = (b .* v^{j-1/2} - Omega^2 eta^j - beta a_base(t^j) + f_load) ./ a` (`f_load`: an
+//! optional extra modal force evaluated at `eta^j`, zero by default), and with the contact
 //! force `v^{j+1/2} = v_free + (Phi_g^T lambda) ./ a`, `eta^{j+1} = eta^j + dt v^{j+1/2}`
 //! (the reference's Eq. differential/explicit).
 //!
@@ -65,17 +66,19 @@ use super::super::energy::{Energy, EnergyAccounts};
 use super::super::error::SimError;
 use super::super::output::{ContactSummary, StepOutput, StepSink};
 use super::kernels::{axpy, dot, Lanes4};
-use super::predict::Prediction;
+use super::predict::{OffsetGap, Prediction};
 use super::{Coupling, Integrator, State};
 
 impl Integrator {
-    /// One step from `st` with base acceleration `a_base` at the step's start time `t0`.
+    /// One step from `st` with base acceleration `a_base` at the step's start time `t0` and
+    /// the extra modal forces `load` (`(mode, force)`, indices checked by the caller).
     /// Returns whether the new state is finite.
     #[inline(always)]
     pub(super) fn step_impl<S: StepSink>(
         &mut self,
         st: &mut State,
         a_base: f64,
+        load: &[(usize, f64)],
         t0: f64,
         sink: &mut S,
     ) -> Result<bool, SimError> {
@@ -99,6 +102,11 @@ impl Integrator {
             let vf = &mut ws.vf[..m];
             for i in 0..m {
                 vf[i] = (b[i] * v[i] - w2[i] * eta[i] - beta[i] * a_base) * inv_a[i];
+            }
+            // Extra modal forces (empty unless the caller passes a load): the same expression
+            // with the force inside, for the few loaded modes only.
+            for &(i, f) in load {
+                vf[i] = (b[i] * v[i] - w2[i] * eta[i] - beta[i] * a_base + f) * inv_a[i];
             }
         }
 
@@ -132,23 +140,38 @@ impl Integrator {
         } else {
             None
         };
-        md.predictor.predict(
-            &ws.x_p,
-            &ws.x_q,
-            md.clearance,
-            &st.lambda,
-            r_prev,
-            kappa,
-            Prediction {
-                cand: &mut ws.cand,
-                p_cand: &mut ws.p_cand,
-                p_all: if md.report_gaps {
-                    Some(&mut ws.gap_n[..])
-                } else {
-                    None
-                },
+        let prediction = Prediction {
+            cand: &mut ws.cand,
+            p_cand: &mut ws.p_cand,
+            p_all: if md.report_gaps {
+                Some(&mut ws.gap_n[..])
+            } else {
+                None
             },
-        );
+        };
+        match &md.gap_offset {
+            None => md.predictor.predict(
+                &ws.x_p,
+                &ws.x_q,
+                md.clearance,
+                &st.lambda,
+                r_prev,
+                kappa,
+                prediction,
+            ),
+            Some(offset) => md.predictor.predict(
+                &ws.x_p,
+                &ws.x_q,
+                OffsetGap {
+                    clearance: md.clearance,
+                    offset,
+                },
+                &st.lambda,
+                r_prev,
+                kappa,
+                prediction,
+            ),
+        }
 
         // 4. Contact solve on the candidates.
         let mut solve = None;

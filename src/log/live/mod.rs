@@ -1,0 +1,202 @@
+//! The live view: a session's channels served to the Foxglove app over the Foxglove WebSocket
+//! protocol (the `foxglove` SDK's server), while the session runs (`rigtwin run --foxglove ADDR`).
+//!
+//! - [`LiveView::start`] binds the server (its own one-thread tokio runtime) and starts the
+//!   publisher thread; it returns the [`LiveRecorder`] (a
+//!   [`SessionRecorder`](crate::control::SessionRecorder)) and the [`LiveView`] that stops both.
+//! - The recorder hands every record to the publisher thread over a bounded queue with
+//!   `try_send`: it never blocks and never fails the session; a full queue drops the record
+//!   (counted in [`LiveStats::dropped_records`]).
+//! - `publisher` (private): the thread that decimates the DAQ blocks ([`decimate`]), serialises
+//!   to JSON and logs to the server only the channels some client subscribed to. The server
+//!   queues per client and drops the oldest messages of a client that cannot keep up.
+//!
+//! Topics: the MCAP session log's, same names and JSON schemas ([`TOPIC_LAYOUT`], latched: a
+//! client that subscribes gets the layout at once; [`TOPIC_CONTROL`], [`TOPIC_EVENTS`],
+//! [`TOPIC_STATUS`], [`TOPIC_STEPS`]), except the raw DAQ blocks: they become [`TOPIC_LIVE_DAQ`],
+//! one message per decimated time point with every channel's min, max and mean in physical
+//! units (`/live/daq.upper_tip.max` in a Plot panel). Log time = rig time of the sample.
+//!
+//! [`TOPIC_LAYOUT`]: super::recorder::TOPIC_LAYOUT
+//! [`TOPIC_CONTROL`]: super::recorder::TOPIC_CONTROL
+//! [`TOPIC_EVENTS`]: super::recorder::TOPIC_EVENTS
+//! [`TOPIC_STATUS`]: super::recorder::TOPIC_STATUS
+//! [`TOPIC_STEPS`]: super::recorder::TOPIC_STEPS
+
+pub mod decimate;
+mod publisher;
+mod view;
+
+use std::net::{IpAddr, Ipv4Addr, SocketAddr};
+use std::time::Duration;
+
+pub use view::{LiveRecorder, LiveStats, LiveView};
+
+/// Decimated DAQ points (one message per time point, every channel).
+pub const TOPIC_LIVE_DAQ: &str = "/live/daq";
+
+/// Schema name of [`TOPIC_LIVE_DAQ`] (its JSON Schema lists the session's channels).
+pub const LIVE_DAQ_SCHEMA: &str = "LiveDaqPoint";
+
+/// Errors of starting the live view.
+#[derive(Debug, thiserror::Error)]
+pub enum LiveError {
+    /// The server could not listen on the address.
+    #[error("live view: cannot listen on {addr}: {io}{}", bind_hint(io))]
+    Bind {
+        /// The address asked for.
+        addr: SocketAddr,
+        /// The I/O error (in the message, not repeated as a cause).
+        io: std::io::Error,
+    },
+    /// The options are out of range.
+    #[error("live view: bad options: {0}")]
+    Options(String),
+    /// A thread or the server's runtime could not start, or the SDK refused the server.
+    #[error("live view: {what}: {detail}")]
+    Start {
+        /// What was being started.
+        what: &'static str,
+        /// The underlying error.
+        detail: String,
+    },
+}
+
+fn bind_hint(e: &std::io::Error) -> &'static str {
+    use std::io::ErrorKind;
+    match e.kind() {
+        ErrorKind::AddrInUse => {
+            " (another program, e.g. another rigtwin session or a Foxglove bridge, uses the \
+             port: choose another port, or port 0 for a free one)"
+        }
+        ErrorKind::AddrNotAvailable => {
+            " (the address is not one of this machine's: use 127.0.0.1 for this machine only, \
+             or 0.0.0.0 for every interface)"
+        }
+        ErrorKind::PermissionDenied => " (ports below 1024 need privileges: use e.g. 8765)",
+        _ => "",
+    }
+}
+
+/// Parses a live-view address: `PORT` (binds 127.0.0.1), `IP:PORT` (`127.0.0.1:8765`,
+/// `0.0.0.0:8765` for every interface), `[IPv6]:PORT` or `localhost:PORT`. Port 0 picks a free
+/// port. Never binds every interface unless the address says so.
+pub fn parse_addr(text: &str) -> Result<SocketAddr, String> {
+    let t = text.trim();
+    if let Ok(port) = t.parse::<u16>() {
+        return Ok(SocketAddr::new(IpAddr::V4(Ipv4Addr::LOCALHOST), port));
+    }
+    if let Ok(addr) = t.parse::<SocketAddr>() {
+        return Ok(addr);
+    }
+    if let Some(port) = t.strip_prefix("localhost:") {
+        if let Ok(port) = port.parse::<u16>() {
+            return Ok(SocketAddr::new(IpAddr::V4(Ipv4Addr::LOCALHOST), port));
+        }
+    }
+    Err(format!(
+        "{text:?} is not a listen address: expected PORT (binds 127.0.0.1, e.g. 8765), \
+         IP:PORT (e.g. 127.0.0.1:8765, or 0.0.0.0:8765 for every interface), [IPv6]:PORT or \
+         localhost:PORT, with PORT in 0..=65535 (0: a free port)"
+    ))
+}
+
+/// How the live view serves a session.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LiveOptions {
+    /// Decimated DAQ points per second of rig time, Hz. Default 200: a bin of 51 samples at
+    /// 10,240 Hz (about a quarter of a 1FU period), 200.8 messages per rig second, which the
+    /// Plot panel draws without effort. Sessions on virtual time run faster than real time, so
+    /// the wall-clock message rate is this times the speed-up.
+    pub daq_points_per_second: f64,
+    /// Capacity of the queue between the session and the publisher thread, records (a DAQ
+    /// block, a control state, an event...). When it is full, records are dropped, never waited
+    /// for. Default 512 (about 6 s of rig time at 40 blocks per second).
+    pub queue_capacity: usize,
+    /// Messages the server queues per client before dropping the client's oldest ones.
+    /// Default 1024 (about 4 s of messages).
+    pub client_backlog: usize,
+    /// Longest wait for the server's connections to close when the view stops. Default 2 s.
+    pub shutdown_timeout: Duration,
+}
+
+impl Default for LiveOptions {
+    fn default() -> Self {
+        Self {
+            daq_points_per_second: 200.0,
+            queue_capacity: 512,
+            client_backlog: 1024,
+            shutdown_timeout: Duration::from_secs(2),
+        }
+    }
+}
+
+impl LiveOptions {
+    /// Checks the values; the first problem, described.
+    pub fn check(&self) -> Result<(), String> {
+        if !(self.daq_points_per_second.is_finite() && self.daq_points_per_second > 0.0) {
+            return Err(format!(
+                "daq_points_per_second is {}, expected a positive rate in Hz",
+                self.daq_points_per_second
+            ));
+        }
+        if self.queue_capacity == 0 {
+            return Err("queue_capacity is 0, expected at least 1 record".into());
+        }
+        if self.client_backlog == 0 {
+            return Err("client_backlog is 0, expected at least 1 message".into());
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_bare_port_binds_the_loopback_interface_only() {
+        assert_eq!(
+            parse_addr("8765").unwrap(),
+            "127.0.0.1:8765".parse().unwrap()
+        );
+        assert_eq!(parse_addr("0").unwrap(), "127.0.0.1:0".parse().unwrap());
+        assert_eq!(
+            parse_addr("localhost:9000").unwrap(),
+            "127.0.0.1:9000".parse().unwrap()
+        );
+        assert_eq!(
+            parse_addr("0.0.0.0:8765").unwrap(),
+            "0.0.0.0:8765".parse().unwrap()
+        );
+        assert_eq!(
+            parse_addr("[::1]:8765").unwrap(),
+            "[::1]:8765".parse().unwrap()
+        );
+    }
+
+    #[test]
+    fn bad_addresses_are_described() {
+        for bad in [
+            "",
+            "65536",
+            "127.0.0.1",
+            "127.0.0.1:http",
+            "host:80",
+            "::1:8765",
+        ] {
+            let e = parse_addr(bad).unwrap_err();
+            assert!(e.contains("expected PORT"), "{bad}: {e}");
+        }
+    }
+
+    #[test]
+    fn options_are_checked() {
+        assert!(LiveOptions::default().check().is_ok());
+        let bad = LiveOptions {
+            daq_points_per_second: 0.0,
+            ..LiveOptions::default()
+        };
+        assert!(bad.check().unwrap_err().contains("daq_points_per_second"));
+    }
+}

@@ -8,7 +8,8 @@
 //! simulation and measurement. [`plan`] holds the stepped-sine test plans and [`report`]
 //! draws the paper-style figures. The experiment side: [`rig`] (the backend trait, the DAQ
 //! types, the simulated rig), [`control`] (amplitude control, settling, safety, the async
-//! stepped-sine session) and [`log`] (the MCAP session log, its recorder and replay). [`cli`]
+//! stepped-sine session), [`twin`] (the live digital twin: the ROM on the measured base
+//! acceleration, on its own thread) and [`log`] (the MCAP session log, its recorder and replay). [`cli`]
 //! wires the commands of the `rigtwin` binary.
 //!
 //! Numerical modules are synchronous, deterministic and never read the clock; async (tokio)
@@ -26,3 +27,4 @@ pub mod rig;
 pub mod rom;
 pub mod signal;
 pub mod sim;
+pub mod twin;

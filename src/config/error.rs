@@ -40,7 +40,7 @@ pub enum ConfigError {
         /// What serde expected.
         message: String,
     },
-    /// A rig-service setting (`[control]`, `[safety]`, `[shaker]`, `[daq]`, `[truth]`) that is
+    /// A rig-service setting (`[control]`, `[safety]`, `[shaker]`, `[daq]`, `[truth]`, `[twin]`) that is
     /// not acceptable; the message names the key.
     #[error("{file}: {message}")]
     Service {

@@ -74,6 +74,9 @@ pub struct RigConfig {
     /// `[truth]`: the simulated rig's truth model (its own ROM and time step). Not hashed.
     #[serde(default, skip_serializing)]
     pub truth: crate::rig::sim::TruthSpec,
+    /// `[twin]`: the live twin's step, input queue and gap handling. Not hashed.
+    #[serde(default, skip_serializing)]
+    pub twin: crate::twin::TwinSpec,
 }
 
 impl RigConfig {

@@ -77,6 +77,7 @@ pub(super) fn validate(cfg: &RigConfig) -> Result<(), ConfigError> {
     };
     cfg.control.validate().map_err(service)?;
     cfg.safety.validate().map_err(service)?;
+    cfg.twin.validate().map_err(|e| service(e.to_string()))?;
     cfg.sim_rig_spec()
         .validate()
         .map_err(|e| service(e.to_string()))

@@ -1,0 +1,237 @@
+//! Twin benchmark on the default ROM (modes to 180 x f(1FU), 192 pairs), one core: the
+//! twin's real-time factor (seconds of data per wall second) and steps per second, fed with
+//! DAQ blocks of the default simulated DAQ layout (10240 Hz, 256-sample blocks, three 24-bit
+//! platform accelerometers) carrying a synthesised sine base acceleration, at the twin's
+//! default step (5 steps per sample, about 1000 per 1FU period):
+//! - `open`: Omega = 0.90 omega_2, base level 2e-5 l, clearance 2.78e-3 l (no contact);
+//! - `impacts`: Omega = omega_2, high level 6e-5 l, clearance 2.78e-3 l (sustained impacts);
+//! - `touching`: Omega = omega_2, low level 0.5e-5 l, clearance 0 (the probes touch at rest:
+//!   most pairs closed at once in the contact phases, the worst case; runs a tenth of the
+//!   data of the others).
+//!
+//! Each case settles for `--settle` periods, then runs `--seconds` of data `--repeat` times
+//! from the settled twin (sync core, `Twin::push_block`, one JSON line per run), then once
+//! through the threaded `TwinTask` (all blocks queued at once). Prints the medians.
+//!
+//! ```text
+//! cargo bench --bench twin                            # 5 runs of 10 s of data per case
+//! cargo bench --bench twin -- --repeat 9 --seconds 20
+//! ```
+//! The ROM is taken from (or built into) the cache folder `$RIGTWIN_CACHE`, default
+//! `target/rom-cache`.
+
+use std::f64::consts::PI;
+use std::path::PathBuf;
+use std::time::Instant;
+
+use rigtwin::config::RigConfig;
+use rigtwin::rig::daq::{ChannelKind, DaqBlock, DaqLayout};
+use rigtwin::rig::sim::DaqSpec;
+use rigtwin::rom::build::BuildOptions;
+use rigtwin::twin::{Twin, TwinEvent, TwinSpec, TwinTask};
+
+struct Args {
+    repeat: usize,
+    seconds: f64,
+    settle: f64,
+}
+
+fn parse_args() -> Args {
+    let mut a = Args {
+        repeat: 5,
+        seconds: 10.0,
+        settle: 200.0,
+    };
+    let mut it = std::env::args().skip(1);
+    while let Some(arg) = it.next() {
+        let mut val = |name: &str| -> f64 {
+            it.next()
+                .and_then(|v| v.parse().ok())
+                .unwrap_or_else(|| panic!("{name} needs a number"))
+        };
+        match arg.as_str() {
+            "--repeat" => a.repeat = val("--repeat") as usize,
+            "--seconds" => a.seconds = val("--seconds"),
+            "--settle" => a.settle = val("--settle"),
+            "--bench" => {}
+            other => panic!("unknown argument {other}"),
+        }
+    }
+    a
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+/// Blocks `first_seq..first_seq + n` of a base acceleration `-amplitude omega^2 sin(omega t)`
+/// quantised to the platform channels' counts (the other channels read 0).
+fn blocks(layout: &DaqLayout, first_seq: u64, n: u64, amplitude: f64, omega: f64) -> Vec<DaqBlock> {
+    let len = layout.block_size;
+    let nc = layout.channels.len();
+    let platform = layout.indices_of(ChannelKind::PlatformAcceleration);
+    (first_seq..first_seq + n)
+        .map(|seq| {
+            let first = seq * len as u64;
+            let mut counts = vec![0; nc * len];
+            for i in 0..len {
+                let t = (first + i as u64) as f64 / layout.sample_rate;
+                let a = -amplitude * omega * omega * (omega * t).sin();
+                for &k in &platform {
+                    counts[k * len + i] = (a / layout.channels[k].scale).round() as i32;
+                }
+            }
+            DaqBlock {
+                seq,
+                first_sample: first,
+                time: first as f64 / layout.sample_rate,
+                len,
+                counts,
+            }
+        })
+        .collect()
+}
+
+struct Case {
+    name: &'static str,
+    omega_ratio: f64,
+    level: f64,
+    clearance: f64,
+    /// Fraction of `--seconds` and `--settle` the case runs (the slow case runs less).
+    share: f64,
+}
+
+fn main() {
+    let args = parse_args();
+    let cfg = RigConfig::default_rig();
+    let dir = std::env::var_os("RIGTWIN_CACHE")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/rom-cache"));
+    let (rom, _, _) = rigtwin::rom::cache::load_or_build(
+        &cfg,
+        &BuildOptions::default(),
+        &dir,
+        false,
+        &mut |_| {},
+    )
+    .expect("default ROM");
+    let l = rom.meta.beam_length;
+    let w2 = rom.omega_ref();
+    let layout = rigtwin::rig::sim::daq::layout(&DaqSpec::default());
+    let fs = layout.sample_rate;
+    let block_s = layout.block_size as f64 / fs;
+    let spec = TwinSpec::default();
+    eprintln!(
+        "default ROM: {} modes, {} pairs, f(1FU) = {:.2} Hz; DAQ {fs} Hz, {} samples per block",
+        rom.n_modes(),
+        rom.n_pairs(),
+        w2 / (2.0 * PI),
+        layout.block_size
+    );
+    let cases = [
+        Case {
+            name: "open",
+            omega_ratio: 0.90,
+            level: 2e-5,
+            clearance: 2.78e-3,
+            share: 1.0,
+        },
+        Case {
+            name: "impacts",
+            omega_ratio: 1.0,
+            level: 6e-5,
+            clearance: 2.78e-3,
+            share: 1.0,
+        },
+        Case {
+            name: "touching",
+            omega_ratio: 1.0,
+            level: 0.5e-5,
+            clearance: 0.0,
+            share: 0.1,
+        },
+    ];
+    let mut summary = Vec::new();
+    for case in &cases {
+        let omega = case.omega_ratio * w2;
+        let clearance = case.clearance * l;
+        let mut twin = Twin::new(&rom, &spec, &layout, clearance).expect("twin");
+        let settle_blocks = (case.share * args.settle * 2.0 * PI / omega / block_s).ceil() as u64;
+        let run_blocks = (case.share * args.seconds / block_s).ceil() as u64;
+        for b in blocks(&layout, 0, settle_blocks, case.level * l, omega) {
+            twin.push_block(&b).expect("settle");
+        }
+        let input = blocks(&layout, settle_blocks, run_blocks, case.level * l, omega);
+        let data_s = run_blocks as f64 * block_s;
+        let mut factors = Vec::new();
+        let mut rates = Vec::new();
+        for run in 0..args.repeat {
+            let mut t = twin.clone();
+            let before = t.counters();
+            let solver_before = t.solver_counters();
+            let start = Instant::now();
+            let mut contact = 0usize;
+            for b in &input {
+                let out = t.push_block(b).expect("run");
+                contact += out.contact.iter().filter(|&&c| c).count();
+            }
+            let secs = start.elapsed().as_secs_f64();
+            let c = t.counters();
+            let sc = t.solver_counters();
+            let solves = sc.solves - solver_before.solves;
+            let sweeps = sc.iterations - solver_before.iterations;
+            let closed_steps = sc.closed_steps - solver_before.closed_steps;
+            let steps = c.steps - before.steps;
+            factors.push(data_s / secs);
+            rates.push(steps as f64 / secs);
+            println!(
+                "{{\"case\":\"{}\",\"run\":{run},\"data_seconds\":{data_s:.3},\"wall_seconds\":{secs:.4},\"realtime_factor\":{:.2},\"steps_per_second\":{:.0},\"steps_per_sample\":{},\"contact_sample_fraction\":{:.4},\"solves_per_step\":{:.4},\"closed_step_fraction\":{:.4},\"sweeps_per_solve\":{:.1},\"solver_failures\":{}}}",
+                case.name,
+                data_s / secs,
+                steps as f64 / secs,
+                t.steps_per_sample(),
+                contact as f64 / (run_blocks as f64 * layout.block_size as f64),
+                solves as f64 / steps as f64,
+                closed_steps as f64 / steps as f64,
+                sweeps as f64 / solves.max(1) as f64,
+                c.solver_failures - before.solver_failures,
+            );
+        }
+        // The same data through the threaded task (queue large enough for all of it).
+        let task_spec = TwinSpec {
+            queue_blocks: input.len(),
+            ..spec.clone()
+        };
+        let (mut task, mut rx) = TwinTask::spawn(twin.clone(), &task_spec).expect("task");
+        for b in &input {
+            task.push(b).expect("push");
+        }
+        let status = task.finish().expect("finish");
+        let mut outputs = 0;
+        while let Ok(ev) = rx.try_recv() {
+            assert!(matches!(ev, TwinEvent::Block(_)));
+            outputs += 1;
+        }
+        assert_eq!(outputs, input.len());
+        println!(
+            "{{\"case\":\"{}\",\"run\":\"task\",\"realtime_factor\":{:.2},\"steps_per_second\":{:.0},\"blocks_skipped\":{}}}",
+            case.name, status.realtime_factor, status.steps_per_s, status.blocks_skipped
+        );
+        summary.push((
+            case.name,
+            median(&mut factors),
+            median(&mut rates),
+            status.realtime_factor,
+        ));
+    }
+    eprintln!(
+        "median over {} runs of {} s of data ({} s touching; sync core; task: one run):",
+        args.repeat,
+        args.seconds,
+        0.1 * args.seconds
+    );
+    for (c, f, r, tf) in summary {
+        eprintln!("  {c:>8}: {f:>6.2} x real time, {r:>9.0} steps/s (task: {tf:.2} x real time)");
+    }
+}

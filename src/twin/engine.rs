@@ -1,0 +1,364 @@
+//! The twin's synchronous core ([`Twin`]): the ROM integrator (end-of-step contact coupling,
+//! fixed `dt`) driven step by step by the measured base acceleration, block by block, with
+//! outputs per DAQ sample on the measurement's time base. No threads, no clock; the same
+//! blocks give the same bits (replay relies on it).
+//!
+//! Time base and resampling. With `N` twin steps per DAQ sample (`dt = 1 / (N fs)`), sample
+//! `i` at `t_i` drives the `N` steps that start at `t_{i-1} + k dt`, `k = 1..=N`, the last one
+//! starting exactly at `t_i`. Each step takes the base acceleration at its start time,
+//! interpolated linearly between the samples `i - 1` and `i`:
+//! `a(t_{i-1} + k dt) = (1 - k/N) a_{i-1} + (k/N) a_i` (`a_i` itself for `k = N`). So the
+//! twin needs no future sample (causal, no delay) and its output for sample `i` stands at
+//! `t_i`: the relative velocities are the mean of the half-step velocities at `t_i - dt/2`
+//! and `t_i + dt/2` (the last two steps), the definition the simulated rig's sensors use;
+//! contact and mean forces cover the `N` steps that start in `(t_{i-1}, t_i]` (the sample
+//! interval ending at `t_i`, one twin step later). Sample `i` of a [`TwinBlock`] is sample `i`
+//! of the input block.
+//!
+//! Start and gaps. The twin starts at rest. For the first sample of the stream, and the first
+//! sample after a gap, there is no previous sample: the base acceleration is held at that
+//! sample over its `N` steps. After a gap (a block whose first sample does not follow the
+//! last one) the twin keeps its state or restarts at rest (`[twin] after_gap`) and reports
+//! the gap in the block's output. A block that starts before the end of the last one is
+//! rejected (the state is left as it was).
+
+use crate::rig::daq::{DaqBlock, DaqLayout};
+use crate::rom::Rom;
+use crate::sim::{
+    Integrator, IntegratorParameters, StabilityLimits, State, StepOutput, StepSink, TimeStep,
+};
+
+use super::error::TwinError;
+use super::input::{InputMap, TwinInput};
+use super::output::{TwinBlock, TwinGap, TWIN_SENSORS};
+use super::spec::{AfterGap, TwinSpec};
+
+/// Cumulative counters of a [`Twin`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct TwinCounters {
+    /// Blocks processed.
+    pub blocks: u64,
+    /// Samples processed.
+    pub samples: u64,
+    /// Twin steps done.
+    pub steps: u64,
+    /// Gaps in the input resumed after.
+    pub gaps: u64,
+    /// Contact solves that stopped at the sweep limit or diverged.
+    pub solver_failures: u64,
+    /// Restarts at rest after a non-finite state.
+    pub restarts: u64,
+}
+
+/// Collects what the outputs of one sample need from the integrator's steps.
+#[derive(Clone, Copy, Debug, Default)]
+struct SampleSink {
+    /// Indices of [`TWIN_SENSORS`] among the ROM outputs.
+    index: [usize; 4],
+    /// Relative sensor velocities of the last step (at its half step), m/s.
+    velocity: [f64; 4],
+    closed: bool,
+    normal: f64,
+    tangential: f64,
+}
+
+impl SampleSink {
+    fn start_sample(&mut self) {
+        self.closed = false;
+        self.normal = 0.0;
+        self.tangential = 0.0;
+    }
+}
+
+impl StepSink for SampleSink {
+    #[inline]
+    fn record(&mut self, out: &StepOutput<'_>) {
+        for (v, &i) in self.velocity.iter_mut().zip(&self.index) {
+            *v = out.velocity[i];
+        }
+        if out.contact.any_closed {
+            self.closed = true;
+            self.normal += out.contact.normal_force;
+            self.tangential += out.contact.tangential_force;
+        }
+    }
+}
+
+/// The live twin's synchronous core. See the module docs for the time base.
+#[derive(Clone, Debug)]
+pub struct Twin {
+    integrator: Integrator,
+    state: State,
+    map: InputMap,
+    after_gap: AfterGap,
+    steps_per_sample: u32,
+    /// `k / N` for `k = 1..=N`.
+    weights: Vec<f64>,
+    sink: SampleSink,
+    /// Base acceleration of the last sample processed (none at the start and after a reset).
+    last_accel: Option<f64>,
+    /// The sample the next block should start with, and the last block's sequence number.
+    next_sample: Option<u64>,
+    last_seq: u64,
+    counters: TwinCounters,
+}
+
+impl Twin {
+    /// The twin for ROM `rom`, settings `spec`, the DAQ stream `layout` and clearance
+    /// `clearance_m` (m), at rest. Checks the spec, the layout (platform accelerometers), the
+    /// ROM (the beam sensor outputs [`TWIN_SENSORS`], sizes and values) and the twin step
+    /// against the ROM's open stability limit; errors name the key or what is missing.
+    pub fn new(
+        rom: &Rom,
+        spec: &TwinSpec,
+        layout: &DaqLayout,
+        clearance_m: f64,
+    ) -> Result<Twin, TwinError> {
+        spec.validate()?;
+        let map = InputMap::new(layout)?;
+        if !clearance_m.is_finite() {
+            return Err(TwinError::Clearance(clearance_m));
+        }
+        let mut index = [0; 4];
+        for (slot, name) in index.iter_mut().zip(TWIN_SENSORS) {
+            *slot = rom
+                .outputs
+                .iter()
+                .position(|o| o.name == name)
+                .ok_or_else(|| {
+                    TwinError::Rom(format!(
+                        "no output {name:?} (outputs: {:?}); the twin predicts the beam sensors \
+                         {TWIN_SENSORS:?}",
+                        rom.outputs.iter().map(|o| &o.name).collect::<Vec<_>>()
+                    ))
+                })?;
+        }
+        // A provisional step far inside any stability limit lets the integrator check the ROM
+        // and compute its limits; the twin step follows from them.
+        let params = IntegratorParameters {
+            time_step: TimeStep::StepsPerReferencePeriod { steps: 1.0e6 },
+            ..IntegratorParameters::default()
+        };
+        let mut integrator = Integrator::new(rom, params)?;
+        let limits = *integrator.limits();
+        let fs = map.sample_rate();
+        let n = spec.steps_per_sample_for(fs, limits.omega_ref);
+        let dt = 1.0 / (fs * f64::from(n));
+        if !(dt < limits.dt_max_open()) {
+            let key = spec.step_key();
+            let value = match spec.steps_per_sample {
+                Some(s) => s.to_string(),
+                None => format!(
+                    "{} (-> {n} steps per sample)",
+                    spec.steps_per_reference_period
+                ),
+            };
+            return Err(TwinError::Spec(format!(
+                "{key} = {value}: the twin step 1 / ({fs} Hz x {n}) = {dt:.4e} s is beyond the \
+                 open stability limit of the twin ROM, {:.4e} s (max(Omega) = {:.5e} rad/s, \
+                 w_max dt < 2, at least {:.1} steps per 1FU period); use \
+                 twin.steps_per_sample >= {}",
+                limits.dt_max_open(),
+                limits.omega_open,
+                limits.steps_per_period_open(),
+                (1.0 / (fs * limits.dt_max_open())).floor() + 1.0
+            )));
+        }
+        integrator.set_time_step(TimeStep::Dt { dt })?;
+        integrator.set_clearance(clearance_m)?;
+        let state = integrator.state_at_rest();
+        let weights = (1..=n).map(|k| f64::from(k) / f64::from(n)).collect();
+        Ok(Twin {
+            integrator,
+            state,
+            map,
+            after_gap: spec.after_gap,
+            steps_per_sample: n,
+            weights,
+            sink: SampleSink {
+                index,
+                ..SampleSink::default()
+            },
+            last_accel: None,
+            next_sample: None,
+            last_seq: 0,
+            counters: TwinCounters::default(),
+        })
+    }
+
+    /// The twin step, s.
+    pub fn dt(&self) -> f64 {
+        self.integrator.dt()
+    }
+
+    /// Twin steps per DAQ sample.
+    pub fn steps_per_sample(&self) -> u32 {
+        self.steps_per_sample
+    }
+
+    /// Sample rate of the input stream, Hz.
+    pub fn sample_rate(&self) -> f64 {
+        self.map.sample_rate()
+    }
+
+    /// The ROM's stability limits.
+    pub fn limits(&self) -> &StabilityLimits {
+        self.integrator.limits()
+    }
+
+    /// How blocks are turned into the twin's input (for extracting it elsewhere, e.g. on the
+    /// producer side of the twin task).
+    pub fn input_map(&self) -> &InputMap {
+        &self.map
+    }
+
+    /// Cumulative counters.
+    pub fn counters(&self) -> TwinCounters {
+        self.counters
+    }
+
+    /// The contact solver's cumulative counters (solves, sweeps, failures) since the twin
+    /// was created or last restarted at rest.
+    pub fn solver_counters(&self) -> crate::sim::SolverCounters {
+        self.state.counters()
+    }
+
+    /// The clearance in use, m.
+    pub fn clearance(&self) -> f64 {
+        self.integrator.clearance()
+    }
+
+    /// Changes the clearance (e.g. per test of a plan), m, from the next sample on; the state
+    /// is kept.
+    pub fn set_clearance(&mut self, clearance_m: f64) -> Result<(), TwinError> {
+        if !clearance_m.is_finite() {
+            return Err(TwinError::Clearance(clearance_m));
+        }
+        self.integrator.set_clearance(clearance_m)?;
+        Ok(())
+    }
+
+    /// The sample the next block is expected to start with (none before the first block).
+    pub fn next_sample(&self) -> Option<u64> {
+        self.next_sample
+    }
+
+    /// Rig time up to which the twin has produced outputs (end of its last block), s.
+    pub fn time(&self) -> Option<f64> {
+        self.next_sample.map(|n| n as f64 / self.map.sample_rate())
+    }
+
+    /// Back to rest, forgetting the stream position (the next block is taken as the first);
+    /// the counters are kept.
+    pub fn reset(&mut self) {
+        self.state = self.integrator.state_at_rest();
+        self.sink.velocity = [0.0; 4];
+        self.last_accel = None;
+        self.next_sample = None;
+    }
+
+    /// Runs the twin over one DAQ block (see the module docs). Fails, leaving the twin as it
+    /// was, on a block that does not fit the layout or starts before the end of the last one.
+    pub fn push_block(&mut self, block: &DaqBlock) -> Result<TwinBlock, TwinError> {
+        let input = self.map.extract(block)?;
+        self.push_input(&input)
+    }
+
+    /// Runs the twin over the base acceleration of one block (from [`InputMap::extract`] of
+    /// this twin's map; [`Twin::push_block`] does both). Fails, leaving the twin as it was, on
+    /// an empty or non-finite input or one that starts before the end of the last block.
+    pub fn push_input(&mut self, input: &TwinInput) -> Result<TwinBlock, TwinError> {
+        let len = input.len();
+        if len == 0 {
+            return Err(TwinError::Block(format!("block {}: no samples", input.seq)));
+        }
+        if let Some(i) = input.base_acceleration.iter().position(|a| !a.is_finite()) {
+            return Err(TwinError::Block(format!(
+                "block {}: base acceleration of sample {i} is {} (must be finite)",
+                input.seq, input.base_acceleration[i]
+            )));
+        }
+        let fs = self.map.sample_rate();
+        let gap = match self.next_sample {
+            None => None,
+            Some(expected) if input.first_sample == expected => None,
+            Some(expected) if input.first_sample > expected => Some(TwinGap {
+                from_sample: expected,
+                samples: input.first_sample - expected,
+                blocks: input.seq.saturating_sub(self.last_seq + 1),
+                from_time: expected as f64 / fs,
+                restarted: self.after_gap == AfterGap::RestartAtRest,
+            }),
+            Some(expected) => {
+                return Err(TwinError::Block(format!(
+                    "block {} starts at sample {}, before the end of the previous block \
+                     (block {}, next sample {expected}): blocks out of order or repeated",
+                    input.seq, input.first_sample, self.last_seq
+                )));
+            }
+        };
+        if let Some(g) = &gap {
+            self.counters.gaps += 1;
+            self.last_accel = None;
+            if g.restarted {
+                self.state = self.integrator.state_at_rest();
+                self.sink.velocity = [0.0; 4];
+            }
+        }
+
+        let mut out = TwinBlock {
+            seq: input.seq,
+            first_sample: input.first_sample,
+            time: input.time,
+            len,
+            velocity: vec![0.0; 4 * len],
+            contact: vec![false; len],
+            normal_force: vec![0.0; len],
+            tangential_force: vec![0.0; len],
+            solver_failures: vec![0; len],
+            gap,
+            restarts: Vec::new(),
+        };
+        let n = self.steps_per_sample as usize;
+        let inv_n = 1.0 / n as f64;
+        for (i, &a_i) in input.base_acceleration.iter().enumerate() {
+            let a_prev = self.last_accel.unwrap_or(a_i);
+            self.sink.start_sample();
+            let mut before = self.sink.velocity;
+            let mut failures = 0u32;
+            for (k, &w) in self.weights.iter().enumerate() {
+                if k + 1 == n {
+                    before = self.sink.velocity;
+                }
+                let a = (1.0 - w) * a_prev + w * a_i;
+                let report = self.integrator.step(&mut self.state, a, &mut self.sink)?;
+                let c = report.counters;
+                failures += (c.max_iterations + c.diverged) as u32;
+                if report.stop.is_some() {
+                    // NOTE: non-finite state: data, not an error. Restart at rest and go on.
+                    self.state = self.integrator.state_at_rest();
+                    self.sink.velocity = [0.0; 4];
+                    before = [0.0; 4];
+                    self.sink.start_sample();
+                    self.counters.restarts += 1;
+                    out.restarts.push(input.first_sample + i as u64);
+                }
+            }
+            for (s, (&b, &v)) in before.iter().zip(&self.sink.velocity).enumerate() {
+                out.velocity[s * len + i] = 0.5 * (b + v);
+            }
+            out.contact[i] = self.sink.closed;
+            out.normal_force[i] = self.sink.normal * inv_n;
+            out.tangential_force[i] = self.sink.tangential * inv_n;
+            out.solver_failures[i] = failures;
+            self.counters.solver_failures += u64::from(failures);
+            self.last_accel = Some(a_i);
+        }
+        self.counters.blocks += 1;
+        self.counters.samples += len as u64;
+        self.counters.steps += (len * n) as u64;
+        self.next_sample = Some(input.first_sample + len as u64);
+        self.last_seq = input.seq;
+        Ok(out)
+    }
+}

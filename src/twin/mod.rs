@@ -1,0 +1,33 @@
+//! The live digital twin (DESIGN.md "Rig service", Twin): the ROM integrated beside the
+//! experiment on the measured base acceleration, with predicted beam velocities, contact
+//! state and contact forces on the measurement's time base.
+//!
+//! - [`spec`]: the `[twin]` settings (twin step, queue, gap handling, test throttle).
+//! - [`input`]: the twin's input, the mean platform acceleration of a DAQ block.
+//! - [`engine`]: the synchronous core [`Twin`] (deterministic, no threads, no clock; replay
+//!   runs it directly).
+//! - [`task`]: [`TwinTask`], the core on a dedicated thread behind a bounded queue that never
+//!   blocks the producer, with lag and skipped blocks in its status.
+//! - [`output`]: the logged types ([`TwinBlock`], [`TwinStatus`], [`TwinEvent`]).
+//! - [`error`]: the error type [`TwinError`].
+
+// NOTE: validation uses negated comparisons such as `!(dt < limit)` on purpose: they reject
+// NaN together with out-of-range values.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
+pub mod engine;
+pub mod error;
+pub mod input;
+pub mod output;
+pub mod spec;
+pub mod task;
+
+pub use engine::{Twin, TwinCounters};
+pub use error::TwinError;
+pub use input::{InputMap, TwinInput};
+pub use output::{TwinBlock, TwinEvent, TwinGap, TwinStatus, TWIN_SENSORS};
+pub use spec::{AfterGap, TwinSpec};
+pub use task::{Pushed, TwinReceiver, TwinTask};
+
+#[cfg(test)]
+mod tests;

@@ -75,6 +75,55 @@ pub struct ReplayArgs {
     /// Write the recomputed summary (JSON) here.
     #[arg(long)]
     pub json: Option<PathBuf>,
+    /// Re-run the twin on the recorded base motion and compare it with the measurement step
+    /// by step (`tests[].steps[].twin`). The model is the rig description the session ran
+    /// with (stored in the log) unless `--rom` or `--config` names another.
+    #[arg(long)]
+    pub twin: bool,
+    /// The twin's ROM file (with `--twin`; `[twin]` settings at their defaults).
+    #[arg(long, requires = "twin", conflicts_with = "config")]
+    pub rom: Option<PathBuf>,
+    /// The twin's rig description (with `--twin`): its ROM is built or taken from the cache,
+    /// its `[twin]` table sets the twin.
+    #[arg(long, requires = "twin")]
+    pub config: Option<PathBuf>,
+    /// Rebuild the twin ROM even if cached (with `--twin`).
+    #[arg(long, requires = "twin")]
+    pub rebuild: bool,
+}
+
+/// The twin model of `rigtwin replay --twin`: ROM, `[twin]` settings and where it came from.
+fn replay_twin_model(
+    a: &ReplayArgs,
+    rig_toml: Option<&str>,
+) -> anyhow::Result<(Rom, crate::twin::TwinSpec, String)> {
+    if let Some(path) = &a.rom {
+        let rom =
+            crate::rom::file::read(path).with_context(|| format!("--rom {}", path.display()))?;
+        return Ok((
+            rom,
+            crate::twin::TwinSpec::default(),
+            path.display().to_string(),
+        ));
+    }
+    let (cfg, source) = match (&a.config, rig_toml) {
+        (Some(path), _) => (RigConfig::from_path(path)?, path.display().to_string()),
+        (None, Some(text)) => (
+            RigConfig::from_str(text, "rig.toml (attached to the log)")?,
+            "the rig description in the log".to_string(),
+        ),
+        (None, None) => bail!(
+            "{}: the log holds no rig description (rig.toml attachment); name the twin's model \
+             with --config or --rom",
+            a.file.display()
+        ),
+    };
+    let (rom, path, _) = super::demo::cached_rom(&cfg, a.rebuild, true)?;
+    Ok((
+        rom,
+        cfg.twin.clone(),
+        format!("{source} (ROM {})", path.display()),
+    ))
 }
 
 /// The twin ROM (the model) and the truth ROM (the simulated rig's structure: more modes).
@@ -325,6 +374,18 @@ fn print_summary(s: &SessionSummary) {
                 st.settle_seconds,
                 if st.settled { "" } else { " (not settled)" }
             );
+            if let Some(w) = &st.twin {
+                println!(
+                    "        twin     rms upper {:7.2} ({:+.1} %) lower {:7.2} ({:+.1} %)  contact {:.3} ({:+.3})  impacts/period {:.2}",
+                    w.metrics.rms_upper,
+                    100.0 * w.rms_error_upper,
+                    w.metrics.rms_lower,
+                    100.0 * w.rms_error_lower,
+                    w.metrics.contact_fraction,
+                    w.contact_fraction_error,
+                    w.metrics.impacts_per_period,
+                );
+            }
         }
     }
     if let Some(r) = &s.abort_reason {
@@ -412,9 +473,28 @@ pub(crate) fn replay(a: ReplayArgs) -> anyhow::Result<()> {
             "DIFFERENT from"
         }
     );
-    print_summary(&r.summary);
+    let mut summary = r.summary;
+    if a.twin {
+        let (rom, spec, source) = replay_twin_model(&a, r.rig_toml.as_deref())?;
+        let stats = crate::twin::replay_twin(
+            &r.recording,
+            &mut summary,
+            &rom,
+            &spec,
+            rom.meta.beam_length,
+        )
+        .with_context(|| format!("twin replay of {}", a.file.display()))?;
+        println!(
+            "twin: {source}: {} blocks, {} steps compared, {} contact-solver failures, {:.3} s \
+             per rig second",
+            stats.blocks, stats.steps_compared, stats.solver_failures, stats.wall_per_rig_second
+        );
+    }
     if let Some(j) = &a.json {
-        super::write_json(j, &r.summary)?;
+        super::write_json(j, &summary)?;
+    }
+    print_summary(&summary);
+    if let Some(j) = &a.json {
         println!("summary: {}", j.display());
     }
     Ok(())

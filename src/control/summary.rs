@@ -76,6 +76,10 @@ pub struct StepSummary {
     /// [`StepInfo::record_attempt`]).
     #[serde(default = "first_attempt")]
     pub record_attempt: u32,
+    /// The twin over the same window (`rigtwin run --twin`, `rigtwin replay --twin`): its
+    /// metrics and its errors against these.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub twin: Option<crate::twin::TwinComparison>,
 }
 
 /// Errors of a step summary.
@@ -252,5 +256,6 @@ pub fn summarize(
         settled: info.settled,
         record_start_s: info.record_first_sample as f64 * w.dt,
         record_attempt: info.record_attempt,
+        twin: None,
     })
 }

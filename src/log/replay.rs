@@ -40,6 +40,10 @@ pub struct Replay {
     pub complete: bool,
     /// What was lost, for an incomplete file.
     pub note: Option<String>,
+    /// The rig description the session ran with (the log's `rig.toml` attachment), if any.
+    pub rig_toml: Option<String>,
+    /// The raw recording (layout, blocks, events).
+    pub recording: Recording,
 }
 
 /// The session's DAQ stream: layout and blocks in order.
@@ -164,11 +168,16 @@ pub fn replay(path: &Path) -> Result<Replay, ReplayError> {
         .into_iter()
         .map(|(_, _, m)| m)
         .collect();
+    let rig_toml = session
+        .attachment("rig.toml")
+        .map(|a| String::from_utf8_lossy(&a.data).into_owned());
     Ok(Replay {
         summary,
         logged_steps,
-        layout: rec.layout,
+        layout: rec.layout.clone(),
         complete: session.complete,
         note: session.note,
+        rig_toml,
+        recording: rec,
     })
 }

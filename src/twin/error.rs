@@ -28,6 +28,9 @@ pub enum TwinError {
     /// The integrator rejected the twin ROM or its parameters.
     #[error("twin model: {0}")]
     Sim(#[from] SimError),
+    /// The metrics of the twin's output over a record window could not be computed.
+    #[error("twin comparison: {0}")]
+    Metrics(String),
     /// The twin task's thread is gone (it panicked, or the task was shut down).
     #[error("twin task: {0}")]
     Task(String),

@@ -15,6 +15,7 @@
 // NaN together with out-of-range values.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod compare;
 pub mod engine;
 pub mod error;
 pub mod input;
@@ -22,6 +23,7 @@ pub mod output;
 pub mod spec;
 pub mod task;
 
+pub use compare::{replay_twin, TwinComparison, TwinReplayStats, TwinWindows};
 pub use engine::{Twin, TwinCounters};
 pub use error::TwinError;
 pub use input::{InputMap, TwinInput};

@@ -23,7 +23,7 @@ pub(super) enum Record {
     Event(SessionEvent),
     Status(StatusMessage),
     /// A finished step and its log time (end of its record window), s.
-    Step(f64, StepMessage),
+    Step(f64, Box<StepMessage>),
     /// Publish what is queued, close the open decimation bin and stop.
     Close,
 }
@@ -119,10 +119,10 @@ impl SessionRecorder for LiveRecorder {
         self.offer(|| {
             Record::Step(
                 time,
-                StepMessage {
+                Box::new(StepMessage {
                     info: info.clone(),
                     summary: summary.clone(),
-                },
+                }),
             )
         });
         Ok(())

@@ -154,3 +154,118 @@ fn replay_with_the_twin_compares_every_step_deterministically() {
     assert!(!o.status.success());
     assert!(text(&o).contains("--twin"), "{}", text(&o));
 }
+
+/// `rigtwin run --twin`: the live twin's comparison equals the replay's, bit for bit, and is
+/// logged on its own channels.
+#[test]
+fn the_live_twin_equals_its_replay_and_is_logged() {
+    let dir = tempfile::tempdir().unwrap();
+    let plan = dir.path().join("plan.toml");
+    std::fs::write(&plan, PLAN.replace("steps = 3", "steps = 2")).unwrap();
+    let mcap = dir.path().join("session.mcap");
+    let live = dir.path().join("live.json");
+    let o = rigtwin(&[
+        "run",
+        "--plan",
+        plan.to_str().unwrap(),
+        "--quiet",
+        "--twin",
+        "--out",
+        mcap.to_str().unwrap(),
+        "--json",
+        live.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(text(&o).contains("2 of 2 steps compared"), "{}", text(&o));
+    let replayed = dir.path().join("replay.json");
+    let o = rigtwin(&[
+        "replay",
+        mcap.to_str().unwrap(),
+        "--twin",
+        "--json",
+        replayed.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert_eq!(
+        std::fs::read_to_string(&live).unwrap(),
+        std::fs::read_to_string(&replayed).unwrap(),
+        "live twin and replayed twin differ"
+    );
+    let s = rigtwin::log::read_session(&mcap).unwrap();
+    let steps = s
+        .decode::<rigtwin::twin::TwinStepMessage>(rigtwin::twin::TOPIC_TWIN_STEPS)
+        .unwrap();
+    assert_eq!(steps.len(), 2);
+    assert!(steps.iter().all(|(_, _, m)| m.twin.is_some()));
+    let status = s
+        .decode::<rigtwin::twin::TwinStatus>(rigtwin::twin::TOPIC_TWIN_STATUS)
+        .unwrap();
+    assert!(!status.is_empty());
+}
+
+/// A twin that cannot keep up (throttled to 4 wall seconds per second of data, queue of 8
+/// blocks) skips blocks and says so, and the session paced to the wall clock goes on without
+/// a single overrun: the twin never holds up control or logging.
+#[test]
+fn a_twin_that_falls_behind_skips_visibly_and_does_not_stall_the_session() {
+    let dir = tempfile::tempdir().unwrap();
+    let plan = dir.path().join("plan.toml");
+    std::fs::write(
+        &plan,
+        PLAN.replace("steps = 3", "steps = 2")
+            .replace("settle_periods = 60", "settle_periods = 40"),
+    )
+    .unwrap();
+    let cfg = dir.path().join("rig.toml");
+    let mut t = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/rig-config/two-beam.toml"
+    ))
+    .unwrap();
+    t.push_str("\n[twin]\nthrottle = 4.0\nqueue_blocks = 8\n");
+    std::fs::write(&cfg, t).unwrap();
+    let mcap = dir.path().join("session.mcap");
+    let summary = dir.path().join("summary.json");
+    let o = rigtwin(&[
+        "run",
+        cfg.to_str().unwrap(),
+        "--plan",
+        plan.to_str().unwrap(),
+        "--quiet",
+        "--realtime",
+        "--twin",
+        "--out",
+        mcap.to_str().unwrap(),
+        "--json",
+        summary.to_str().unwrap(),
+    ]);
+    let out = text(&o);
+    assert!(o.status.success(), "{out}");
+    assert!(out.contains(" 0 overruns"), "{out}");
+    let skipped: u64 = out
+        .lines()
+        .find_map(|l| {
+            l.strip_prefix("twin: ")?
+                .split(" (")
+                .nth(1)?
+                .split(' ')
+                .next()?
+                .parse()
+                .ok()
+        })
+        .unwrap_or_else(|| panic!("no twin line: {out}"));
+    assert!(skipped > 0, "the throttled twin skipped nothing: {out}");
+    // The lag is in the log.
+    let s = rigtwin::log::read_session(&mcap).unwrap();
+    let status = s
+        .decode::<rigtwin::twin::TwinStatus>(rigtwin::twin::TOPIC_TWIN_STATUS)
+        .unwrap();
+    assert!(
+        status.iter().any(|(_, _, st)| st.behind && st.lag_s > 0.1),
+        "{status:?}"
+    );
+    // The session's own summary is complete.
+    let s = json(&summary);
+    assert_eq!(s["aborted"], false);
+    assert_eq!(s["tests"][0]["steps"].as_array().unwrap().len(), 2);
+}

@@ -100,6 +100,7 @@ pub(crate) fn run(a: DemoArgs) -> anyhow::Result<()> {
         rebuild: false,
         quiet: a.quiet,
         foxglove: None,
+        twin: true,
     })?;
     super::run::print_session(&o);
     let json = a.out.join("session.json");

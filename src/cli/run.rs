@@ -54,6 +54,13 @@ pub struct RunArgs {
     /// second; plot e.g. /live/daq.upper_tip.max). The server stops when the session ends.
     #[arg(long, value_name = "ADDR", value_parser = crate::log::live::parse_addr)]
     pub foxglove: Option<SocketAddr>,
+    /// Run the twin beside the session: the rig description's own ROM driven by the measured
+    /// base acceleration on its own thread (`[twin]` settings), compared with the measurement
+    /// in every record window (`tests[].steps[].twin`; logged on /twin/steps and
+    /// /twin/status). It never holds the session up: when it falls behind it skips blocks and
+    /// says so.
+    #[arg(long)]
+    pub twin: bool,
     /// Inject a fault into the simulated rig, as JSON, e.g.
     /// '{"kind":"dead_channel","at_s":3.0,"channel":"upper_tip"}' (repeatable). Kinds:
     /// daq_stall, dead_channel, drive_saturation, clearance_change.
@@ -151,6 +158,8 @@ pub(crate) struct RunOutcome {
     pub overruns: u64,
     /// What the live view did (with `--foxglove`).
     pub live: Option<LiveStats>,
+    /// What the twin did (with `--twin`).
+    pub twin: Option<crate::twin::TwinOutcome>,
 }
 
 /// A session on the simulated rig.
@@ -173,6 +182,8 @@ pub(crate) struct SimSession<'a> {
     pub quiet: bool,
     /// Serve the session live to the Foxglove app on this address.
     pub foxglove: Option<SocketAddr>,
+    /// Run the twin beside the session.
+    pub twin: bool,
 }
 
 /// Starts the live view on `addr` and prints where to connect.
@@ -210,6 +221,7 @@ pub(crate) fn run_sim_session(session: &SimSession<'_>) -> anyhow::Result<RunOut
         rebuild,
         quiet,
         foxglove,
+        twin: with_twin,
     } = *session;
     // First, so that a port in use fails before the ROMs are built.
     let (live_recorder, live_view) = foxglove.map(start_live_view).transpose()?.unzip();
@@ -281,7 +293,25 @@ pub(crate) fn run_sim_session(session: &SimSession<'_>) -> anyhow::Result<RunOut
         attachments,
     )
     .with_context(|| format!("creating the session log {}", out.display()))?;
-    let mut recorder = Tee(McapRecorder::new(handle)?, live_recorder);
+    let twin_recorder = if with_twin {
+        let layout = crate::rig::RigBackend::layout(&backend).clone();
+        let engine = crate::twin::Twin::new(&twin, &cfg.twin, &layout, cfg.contact.clearance)
+            .context("the twin")?;
+        let (task, rx) = crate::twin::TwinTask::spawn(engine, &cfg.twin).context("the twin")?;
+        Some(crate::twin::TwinRecorder::new(
+            task,
+            rx,
+            l,
+            layout.dt(),
+            Some(handle.clone()),
+        )?)
+    } else {
+        None
+    };
+    let mut recorder = Tee(
+        Tee(McapRecorder::new(handle)?, live_recorder),
+        twin_recorder,
+    );
 
     let bar = if quiet {
         ProgressBar::hidden()
@@ -317,9 +347,16 @@ pub(crate) fn run_sim_session(session: &SimSession<'_>) -> anyhow::Result<RunOut
         let s = run_session(&mut backend, &setup, &mut recorder, shutdown, &mut progress).await?;
         anyhow::Ok((s, crate::rig::RigBackend::status(&backend).overruns))
     })?;
-    let (summary, overruns) = summary;
+    let (mut summary, overruns) = summary;
     bar.finish_and_clear();
-    let messages = recorder.0.messages();
+    let twin_outcome = recorder.1.take().map(crate::twin::TwinRecorder::finish);
+    if let Some(t) = &twin_outcome {
+        let slots = summary.tests.iter_mut().flat_map(|t| t.steps.iter_mut());
+        for (slot, c) in slots.zip(&t.comparisons) {
+            slot.twin = c.clone();
+        }
+    }
+    let messages = recorder.0 .0.messages();
     drop(recorder);
     join.close().context("closing the session log")?;
     let wall_seconds = t0.elapsed().as_secs_f64();
@@ -330,6 +367,7 @@ pub(crate) fn run_sim_session(session: &SimSession<'_>) -> anyhow::Result<RunOut
         messages,
         overruns,
         live,
+        twin: twin_outcome,
     })
 }
 
@@ -352,6 +390,23 @@ pub(crate) fn print_session(o: &RunOutcome) {
             l.points,
             l.dropped_records
         );
+    }
+    if let Some(t) = &o.twin {
+        let s = &t.status;
+        println!(
+            "twin: {} of {} blocks ({} skipped while behind, {} gaps), {:.1}x real time, {} contact-solver failures, {} of {} steps compared",
+            s.blocks_processed,
+            s.blocks_offered,
+            s.blocks_skipped,
+            s.gaps,
+            s.realtime_factor,
+            s.solver_failures,
+            t.comparisons.iter().filter(|c| c.is_some()).count(),
+            t.comparisons.len()
+        );
+        for e in &t.errors {
+            println!("twin error: {e}");
+        }
     }
     print_summary(&o.summary);
 }
@@ -433,6 +488,7 @@ pub(crate) fn run(a: RunArgs) -> anyhow::Result<()> {
         rebuild: a.rebuild,
         quiet: a.quiet,
         foxglove: a.foxglove,
+        twin: a.twin,
     })?;
     print_session(&o);
     println!("log: {}", a.out.display());

@@ -2,6 +2,8 @@
 //! from the raw recording (the same signal processing as the live summary): RMS response and
 //! amplitude ranges of every test, time histories and contact activity of the step nearest
 //! Omega = omega_2 of each test, and its Morlet scalogram; plus the replayed summary as JSON.
+//! A session run with `--twin` has the twin's RMS response and amplitude ranges drawn dashed
+//! beside the measurement's (from `/twin/steps`).
 
 use anyhow::Context;
 use clap::Args;
@@ -78,6 +80,43 @@ pub(crate) fn figures(file: &Path, out: &Path) -> anyhow::Result<Vec<PathBuf>> {
             }
         })
         .collect();
+    // The live twin's comparison (sessions run with `--twin`), dashed beside the measurement.
+    let twin_steps = session
+        .decode::<crate::twin::TwinStepMessage>(crate::twin::TOPIC_TWIN_STEPS)
+        .unwrap_or_default();
+    let mut curves = curves;
+    for t in r.summary.tests.iter().filter(|t| !t.steps.is_empty()) {
+        let steps: Vec<(f64, &crate::signal::StepMetrics)> = twin_steps
+            .iter()
+            .filter(|(_, _, m)| m.test == t.name)
+            .filter_map(|(_, _, m)| Some((m.omega_ratio, &m.twin.as_ref()?.metrics)))
+            .collect();
+        if steps.is_empty() {
+            continue;
+        }
+        let col = |f: fn(&crate::signal::StepMetrics) -> f64| -> Vec<f64> {
+            steps.iter().map(|(_, m)| f(m)).collect()
+        };
+        curves.push(TestCurve {
+            name: t.name.clone(),
+            level: t.level,
+            direction: if t.direction == "up" {
+                Direction::Up
+            } else {
+                Direction::Down
+            },
+            source: Source::Twin,
+            omega_ratio: steps.iter().map(|(w, _)| *w).collect(),
+            rms_upper: col(|m| m.rms_upper),
+            rms_lower: col(|m| m.rms_lower),
+            amp_min_upper: col(|m| m.amp_min_upper),
+            amp_mean_upper: col(|m| m.amp_mean_upper),
+            amp_max_upper: col(|m| m.amp_max_upper),
+            amp_min_lower: col(|m| m.amp_min_lower),
+            amp_mean_lower: col(|m| m.amp_mean_lower),
+            amp_max_lower: col(|m| m.amp_max_lower),
+        });
+    }
     if !curves.is_empty() {
         let data = FrequencyResponse { tests: curves };
         let p = a.out.join("rms_response.png");

@@ -12,12 +12,13 @@
 //!   the command succeeds);
 //! - a malformed or busy `--foxglove` address fails at once with an error naming the flag.
 
+mod cli_support;
 mod log_support;
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::io::{BufRead, BufReader};
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output, Stdio};
+use std::path::Path;
+use std::process::{Command, Stdio};
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
@@ -25,6 +26,7 @@ use futures_util::{SinkExt, StreamExt};
 use tokio_tungstenite::tungstenite::client::IntoClientRequest;
 use tokio_tungstenite::tungstenite::Message;
 
+use cli_support::{rigtwin_command as rigtwin, text};
 use rigtwin::control::ControlState;
 use rigtwin::log::read_session;
 use rigtwin::rig::{DaqBlock, DaqLayout};
@@ -59,24 +61,6 @@ const TOPICS: [&str; 6] = [
 
 /// The Foxglove WebSocket subprotocol the SDK's server (foxglove 0.30) speaks.
 const SUBPROTOCOL: &str = "foxglove.sdk.v1";
-
-fn cache() -> PathBuf {
-    PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("rom-cache")
-}
-
-fn rigtwin() -> Command {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_rigtwin"));
-    c.env("RIGTWIN_CACHE", cache());
-    c
-}
-
-fn text(o: &Output) -> String {
-    format!(
-        "{}\n{}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    )
-}
 
 /// An advertised channel.
 #[derive(Clone, Debug)]

@@ -12,11 +12,13 @@
 //! - the session metadata records which truth variants (hidden physics) the simulated rig ran
 //!   with (`{}` for none), and a bad variant in the rig description is a clear error.
 
+mod cli_support;
 mod log_support;
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
+use cli_support::{cache, json, rigtwin, text, write_plan};
 use rigtwin::control::{ControlState, EventKind, Phase, SessionEvent};
 use rigtwin::log::read_session;
 use rigtwin::log::recorder::{TOPIC_CONTROL, TOPIC_DAQ, TOPIC_EVENTS};
@@ -39,33 +41,6 @@ omega_start = 1.01
 omega_end = 0.99
 "#;
 
-fn cache() -> PathBuf {
-    PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("rom-cache")
-}
-
-fn rigtwin(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_rigtwin"))
-        .env("RIGTWIN_CACHE", cache())
-        .args(args)
-        .output()
-        .unwrap()
-}
-
-fn text(o: &Output) -> String {
-    format!(
-        "{}\n{}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    )
-}
-
-fn write_plan(dir: &Path, text: &str) -> String {
-    let p = dir.join("plan.toml");
-    std::fs::write(&p, text).unwrap();
-    p.display().to_string()
-}
-
-/// `rigtwin run --plan PLAN_TEXT --quiet --out DIR/session.mcap --json DIR/summary.json EXTRA`.
 fn run_plan(dir: &Path, plan_text: &str, extra: &[&str]) -> (Output, PathBuf, PathBuf) {
     let plan = write_plan(dir, plan_text);
     let mcap = dir.join("session.mcap");
@@ -82,10 +57,6 @@ fn run_plan(dir: &Path, plan_text: &str, extra: &[&str]) -> (Output, PathBuf, Pa
     ];
     args.extend_from_slice(extra);
     (rigtwin(&args), mcap, summary)
-}
-
-fn json(path: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
 
 #[test]
@@ -430,15 +401,11 @@ fn bad_input_gives_clear_errors() {
 #[test]
 fn a_window_off_the_tolerance_is_recorded_again() {
     let dir = tempfile::tempdir().unwrap();
-    let config = dir.path().join("rig.toml");
-    let mut text_cfg = std::fs::read_to_string(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/rig-config/two-beam.toml"
-    ))
-    .unwrap();
     // No window meets 1e-9: every step takes both windows.
-    text_cfg.push_str("\n[control]\nrecord_tolerance = 1e-9\nrecord_attempts = 2\n");
-    std::fs::write(&config, text_cfg).unwrap();
+    let config = cli_support::default_rig_with(
+        dir.path(),
+        "[control]\nrecord_tolerance = 1e-9\nrecord_attempts = 2\n",
+    );
     let plan = PLAN.replace("steps = 3", "steps = 2");
     let (o, mcap, summary) = run_plan(dir.path(), &plan, &[config.to_str().unwrap()]);
     assert!(o.status.success(), "{}", text(&o));

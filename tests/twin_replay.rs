@@ -5,8 +5,11 @@
 //! - the same recording and model give the same bits; a changed model changes them;
 //! - a bad model argument is a clear error.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+mod cli_support;
+
+use std::path::PathBuf;
+
+use cli_support::{default_rig_with, json, rigtwin, text};
 
 const PLAN: &str = r#"
 name = "twin-replay-test"
@@ -24,30 +27,6 @@ direction = "down"
 omega_start = 1.08
 omega_end = 1.00
 "#;
-
-fn cache() -> PathBuf {
-    PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("rom-cache")
-}
-
-fn rigtwin(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_rigtwin"))
-        .env("RIGTWIN_CACHE", cache())
-        .args(args)
-        .output()
-        .unwrap()
-}
-
-fn text(o: &Output) -> String {
-    format!(
-        "{}\n{}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    )
-}
-
-fn json(path: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
-}
 
 #[test]
 fn replay_with_the_twin_compares_every_step_deterministically() {
@@ -116,14 +95,7 @@ fn replay_with_the_twin_compares_every_step_deterministically() {
     }
 
     // A changed model (the twin's time step) changes the twin's output.
-    let cfg = dir.path().join("rig.toml");
-    let mut t = std::fs::read_to_string(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/rig-config/two-beam.toml"
-    ))
-    .unwrap();
-    t.push_str("\n[twin]\nsteps_per_reference_period = 2000\n");
-    std::fs::write(&cfg, t).unwrap();
+    let cfg = default_rig_with(dir.path(), "[twin]\nsteps_per_reference_period = 2000\n");
     let c = replay("c.json", &["--config", cfg.to_str().unwrap()]);
     let sc = json(&c);
     assert_ne!(
@@ -216,14 +188,7 @@ fn a_twin_that_falls_behind_skips_visibly_and_does_not_stall_the_session() {
             .replace("settle_periods = 60", "settle_periods = 40"),
     )
     .unwrap();
-    let cfg = dir.path().join("rig.toml");
-    let mut t = std::fs::read_to_string(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/rig-config/two-beam.toml"
-    ))
-    .unwrap();
-    t.push_str("\n[twin]\nthrottle = 4.0\nqueue_blocks = 8\n");
-    std::fs::write(&cfg, t).unwrap();
+    let cfg = default_rig_with(dir.path(), "[twin]\nthrottle = 4.0\nqueue_blocks = 8\n");
     let mcap = dir.path().join("session.mcap");
     let summary = dir.path().join("summary.json");
     let o = rigtwin(&[

@@ -9,10 +9,11 @@ use anyhow::Context;
 use clap::Args;
 use std::path::{Path, PathBuf};
 
-use crate::control::{window_signals, EventKind, StepInfo};
+use crate::control::{window_signals, EventKind, StepInfo, TestSummary};
 use crate::log::replay::{recording, replay, window_counts};
 use crate::plan::Direction;
 use crate::report::{self, Beam, FigureOptions, FrequencyResponse, Source, TestCurve, TimeHistory};
+use crate::signal::StepMetrics;
 
 /// `rigtwin report`
 #[derive(Args, Debug)]
@@ -29,6 +30,31 @@ pub(crate) fn run(a: ReportArgs) -> anyhow::Result<()> {
         println!("{}", p.display());
     }
     Ok(())
+}
+
+/// The frequency-response curve of test `t` from `(Omega / omega_2, metrics)` per step.
+fn test_curve(t: &TestSummary, source: Source, steps: &[(f64, &StepMetrics)]) -> TestCurve {
+    let col =
+        |f: fn(&StepMetrics) -> f64| -> Vec<f64> { steps.iter().map(|(_, m)| f(m)).collect() };
+    TestCurve {
+        name: t.name.clone(),
+        level: t.level,
+        direction: if t.direction == "up" {
+            Direction::Up
+        } else {
+            Direction::Down
+        },
+        source,
+        omega_ratio: steps.iter().map(|(w, _)| *w).collect(),
+        rms_upper: col(|m| m.rms_upper),
+        rms_lower: col(|m| m.rms_lower),
+        amp_min_upper: col(|m| m.amp_min_upper),
+        amp_mean_upper: col(|m| m.amp_mean_upper),
+        amp_max_upper: col(|m| m.amp_max_upper),
+        amp_min_lower: col(|m| m.amp_min_lower),
+        amp_mean_lower: col(|m| m.amp_mean_lower),
+        amp_max_lower: col(|m| m.amp_max_lower),
+    }
 }
 
 /// Draws the figures of the session log `file` into `out` (created); returns the files
@@ -50,72 +76,29 @@ pub(crate) fn figures(file: &Path, out: &Path) -> anyhow::Result<Vec<PathBuf>> {
     let fig = FigureOptions::default();
     let mut written = Vec::new();
 
-    let curves: Vec<TestCurve> = r
-        .summary
-        .tests
-        .iter()
-        .filter(|t| !t.steps.is_empty())
-        .map(|t| {
-            let col = |f: fn(&crate::control::StepSummary) -> f64| -> Vec<f64> {
-                t.steps.iter().map(f).collect()
-            };
-            TestCurve {
-                name: t.name.clone(),
-                level: t.level,
-                direction: if t.direction == "up" {
-                    Direction::Up
-                } else {
-                    Direction::Down
-                },
-                source: Source::Measurement,
-                omega_ratio: col(|s| s.omega_ratio),
-                rms_upper: col(|s| s.metrics.rms_upper),
-                rms_lower: col(|s| s.metrics.rms_lower),
-                amp_min_upper: col(|s| s.metrics.amp_min_upper),
-                amp_mean_upper: col(|s| s.metrics.amp_mean_upper),
-                amp_max_upper: col(|s| s.metrics.amp_max_upper),
-                amp_min_lower: col(|s| s.metrics.amp_min_lower),
-                amp_mean_lower: col(|s| s.metrics.amp_mean_lower),
-                amp_max_lower: col(|s| s.metrics.amp_max_lower),
-            }
-        })
-        .collect();
-    // The live twin's comparison (sessions run with `--twin`), dashed beside the measurement.
+    // The measurement's curves, then the live twin's (sessions run with `--twin`, from
+    // `/twin/steps`), dashed beside them.
     let twin_steps = session
         .decode::<crate::twin::TwinStepMessage>(crate::twin::TOPIC_TWIN_STEPS)
         .unwrap_or_default();
-    let mut curves = curves;
+    let mut curves = Vec::new();
     for t in r.summary.tests.iter().filter(|t| !t.steps.is_empty()) {
-        let steps: Vec<(f64, &crate::signal::StepMetrics)> = twin_steps
+        let measured: Vec<(f64, &StepMetrics)> = t
+            .steps
+            .iter()
+            .map(|s| (s.omega_ratio, &s.metrics))
+            .collect();
+        curves.push(test_curve(t, Source::Measurement, &measured));
+    }
+    for t in r.summary.tests.iter().filter(|t| !t.steps.is_empty()) {
+        let twin: Vec<(f64, &StepMetrics)> = twin_steps
             .iter()
             .filter(|(_, _, m)| m.test == t.name)
             .filter_map(|(_, _, m)| Some((m.omega_ratio, &m.twin.as_ref()?.metrics)))
             .collect();
-        if steps.is_empty() {
-            continue;
+        if !twin.is_empty() {
+            curves.push(test_curve(t, Source::Twin, &twin));
         }
-        let col = |f: fn(&crate::signal::StepMetrics) -> f64| -> Vec<f64> {
-            steps.iter().map(|(_, m)| f(m)).collect()
-        };
-        curves.push(TestCurve {
-            name: t.name.clone(),
-            level: t.level,
-            direction: if t.direction == "up" {
-                Direction::Up
-            } else {
-                Direction::Down
-            },
-            source: Source::Twin,
-            omega_ratio: steps.iter().map(|(w, _)| *w).collect(),
-            rms_upper: col(|m| m.rms_upper),
-            rms_lower: col(|m| m.rms_lower),
-            amp_min_upper: col(|m| m.amp_min_upper),
-            amp_mean_upper: col(|m| m.amp_mean_upper),
-            amp_max_upper: col(|m| m.amp_max_upper),
-            amp_min_lower: col(|m| m.amp_min_lower),
-            amp_mean_lower: col(|m| m.amp_mean_lower),
-            amp_max_lower: col(|m| m.amp_max_lower),
-        });
     }
     if !curves.is_empty() {
         let data = FrequencyResponse { tests: curves };

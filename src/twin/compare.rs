@@ -134,6 +134,45 @@ impl TwinWindows {
     }
 }
 
+/// A completed record window: the step, and the twin over it (`None`: the twin missed part
+/// of the window; `Err`: its metrics failed).
+pub type Completed = (
+    StepInfo,
+    Option<Result<TwinComparison, crate::signal::SignalError>>,
+);
+
+impl TwinWindows {
+    /// Takes the windows at the front of `pending` (record windows in order, with the
+    /// measurement's summary) that the output covers — all of them when `all` — and compares
+    /// each; then drops the output no longer needed: everything before the next pending window,
+    /// or, with none pending, all but the last 30 s (the twin may run ahead of the session's
+    /// record-window events; no record window is that long).
+    pub fn complete(
+        &mut self,
+        pending: &mut VecDeque<(StepInfo, StepSummary)>,
+        dt: f64,
+        all: bool,
+    ) -> Vec<Completed> {
+        let mut done = Vec::new();
+        while let Some((info, _)) = pending.front() {
+            let end = info.record_first_sample + info.record_samples as u64;
+            if !all && end > self.end() {
+                break;
+            }
+            let (info, measured) = pending.pop_front().expect("front");
+            let c = self.compare(&info, &measured, dt);
+            done.push((info, c));
+            self.trim(end);
+        }
+        let keep = match pending.front() {
+            Some((info, _)) => info.record_first_sample,
+            None => self.end().saturating_sub((30.0 / dt) as u64),
+        };
+        self.trim(keep);
+        done
+    }
+}
+
 fn compare(twin: StepMetrics, measured: &StepMetrics) -> TwinComparison {
     TwinComparison {
         rms_error_upper: twin.rms_upper / measured.rms_upper - 1.0,
@@ -170,60 +209,44 @@ pub fn replay_twin(
 ) -> Result<TwinReplayStats, TwinError> {
     let wall = std::time::Instant::now();
     let mut clearances: VecDeque<(u64, f64)> = VecDeque::new();
-    let mut windows: VecDeque<StepInfo> = VecDeque::new();
+    let mut infos: Vec<StepInfo> = Vec::new();
     for e in &rec.events {
         match &e.kind {
             EventKind::TestStart { clearance, .. } => {
                 clearances.push_back((e.sample, clearance * beam_length))
             }
-            EventKind::RecordEnd { info } => windows.push_back(info.clone()),
+            EventKind::RecordEnd { info } => infos.push(info.clone()),
             _ => {}
         }
     }
     let first_clearance = clearances.front().map_or(0.0, |c| c.1);
     let mut twin = Twin::new(rom, spec, &rec.layout, first_clearance)?;
     let dt = rec.layout.dt();
-    // The measured step summaries, in record-window order.
+    // The measured step summaries are in record-window order.
     let mut slots: Vec<&mut StepSummary> = summary
         .tests
         .iter_mut()
         .flat_map(|t| t.steps.iter_mut())
         .collect();
-    let mut next_slot = 0usize;
+    let mut pending: VecDeque<(StepInfo, StepSummary)> = infos
+        .into_iter()
+        .zip(slots.iter().map(|s| (**s).clone()))
+        .collect();
+    let mut results: Vec<Option<TwinComparison>> = Vec::new();
     let mut out = TwinWindows::default();
     let mut stats = TwinReplayStats::default();
-    let finish_windows = |out: &mut TwinWindows,
-                          windows: &mut VecDeque<StepInfo>,
-                          slots: &mut Vec<&mut StepSummary>,
-                          next_slot: &mut usize,
-                          stats: &mut TwinReplayStats,
-                          all: bool|
-     -> Result<(), TwinError> {
-        while let Some(info) = windows.front() {
-            let end = info.record_first_sample + info.record_samples as u64;
-            if !all && end > out.end() {
-                break;
-            }
-            let info = windows.pop_front().expect("front");
-            if let Some(slot) = slots.get_mut(*next_slot) {
-                slot.twin = match out.compare(&info, slot, dt) {
-                    Some(Ok(c)) => Some(c),
-                    Some(Err(e)) => {
-                        return Err(TwinError::Metrics(format!(
-                            "metrics of step {} of test {}: {e}",
-                            info.step, info.test
-                        )))
-                    }
-                    None => None,
-                };
-                stats.steps_compared += usize::from(slot.twin.is_some());
-            }
-            *next_slot += 1;
-            out.trim(end);
-        }
-        // Nothing before the next window is needed any more.
-        if let Some(info) = windows.front() {
-            out.trim(info.record_first_sample);
+    let mut take = |done: Vec<Completed>| -> Result<(), TwinError> {
+        for (info, c) in done {
+            results.push(match c {
+                Some(Ok(c)) => Some(c),
+                Some(Err(e)) => {
+                    return Err(TwinError::Metrics(format!(
+                        "metrics of step {} of test {}: {e}",
+                        info.step, info.test
+                    )))
+                }
+                None => None,
+            });
         }
         Ok(())
     };
@@ -243,23 +266,13 @@ pub fn replay_twin(
             .map(|&f| u64::from(f))
             .sum::<u64>();
         out.push(&tb);
-        finish_windows(
-            &mut out,
-            &mut windows,
-            &mut slots,
-            &mut next_slot,
-            &mut stats,
-            false,
-        )?;
+        take(out.complete(&mut pending, dt, false))?;
     }
-    finish_windows(
-        &mut out,
-        &mut windows,
-        &mut slots,
-        &mut next_slot,
-        &mut stats,
-        true,
-    )?;
+    take(out.complete(&mut pending, dt, true))?;
+    for (slot, c) in slots.iter_mut().zip(results) {
+        stats.steps_compared += usize::from(c.is_some());
+        slot.twin = c;
+    }
     let rig = rec
         .blocks
         .last()

@@ -134,13 +134,8 @@ impl TwinRecorder {
                 }
             }
         }
-        while let Some((info, _)) = self.windows.front() {
-            let end = info.record_first_sample + info.record_samples as u64;
-            if !all && end > self.out.end() {
-                break;
-            }
-            let (info, measured) = self.windows.pop_front().expect("front");
-            let c = match self.out.compare(&info, &measured, self.dt) {
+        for (info, c) in self.out.complete(&mut self.windows, self.dt, all) {
+            let c = match c {
                 Some(Ok(c)) => Some(c),
                 Some(Err(e)) => {
                     self.fail(format!(
@@ -152,6 +147,7 @@ impl TwinRecorder {
                 None => None,
             };
             if let Some(l) = &self.logs {
+                let end = info.record_first_sample + info.record_samples as u64;
                 let _ = l.log.log(
                     &l.steps,
                     log_time_ns(end as f64 * self.dt),
@@ -164,13 +160,6 @@ impl TwinRecorder {
                 );
             }
             self.results.push(c);
-            self.out.trim(end);
-        }
-        if self.windows.is_empty() {
-            // The twin may run ahead of the session's record-window events: keep the last 30 s
-            // of output (longer than any record window) for the next window.
-            let keep = self.out.end().saturating_sub((30.0 / self.dt) as u64);
-            self.out.trim(keep);
         }
     }
 

@@ -1,0 +1,59 @@
+//! Helpers shared by the tests that run the `rigtwin` binary on the default rig: the ROM
+//! cache they share, running the binary, its output as text, JSON files, plan files.
+
+#![allow(dead_code)]
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+/// The ROM cache shared by the default-rig tests (built once per target directory).
+pub fn cache() -> PathBuf {
+    PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("rom-cache")
+}
+
+/// The `rigtwin` binary with the shared ROM cache.
+pub fn rigtwin_command() -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_rigtwin"));
+    c.env("RIGTWIN_CACHE", cache());
+    c
+}
+
+/// Runs `rigtwin args...` to completion.
+pub fn rigtwin(args: &[&str]) -> Output {
+    rigtwin_command().args(args).output().unwrap()
+}
+
+/// Stdout and stderr of a run, for assertion messages.
+pub fn text(o: &Output) -> String {
+    format!(
+        "{}\n{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    )
+}
+
+/// A JSON file.
+pub fn json(path: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+/// Writes `text` as `dir/plan.toml`; returns its path.
+pub fn write_plan(dir: &Path, text: &str) -> String {
+    let p = dir.join("plan.toml");
+    std::fs::write(&p, text).unwrap();
+    p.display().to_string()
+}
+
+/// The embedded default rig description with `extra` TOML appended, written to `dir/rig.toml`.
+pub fn default_rig_with(dir: &Path, extra: &str) -> PathBuf {
+    let mut t = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/rig-config/two-beam.toml"
+    ))
+    .unwrap();
+    t.push('\n');
+    t.push_str(extra);
+    let p = dir.join("rig.toml");
+    std::fs::write(&p, t).unwrap();
+    p
+}

@@ -470,4 +470,16 @@ fn documented_truth_variants_examples_are_valid() {
         .truth
         .variants;
     assert_eq!(from_readme, v);
+    // The `[twin]` example (the last toml block of rig-config/README.md).
+    let twin_block = readme
+        .split("```toml\n")
+        .last()
+        .and_then(|b| b.split("```").next())
+        .unwrap();
+    assert!(twin_block.starts_with("[twin]"), "{twin_block}");
+    let cfg = parse(&format!("{}\n{twin_block}", &text[..start])).unwrap();
+    assert_eq!(
+        (cfg.twin.steps_per_reference_period, cfg.twin.queue_blocks),
+        (2000.0, 80)
+    );
 }

@@ -351,10 +351,7 @@ pub(crate) fn run_sim_session(session: &SimSession<'_>) -> anyhow::Result<RunOut
     bar.finish_and_clear();
     let twin_outcome = recorder.1.take().map(crate::twin::TwinRecorder::finish);
     if let Some(t) = &twin_outcome {
-        let slots = summary.tests.iter_mut().flat_map(|t| t.steps.iter_mut());
-        for (slot, c) in slots.zip(&t.comparisons) {
-            slot.twin = c.clone();
-        }
+        summary.attach_twin(t.comparisons.iter().cloned());
     }
     let messages = recorder.0 .0.messages();
     drop(recorder);

@@ -178,6 +178,26 @@ impl SessionSummary {
             t.steps.push(summary);
         }
     }
+
+    /// Every step's measured summary, in record-window order (tests in order, steps in order).
+    pub fn steps(&self) -> impl Iterator<Item = &StepSummary> {
+        self.tests.iter().flat_map(|t| t.steps.iter())
+    }
+
+    /// Sets the twin's comparison of every step, in record-window order; returns how many
+    /// steps have one.
+    pub fn attach_twin(
+        &mut self,
+        comparisons: impl IntoIterator<Item = Option<crate::twin::TwinComparison>>,
+    ) -> usize {
+        let slots = self.tests.iter_mut().flat_map(|t| t.steps.iter_mut());
+        let mut n = 0;
+        for (slot, c) in slots.zip(comparisons) {
+            n += usize::from(c.is_some());
+            slot.twin = c;
+        }
+        n
+    }
 }
 
 /// Progress of a session, for a progress display.

@@ -223,15 +223,8 @@ pub fn replay_twin(
     let mut twin = Twin::new(rom, spec, &rec.layout, first_clearance)?;
     let dt = rec.layout.dt();
     // The measured step summaries are in record-window order.
-    let mut slots: Vec<&mut StepSummary> = summary
-        .tests
-        .iter_mut()
-        .flat_map(|t| t.steps.iter_mut())
-        .collect();
-    let mut pending: VecDeque<(StepInfo, StepSummary)> = infos
-        .into_iter()
-        .zip(slots.iter().map(|s| (**s).clone()))
-        .collect();
+    let mut pending: VecDeque<(StepInfo, StepSummary)> =
+        infos.into_iter().zip(summary.steps().cloned()).collect();
     let mut results: Vec<Option<TwinComparison>> = Vec::new();
     let mut out = TwinWindows::default();
     let mut stats = TwinReplayStats::default();
@@ -269,10 +262,7 @@ pub fn replay_twin(
         take(out.complete(&mut pending, dt, false))?;
     }
     take(out.complete(&mut pending, dt, true))?;
-    for (slot, c) in slots.iter_mut().zip(results) {
-        stats.steps_compared += usize::from(c.is_some());
-        slot.twin = c;
-    }
+    stats.steps_compared = summary.attach_twin(results);
     let rig = rec
         .blocks
         .last()

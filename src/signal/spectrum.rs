@@ -143,17 +143,22 @@ mod tests {
         assert_eq!(spectrum_distance_db(&r, &r), 0.0);
         let double = r.map(|v| 2.0 * v);
         let d = spectrum_distance_db(&double, &r);
-        // The floor shifts the ratio a little in the weakest band only.
-        assert!((d - 20.0 * 2f64.log10()).abs() < 1e-3, "{d}");
+        // The floor (1e-3 of the strongest band) pulls each band's ratio a little below 2.
+        let floor = 1e-3;
+        let expected = (r
+            .iter()
+            .map(|v| (20.0 * ((2.0 * v + floor) / (v + floor)).log10()).powi(2))
+            .sum::<f64>()
+            / SPECTRUM_BANDS as f64)
+            .sqrt();
+        assert!((d - expected).abs() < 1e-12, "{d} {expected}");
+        assert!((d - 20.0 * 2f64.log10()).abs() < 0.1, "{d}");
         // A band missing in the candidate counts as much as the floor allows, not infinitely.
         let mut missing = r;
         missing[1] = 0.0;
         let d = spectrum_distance_db(&missing, &r);
-        let worst = 20.0 * (r[1] / (r[0] * 1e-3)).log10();
-        assert!(
-            d > 0.0 && d <= worst / (SPECTRUM_BANDS as f64).sqrt() + 1e-9,
-            "{d}"
-        );
+        let worst = 20.0 * ((r[1] + floor) / floor).log10();
+        assert!((d - worst / (SPECTRUM_BANDS as f64).sqrt()).abs() < 1e-9, "{d}");
         assert!(spectrum_distance_db(&r, &[0.0; SPECTRUM_BANDS]).is_nan());
     }
 

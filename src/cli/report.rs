@@ -168,64 +168,59 @@ pub(crate) fn figures(file: &Path, out: &Path) -> anyhow::Result<Vec<PathBuf>> {
         };
         let w = window_signals(&rec.layout, info, &counts)?;
         let s = 1.0 / (info.omega * l);
-        histories.push(TimeHistory {
-            name: info.test.clone(),
-            source: Source::Measurement,
-            omega_ratio: info.omega_ratio,
-            t: (0..w.upper.len()).map(|k| k as f64 * w.dt).collect(),
-            upper: w.upper.iter().map(|v| v * s).collect(),
-            lower: w.lower.iter().map(|v| v * s).collect(),
-            contact_closed: w.closed.clone(),
-            normal_force: Vec::new(),
-            tangential_force: Vec::new(),
-        });
-        let p = a.out.join(format!(
-            "scalogram_{}.png",
-            super::simulate::sanitize(&info.test)
-        ));
-        super::simulate::scalogram_of(
-            &w.upper,
-            w.dt,
-            info.omega,
-            l,
-            &format!(
-                "measurement, {}, upper beam, Omega/omega_2 = {:.3}",
-                info.test, info.omega_ratio
-            ),
-            &p,
-        )?;
-        written.push(p);
-        // The twin over the same window, where the log holds its predicted channels.
-        let Some(twin) = twin_window(&session, info, w.dt)? else {
-            continue;
-        };
-        histories.push(TimeHistory {
-            name: info.test.clone(),
-            source: Source::Twin,
-            omega_ratio: info.omega_ratio,
-            t: (0..twin.upper_tip.len()).map(|k| k as f64 * w.dt).collect(),
-            upper: twin.upper_tip.iter().map(|v| v * s).collect(),
-            lower: twin.lower_tip.iter().map(|v| v * s).collect(),
-            contact_closed: twin.contact,
-            normal_force: twin.normal_force,
-            tangential_force: twin.tangential_force,
-        });
-        let p = a.out.join(format!(
-            "scalogram_{}_twin.png",
-            super::simulate::sanitize(&info.test)
-        ));
-        super::simulate::scalogram_of(
-            &twin.upper_tip,
-            w.dt,
-            info.omega,
-            l,
-            &format!(
-                "twin, {}, upper beam, Omega/omega_2 = {:.3}",
-                info.test, info.omega_ratio
-            ),
-            &p,
-        )?;
-        written.push(p);
+        // The measurement, then the twin over the same window where the log holds its
+        // predicted channels: one time history and one scalogram each.
+        let mut sources = vec![(
+            w.upper.clone(),
+            TimeHistory {
+                name: info.test.clone(),
+                source: Source::Measurement,
+                omega_ratio: info.omega_ratio,
+                t: (0..w.upper.len()).map(|k| k as f64 * w.dt).collect(),
+                upper: w.upper.iter().map(|v| v * s).collect(),
+                lower: w.lower.iter().map(|v| v * s).collect(),
+                contact_closed: w.closed.clone(),
+                normal_force: Vec::new(),
+                tangential_force: Vec::new(),
+            },
+        )];
+        if let Some(twin) = twin_window(&session, info, w.dt)? {
+            sources.push((
+                twin.upper_tip.clone(),
+                TimeHistory {
+                    name: info.test.clone(),
+                    source: Source::Twin,
+                    omega_ratio: info.omega_ratio,
+                    t: (0..twin.upper_tip.len()).map(|k| k as f64 * w.dt).collect(),
+                    upper: twin.upper_tip.iter().map(|v| v * s).collect(),
+                    lower: twin.lower_tip.iter().map(|v| v * s).collect(),
+                    contact_closed: twin.contact,
+                    normal_force: twin.normal_force,
+                    tangential_force: twin.tangential_force,
+                },
+            ));
+        }
+        for (upper, h) in sources {
+            let source = h.source;
+            let suffix = if source == Source::Twin { "_twin" } else { "" };
+            let p = a.out.join(format!(
+                "scalogram_{}{suffix}.png",
+                super::simulate::sanitize(&info.test)
+            ));
+            super::simulate::scalogram_of(
+                &upper,
+                w.dt,
+                info.omega,
+                l,
+                &format!(
+                    "{source}, {}, upper beam, Omega/omega_2 = {:.3}",
+                    info.test, info.omega_ratio
+                ),
+                &p,
+            )?;
+            written.push(p);
+            histories.push(h);
+        }
     }
     let period = nearest
         .iter()

@@ -158,7 +158,10 @@ mod tests {
         missing[1] = 0.0;
         let d = spectrum_distance_db(&missing, &r);
         let worst = 20.0 * ((r[1] + floor) / floor).log10();
-        assert!((d - worst / (SPECTRUM_BANDS as f64).sqrt()).abs() < 1e-9, "{d}");
+        assert!(
+            (d - worst / (SPECTRUM_BANDS as f64).sqrt()).abs() < 1e-9,
+            "{d}"
+        );
         assert!(spectrum_distance_db(&r, &[0.0; SPECTRUM_BANDS]).is_nan());
     }
 

@@ -597,8 +597,12 @@ fn marked_block(first_sample: u64, len: usize) -> TwinBlock {
         first_sample,
         time: first_sample as f64 / FS,
         len,
-        velocity: (0..4).flat_map(|k| (0..len).map(move |i| v(k, i))).collect(),
-        contact: (0..len).map(|i| (first_sample + i as u64) % 2 == 1).collect(),
+        velocity: (0..4)
+            .flat_map(|k| (0..len).map(move |i| v(k, i)))
+            .collect(),
+        contact: (0..len)
+            .map(|i| (first_sample + i as u64) % 2 == 1)
+            .collect(),
         normal_force: (0..len).map(|i| v(10, i)).collect(),
         tangential_force: (0..len).map(|i| v(20, i)).collect(),
         solver_failures: vec![1; len],
@@ -633,7 +637,10 @@ fn logged_samples_keep_the_sensor_order_and_cut_record_windows() {
         assert_eq!(t.upper_tip[j], f64::from((2.0 + s as f64 / 1000.0) as f32));
         assert_eq!(t.lower_tip[j], f64::from((s as f64 / 1000.0) as f32));
         assert_eq!(t.contact[j], s % 2 == 1);
-        assert_eq!(t.normal_force[j], f64::from((10.0 + s as f64 / 1000.0) as f32));
+        assert_eq!(
+            t.normal_force[j],
+            f64::from((10.0 + s as f64 / 1000.0) as f32)
+        );
     }
     // A missing block (skipped by the twin) or a window past the end: no trace.
     assert!(TwinTrace::cut(&[blocks[0].clone(), blocks[2].clone()], 5, 14).is_none());

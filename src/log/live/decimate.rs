@@ -271,18 +271,22 @@ mod tests {
         mean: Vec<f64>,
     }
 
-    fn collect(d: &mut MinMaxDecimator, blocks: &[DaqBlock], finish: bool) -> Vec<Owned> {
-        let mut out = Vec::new();
-        let mut emit = |p: &DecimatedPoint<'_>| {
-            out.push(Owned {
+    impl Owned {
+        fn of(p: &DecimatedPoint<'_>) -> Owned {
+            Owned {
                 first: p.first_sample,
                 time: p.time,
                 samples: p.samples,
                 min: p.min.to_vec(),
                 max: p.max.to_vec(),
                 mean: p.mean.to_vec(),
-            })
-        };
+            }
+        }
+    }
+
+    fn collect(d: &mut MinMaxDecimator, blocks: &[DaqBlock], finish: bool) -> Vec<Owned> {
+        let mut out = Vec::new();
+        let mut emit = |p: &DecimatedPoint<'_>| out.push(Owned::of(p));
         for b in blocks {
             d.push(b, &mut emit);
         }
@@ -337,16 +341,7 @@ mod tests {
         let from_counts = collect(&mut MinMaxDecimator::new(&l, 5), &blocks, true);
         let mut d = MinMaxDecimator::with_scales(1000.0, vec![1.0, 1.0], 5);
         let mut from_values = Vec::new();
-        let mut emit = |p: &DecimatedPoint<'_>| {
-            from_values.push(Owned {
-                first: p.first_sample,
-                time: p.time,
-                samples: p.samples,
-                min: p.min.to_vec(),
-                max: p.max.to_vec(),
-                mean: p.mean.to_vec(),
-            })
-        };
+        let mut emit = |p: &DecimatedPoint<'_>| from_values.push(Owned::of(p));
         for b in &blocks {
             let values: Vec<f64> = (0..2)
                 .flat_map(|k| {

@@ -81,7 +81,7 @@ pub fn spectrum_distance_db(
     reference: &[f64; SPECTRUM_BANDS],
 ) -> f64 {
     let peak = reference.iter().copied().fold(0.0, f64::max);
-    if !(peak > 0.0) || !peak.is_finite() {
+    if peak <= 0.0 || !peak.is_finite() {
         return f64::NAN;
     }
     let floor = peak * 10f64.powf(SPECTRUM_FLOOR_DB / 20.0);

@@ -133,7 +133,7 @@ impl PointTopic {
 struct TwinTopics {
     status: Arc<RawChannel>,
     steps: Arc<RawChannel>,
-    /// `/live/twin`; `None` until the layout gave the sample rate.
+    /// `/live/twin`, made with the first twin block after the layout (which gives the rate).
     points: Option<PointTopic>,
     /// Reused buffer of a twin block's decimated channels, channel-major.
     values: Vec<f64>,

@@ -178,6 +178,9 @@ pub struct TruthTrace {
     pub closed_steps: Vec<u32>,
     /// Clearance in force after the sample period's truth steps, m.
     pub clearance: Vec<f64>,
+    /// Relative velocities of the beam sensors ([`truth::BEAM_SENSORS`] order) at the sample
+    /// instant, the mean of the truth's half-step velocities around it, m/s.
+    pub relative_velocity: Vec<[f64; 4]>,
 }
 
 /// The simulated rig's deterministic core. See the module docs.
@@ -417,6 +420,7 @@ impl SimRig {
             tr.amplifier_output.reserve(len);
             tr.closed_steps.reserve(len);
             tr.clearance.reserve(len);
+            tr.relative_velocity.reserve(len);
         }
         for i in 0..len {
             let t = self.sample_time(first_sample + i as u64);
@@ -448,6 +452,9 @@ impl SimRig {
                 tr.amplifier_output.push(v.amplifier_output);
                 tr.closed_steps.push(closed_steps);
                 tr.clearance.push(self.truth.clearance());
+                let [before, after] = v.relative_velocity;
+                tr.relative_velocity
+                    .push(std::array::from_fn(|k| 0.5 * (before[k] + after[k])));
             }
         }
         self.latch_block_faults();

@@ -167,6 +167,15 @@ impl UdpTunnel {
         *self.peer.lock().unwrap_or_else(|e| e.into_inner()) = peer;
     }
 
+    /// Sends arbitrary bytes as one datagram (fault injection: a datagram that is no frame).
+    pub async fn send_raw(&self, bytes: &[u8], to: SocketAddr) -> std::io::Result<usize> {
+        if self.connected {
+            self.socket.send(bytes).await
+        } else {
+            self.socket.send_to(bytes, to).await
+        }
+    }
+
     /// The source of the last datagram received.
     pub fn last_from(&self) -> Option<SocketAddr> {
         *self.last_from.lock().unwrap_or_else(|e| e.into_inner())

@@ -717,6 +717,11 @@ impl RigBackend for HwBackend {
             return Ok(());
         }
         self.stopped = true;
+        // Amplifier off first, serial links closed, then the stream: the device may go away
+        // once the stream stops.
+        let amp = self.amp.request("ENABLE 0").await;
+        self.ldv.close();
+        self.amp.close();
         let stop = self
             .link
             .send(&Message::StreamControl(StreamControl {
@@ -724,15 +729,12 @@ impl RigBackend for HwBackend {
                 session: 0,
             }))
             .await;
-        let amp = self.amp.request("ENABLE 0").await;
         self.status.running = false;
         self.status.drive.amplitude_v = 0.0;
         self.status.drive.target_amplitude_v = 0.0;
         // Let the last frames in flight reach the log.
         tokio::time::sleep(Duration::from_millis(50)).await;
         self.blocks_tx.take();
-        self.ldv.close();
-        self.amp.close();
         let log = self.close_log();
         if let Some(st) = *self.amp_status.lock().unwrap_or_else(|e| e.into_inner()) {
             tracing::debug!("last amplifier status: {st:?}");

@@ -86,8 +86,9 @@ const fn sig(
     }
 }
 
-/// Frequency resolution, Hz.
-pub const FREQUENCY_RES: f64 = 0.0001;
+/// Frequency resolution, Hz (1 nHz: the controller holds a step's frequency to 1e-9
+/// relative, and the device applies what it receives).
+pub const FREQUENCY_RES: f64 = 0.000000001;
 /// Drive amplitude resolution, V.
 pub const AMPLITUDE_RES: f64 = 0.000001;
 /// Ramp-time resolution, s.
@@ -209,7 +210,7 @@ pub static MESSAGES: [MessageDef; 10] = [
     MessageDef {
         id: id::DRIVE_SETPOINT,
         name: "DRIVE_SETPOINT",
-        len: 16,
+        len: 20,
         sender: Node::Host,
         comment: "Drive sine at the amplifier input: frequency changes phase-continuously, \
                   amplitude ramps linearly from its current value over RampTime; applied \
@@ -217,15 +218,15 @@ pub static MESSAGES: [MessageDef; 10] = [
         signals: &[
             sig("SetpointSeq", 0, 16, false, 1.0, "", "Counter, +1 per setpoint"),
             sig("DriveEnable", 2, 8, false, 1.0, "", "1 = drive on, 0 = ramp to zero"),
-            sig("Frequency", 4, 32, false, FREQUENCY_RES, "Hz", "Drive frequency"),
-            sig("Amplitude", 8, 32, false, AMPLITUDE_RES, "V", "Amplitude the ramp heads for"),
-            sig("RampTime", 12, 32, false, RAMP_RES, "s", "Ramp duration, 0 = at the next sample"),
+            sig("Frequency", 4, 64, false, FREQUENCY_RES, "Hz", "Drive frequency"),
+            sig("Amplitude", 12, 32, false, AMPLITUDE_RES, "V", "Amplitude the ramp heads for"),
+            sig("RampTime", 16, 32, false, RAMP_RES, "s", "Ramp duration, 0 = at the next sample"),
         ],
     },
     MessageDef {
         id: id::DRIVE_STATUS,
         name: "DRIVE_STATUS",
-        len: 24,
+        len: 32,
         sender: Node::Daq,
         comment: "The drive as applied at the end of block StatusBlockSeq; sent before that \
                   block's DAQ_BLOCK_HEADER",
@@ -233,10 +234,10 @@ pub static MESSAGES: [MessageDef; 10] = [
             sig("StatusBlockSeq", 0, 32, false, 1.0, "", "Block whose last sample this describes"),
             sig("AppliedSeq", 4, 16, false, 1.0, "", "SetpointSeq of the last setpoint applied"),
             sig("DriveState", 6, 8, false, 1.0, "", "0 idle, 1 running, 2 safety ramp-down, 3 off after a fault"),
-            sig("AppliedFrequency", 8, 32, false, FREQUENCY_RES, "Hz", "Drive frequency"),
-            sig("AppliedAmplitude", 12, 32, false, AMPLITUDE_RES, "V", "Current amplitude"),
-            sig("TargetAmplitude", 16, 32, false, AMPLITUDE_RES, "V", "Amplitude the ramp heads for"),
-            sig("Phase", 20, 16, false, PHASE_RES, "rad", "Drive phase, [0, 2 pi)"),
+            sig("AppliedFrequency", 8, 64, false, FREQUENCY_RES, "Hz", "Drive frequency"),
+            sig("AppliedAmplitude", 16, 32, false, AMPLITUDE_RES, "V", "Current amplitude"),
+            sig("TargetAmplitude", 20, 32, false, AMPLITUDE_RES, "V", "Amplitude the ramp heads for"),
+            sig("Phase", 24, 16, false, PHASE_RES, "rad", "Drive phase, [0, 2 pi)"),
         ],
     },
     MessageDef {
@@ -518,7 +519,7 @@ pub struct DriveSetpoint {
     /// Drive on.
     pub enable: bool,
     /// Frequency / FREQUENCY_RES.
-    pub frequency: u32,
+    pub frequency: u64,
     /// Amplitude / AMPLITUDE_RES.
     pub amplitude: u32,
     /// Ramp time / RAMP_RES.
@@ -539,7 +540,14 @@ impl DriveSetpoint {
                 ))
             }
         };
-        let frequency = q("Frequency", cmd.frequency_hz, FREQUENCY_RES)?;
+        let f = (cmd.frequency_hz / FREQUENCY_RES).round();
+        if !(cmd.frequency_hz.is_finite() && f >= 1.0 && f < 1.8e19) {
+            return Err(format!(
+                "DRIVE_SETPOINT Frequency = {} Hz: expected > 0 and finite",
+                cmd.frequency_hz
+            ));
+        }
+        let frequency = f as u64;
         if frequency == 0 {
             return Err(format!(
                 "DRIVE_SETPOINT Frequency = {} Hz: expected > 0",
@@ -558,7 +566,7 @@ impl DriveSetpoint {
     /// The command it stands for (amplitude 0 when not enabled).
     pub fn command(&self) -> crate::rig::DriveCommand {
         crate::rig::DriveCommand {
-            frequency_hz: f64::from(self.frequency) * FREQUENCY_RES,
+            frequency_hz: self.frequency as f64 * FREQUENCY_RES,
             amplitude_v: if self.enable {
                 f64::from(self.amplitude) * AMPLITUDE_RES
             } else {
@@ -579,7 +587,7 @@ pub struct DriveStatus {
     /// 0 idle, 1 running, 2 safety ramp-down, 3 off after a fault.
     pub state: u8,
     /// Frequency / FREQUENCY_RES.
-    pub frequency: u32,
+    pub frequency: u64,
     /// Amplitude / AMPLITUDE_RES.
     pub amplitude: u32,
     /// Target amplitude / AMPLITUDE_RES.
@@ -601,7 +609,7 @@ impl DriveStatus {
             block_seq,
             applied_seq,
             state,
-            frequency: q(d.frequency_hz, FREQUENCY_RES),
+            frequency: (d.frequency_hz / FREQUENCY_RES).round().clamp(0.0, 1.8e19) as u64,
             amplitude: q(d.amplitude_v, AMPLITUDE_RES),
             target: q(d.target_amplitude_v, AMPLITUDE_RES),
             phase: (d.phase / PHASE_RES).round().clamp(0.0, 65535.0) as u16,
@@ -611,7 +619,7 @@ impl DriveStatus {
     /// As the rig's drive state.
     pub fn drive(&self) -> crate::rig::DriveState {
         crate::rig::DriveState {
-            frequency_hz: f64::from(self.frequency) * FREQUENCY_RES,
+            frequency_hz: self.frequency as f64 * FREQUENCY_RES,
             amplitude_v: f64::from(self.amplitude) * AMPLITUDE_RES,
             target_amplitude_v: f64::from(self.target) * AMPLITUDE_RES,
             phase: f64::from(self.phase) * PHASE_RES,
@@ -855,7 +863,7 @@ impl Message {
                 Message::DriveSetpoint(DriveSetpoint {
                     seq: r[0] as u16,
                     enable: r[1] == 1,
-                    frequency: r[2] as u32,
+                    frequency: r[2] as u64,
                     amplitude: r[3] as u32,
                     ramp: r[4] as u32,
                 })
@@ -868,7 +876,7 @@ impl Message {
                     block_seq: r[0] as u32,
                     applied_seq: r[1] as u16,
                     state: r[2] as u8,
-                    frequency: r[3] as u32,
+                    frequency: r[3] as u64,
                     amplitude: r[4] as u32,
                     target: r[5] as u32,
                     phase: r[6] as u16,
@@ -1081,7 +1089,7 @@ mod tests {
             Message::DriveSetpoint(DriveSetpoint {
                 seq: 7,
                 enable: true,
-                frequency: 550_000,
+                frequency: 55_000_000_000,
                 amplitude: 123_456,
                 ramp: 500_000,
             }),

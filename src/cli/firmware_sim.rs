@@ -19,7 +19,7 @@ use crate::rig::sim::SimRig;
 pub enum PaceArg {
     /// Like a real DAQ: block k leaves at the wall time of its last sample.
     Realtime,
-    /// As fast as it computes, at most two blocks ahead of the host (HOST_HEARTBEAT
+    /// As fast as it computes, at most three blocks ahead of the host (HOST_HEARTBEAT
     /// ConsumedSeq): for tests.
     Virtual,
 }

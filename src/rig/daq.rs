@@ -192,8 +192,23 @@ pub enum RigFault {
         channel: String,
     },
     /// The backend reports a broken link or device.
-    #[error("{0}")]
-    Device(String),
+    // NOTE: a struct variant: serde's internally tagged enums cannot serialize a newtype
+    // variant holding a string (as `Device(String)` was, which made every abort and status
+    // with a device fault fail to log).
+    #[error("{message}")]
+    Device {
+        /// What happened.
+        message: String,
+    },
+}
+
+impl RigFault {
+    /// A device fault with this message.
+    pub fn device(message: impl Into<String>) -> RigFault {
+        RigFault::Device {
+            message: message.into(),
+        }
+    }
 }
 
 /// Backend status.
@@ -248,4 +263,25 @@ pub struct LinkCounters {
     pub clock_offset_s: Option<f64>,
     /// The last link problem, as text.
     pub last_error: Option<String>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_fault_serializes_and_reads_back() {
+        for f in [
+            RigFault::DriveSaturated { limit_v: 1.5 },
+            RigFault::OverRange {
+                channel: "vibrometer".into(),
+            },
+            RigFault::Device {
+                message: "link gone".into(),
+            },
+        ] {
+            let j = serde_json::to_string(&f).unwrap();
+            assert_eq!(serde_json::from_str::<RigFault>(&j).unwrap(), f, "{j}");
+        }
+    }
 }

@@ -359,7 +359,7 @@ fn open_serial(
                     s.counters.serial_garbage += 1;
                     s.counters.last_error = Some(format!("vibrometer ({ldv_path}): {e}"));
                 }
-                Err(e @ SerialError::Gone { .. }) => s.fault(RigFault::Device(e.to_string())),
+                Err(e @ SerialError::Gone { .. }) => s.fault(RigFault::device(e.to_string())),
                 Err(_) => {}
             }
         },
@@ -381,12 +381,12 @@ fn open_serial(
                 Ok(Ok(st)) => {
                     *last.lock().unwrap_or_else(|e| e.into_inner()) = Some(st);
                     if st.interlock_open {
-                        s.fault(RigFault::Device(format!(
+                        s.fault(RigFault::device(format!(
                             "interlock open (power amplifier {amp_path}: ILK=1, output off)"
                         )));
                     }
                     if st.overload {
-                        s.fault(RigFault::Device(format!(
+                        s.fault(RigFault::device(format!(
                             "power amplifier overload (power amplifier {amp_path}: OVL=1, \
                              output limit {} V)",
                             st.limit_v
@@ -397,7 +397,7 @@ fn open_serial(
                     s.counters.serial_garbage += 1;
                     s.counters.last_error = Some(format!("power amplifier ({amp_path}): {e}"));
                 }
-                Err(e @ SerialError::Gone { .. }) => s.fault(RigFault::Device(e.to_string())),
+                Err(e @ SerialError::Gone { .. }) => s.fault(RigFault::device(e.to_string())),
                 Err(_) => {}
             }
         },
@@ -408,17 +408,16 @@ fn open_serial(
 /// Maps a FAULT frame to a rig fault.
 fn fault_of(f: &messages::Fault, layout: &DaqLayout) -> RigFault {
     match f.code {
-        FaultCode::HeartbeatLost => RigFault::Device(
+        FaultCode::HeartbeatLost => RigFault::device(
             "rig DAQ: host heartbeat lost, the device ramped the drive down (FAULT \
-             HEARTBEAT_LOST)"
-                .into(),
+             HEARTBEAT_LOST)",
         ),
         FaultCode::Interlock => {
-            RigFault::Device("interlock open (FAULT INTERLOCK from the rig DAQ)".into())
+            RigFault::device("interlock open (FAULT INTERLOCK from the rig DAQ)")
         }
-        FaultCode::AmplifierOverload => RigFault::Device(
-            "power amplifier overload (FAULT AMPLIFIER_OVERLOAD from the rig DAQ)".into(),
-        ),
+        FaultCode::AmplifierOverload => {
+            RigFault::device("power amplifier overload (FAULT AMPLIFIER_OVERLOAD from the rig DAQ)")
+        }
         FaultCode::OverRange => RigFault::OverRange {
             channel: layout
                 .channels
@@ -428,9 +427,7 @@ fn fault_of(f: &messages::Fault, layout: &DaqLayout) -> RigFault {
         FaultCode::DriveSaturated => RigFault::DriveSaturated {
             limit_v: f64::from(f.value) * messages::FAULT_VALUE_RES,
         },
-        FaultCode::DeviceError => {
-            RigFault::Device("rig DAQ device error (FAULT DEVICE_ERROR)".into())
-        }
+        FaultCode::DeviceError => RigFault::device("rig DAQ device error (FAULT DEVICE_ERROR)"),
     }
 }
 
@@ -654,6 +651,13 @@ impl RigBackend for HwBackend {
             .send(&Message::StreamControl(StreamControl {
                 command: StreamCommand::Start,
                 session: (self.link.now_us() & 0xFFFF_FFFF) as u32,
+            }))
+            .await?;
+        // A first time sync right away (then once per second).
+        self.link
+            .send(&Message::TimeSyncRequest(TimeSyncRequest {
+                seq: 0,
+                host_time_us: self.link.now_us(),
             }))
             .await?;
         self.started = true;

@@ -12,7 +12,7 @@
 //! drive is also ramped down when the amplifier is disabled or the interlock opens.
 //!
 //! Pacing: `Realtime` sends block `k` no earlier than the wall time of its last sample (a
-//! real DAQ); `Virtual` computes as fast as it can but at most two blocks ahead of the host's
+//! real DAQ); `Virtual` computes as fast as it can but at most three blocks ahead of the host's
 //! `HOST_HEARTBEAT.ConsumedSeq` (flow control for tests; real hardware ignores that field).
 //! Faults can be injected ([`Inject`]): the simulated rig's own, and link faults (dropped,
 //! swapped, corrupted and malformed frames, serial garbage and silence, the interlock, the
@@ -46,7 +46,8 @@ use serial::{Devices, Misbehaviour};
 pub enum Pace {
     /// Block k leaves no earlier than the wall time of its last sample.
     Realtime,
-    /// As fast as possible, at most two blocks ahead of the host.
+    /// As fast as possible, at most three blocks ahead of the host (so that a lost block is
+    /// detected: the host declares block s lost when the header of s + 2 arrives).
     Virtual,
 }
 
@@ -463,7 +464,7 @@ impl<'a> Session<'a> {
                     if self.state != State::Idle {
                         return Ok(Some("stop".into()));
                     }
-                }
+                } // (On stop the drive goes off at once: see `run`.)
             },
             Message::DriveSetpoint(sp) => {
                 self.report.setpoints += 1;
@@ -613,7 +614,7 @@ impl<'a> Session<'a> {
                     self.fault(FaultCode::OverRange, k as u8, 0, FLAG_OVER_RANGE)
                         .await;
                 }
-                RigFault::Device(_) => {
+                RigFault::Device { .. } => {
                     self.fault(FaultCode::DeviceError, 255, 0, FLAG_DEVICE)
                         .await;
                 }
@@ -687,7 +688,7 @@ impl<'a> Session<'a> {
         match self.fw.opts.pace {
             Pace::Virtual if self.state == State::Streaming => {
                 let consumed = self.consumed.map_or(-1, i64::from);
-                (self.seq as i64) <= consumed + 2
+                (self.seq as i64) <= consumed + 3
             }
             _ => true,
         }
@@ -743,6 +744,17 @@ impl<'a> Session<'a> {
         if let Some(p) = self.pending.take() {
             if let Ok((rig, _)) = p.await {
                 self.rig = Some(rig);
+            }
+        }
+        if end == "stop" {
+            // STREAM_CONTROL stop: drive off (the host ramped it down before).
+            if let Some(rig) = self.rig.as_mut() {
+                let f = rig.drive().frequency_hz.max(1.0);
+                let _ = rig.set_drive(DriveCommand {
+                    frequency_hz: f,
+                    amplitude_v: 0.0,
+                    ramp_s: 0.0,
+                });
             }
         }
         self.report.reason = end;

@@ -187,8 +187,8 @@ pub static MESSAGES: [MessageDef; 10] = [
         name: "FAULT",
         len: 8,
         sender: Node::Daq,
-        comment: "A fault or interlock the device raised (latched; sent when raised and \
-                  repeated with every DEVICE_HEARTBEAT while latched)",
+        comment: "A fault or interlock the device raised: sent once when raised; the \
+                  latched flags are in every DEVICE_HEARTBEAT (FaultFlags)",
         signals: &[
             sig("FaultCode", 0, 8, false, 1.0, "", "What happened"),
             sig("FaultChannel", 1, 8, false, 1.0, "", "DAQ channel index for OVER_RANGE, 255 otherwise"),

@@ -35,7 +35,7 @@ pub enum BackendArg {
 /// The session's backend: control code is generic, this picks one at run time.
 #[derive(Debug)]
 enum Backend {
-    Sim(SimBackend),
+    Sim(Box<SimBackend>),
     Hw(Box<HwBackend>),
 }
 
@@ -317,7 +317,12 @@ pub(crate) fn run_session_on(
             for f in inject {
                 backend.inject(f.clone());
             }
-            (twin, Some(truth), twin_path, Backend::Sim(backend))
+            (
+                twin,
+                Some(truth),
+                twin_path,
+                Backend::Sim(Box::new(backend)),
+            )
         }
         Some(h) => {
             let (twin, twin_path, _) = super::demo::cached_rom(cfg, rebuild, quiet)?;

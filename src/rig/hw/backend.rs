@@ -320,18 +320,18 @@ impl HwBackend {
     }
 }
 
+/// The two serial clients and the amplifier's last status.
+type SerialLinks = (
+    SerialClient,
+    SerialClient,
+    Arc<Mutex<Option<AmplifierStatus>>>,
+);
+
 fn open_serial(
     opts: &HwOptions,
     layout: &DaqLayout,
     shared: &Arc<Mutex<Shared>>,
-) -> Result<
-    (
-        SerialClient,
-        SerialClient,
-        Arc<Mutex<Option<AmplifierStatus>>>,
-    ),
-    RigError,
-> {
+) -> Result<SerialLinks, RigError> {
     let ldv_port = port::open(&opts.ldv, 115_200)
         .map_err(|e| config(format!("--ldv (vibrometer controller): {e}")))?;
     let amp_port =

@@ -541,7 +541,7 @@ impl DriveSetpoint {
             }
         };
         let f = (cmd.frequency_hz / FREQUENCY_RES).round();
-        if !(cmd.frequency_hz.is_finite() && f >= 1.0 && f < 1.8e19) {
+        if !(cmd.frequency_hz.is_finite() && (1.0..1.8e19).contains(&f)) {
             return Err(format!(
                 "DRIVE_SETPOINT Frequency = {} Hz: expected > 0 and finite",
                 cmd.frequency_hz

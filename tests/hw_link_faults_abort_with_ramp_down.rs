@@ -4,7 +4,8 @@
 //!   checksums) are counted on `/rig/status` and the session completes;
 //! - problems that make the test impossible (a lost frame or corrupted block: a sequence gap;
 //!   a silent amplifier; the interlock; amplifier overload; the device vanishing) abort the
-//!   session with a clear reason, with the drive ramped down over the link when it is alive,
+//!   session with a clear reason (a hung device: by the heartbeat supervision), with the drive
+//!   ramped down over the link when it is alive,
 //!   every block so far recorded and the log complete;
 //! - when the host dies mid-test, the device ramps the drive down by itself.
 
@@ -215,6 +216,18 @@ fn fatal_link_faults_abort_with_a_reason_and_a_ramp_down() {
     );
     assert_ramped_down(&o, "drive_saturation");
 
+    // The device hangs (sends nothing, still listens): the host's heartbeat supervision
+    // declares the link lost before the DAQ watchdog (2 s) would.
+    let o = long_session_with(r#"{"kind":"mute","at_s":1.5}"#);
+    assert_eq!(o.abort_kind.as_deref(), Some("backend"), "{}", o.text);
+    let reason = o.summary["abort_reason"].as_str().unwrap();
+    assert!(reason.contains("no DEVICE_HEARTBEAT"), "{reason}");
+    assert!(
+        o.link["heartbeat_misses"].as_u64().unwrap() >= 1,
+        "{}",
+        o.link
+    );
+
     // The device disappears mid-test: the link is lost, the log is complete.
     let o = long_session_with(r#"{"kind":"vanish","at_s":1.5}"#);
     assert_eq!(o.abort_kind.as_deref(), Some("backend"), "{}", o.text);
@@ -237,7 +250,8 @@ fn fatal_link_faults_abort_with_a_reason_and_a_ramp_down() {
 fn the_device_ramps_down_by_itself_when_the_host_dies() {
     let dir = tempfile::tempdir().unwrap();
     let fw = FirmwareSim::start(&[]);
-    let plan = cli_support::write_plan(dir.path(), PLAN);
+    // Six steps: the session surely outlasts the first flushes of its log.
+    let plan = cli_support::write_plan(dir.path(), &PLAN.replace("steps = 2", "steps = 6"));
     let mcap = dir.path().join("session.mcap");
     let mut host = std::process::Command::new(env!("CARGO_BIN_EXE_rigtwin"))
         .env("RIGTWIN_CACHE", cache())

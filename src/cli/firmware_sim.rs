@@ -44,7 +44,7 @@ pub struct FirmwareSimArgs {
     /// Inject a fault, as JSON (repeatable): the simulated rig's (as `rigtwin run --inject`)
     /// or a link fault: drop_frame {block, frame}, swap_frames {block}, corrupt_sample
     /// {block}, bad_frames {block}, interlock {at_s}, serial_garbage {at_s, port: ldv|amp},
-    /// serial_silent {at_s, port}, vanish {at_s}.
+    /// serial_silent {at_s, port}, mute {at_s}, vanish {at_s}.
     #[arg(long)]
     pub inject: Vec<String>,
     /// Rebuild the truth ROM even if cached.

@@ -128,6 +128,7 @@ impl UdpTunnel {
         let socket = tokio::net::UdpSocket::bind(local)
             .await
             .map_err(|e| TransportError::Open(format!("UDP tunnel: binding {local}: {e}")))?;
+        enlarge_receive_buffer(&socket);
         socket.connect(remote).await.map_err(|e| {
             TransportError::Open(format!("UDP tunnel: connecting to {remote}: {e}"))
         })?;
@@ -144,6 +145,7 @@ impl UdpTunnel {
         let socket = tokio::net::UdpSocket::bind(local)
             .await
             .map_err(|e| TransportError::Open(format!("UDP tunnel: binding {local}: {e}")))?;
+        enlarge_receive_buffer(&socket);
         Ok(UdpTunnel {
             socket,
             peer: Mutex::new(None),
@@ -180,6 +182,41 @@ impl UdpTunnel {
     pub fn last_from(&self) -> Option<SocketAddr> {
         *self.last_from.lock().unwrap_or_else(|e| e.into_inner())
     }
+}
+
+/// Receive buffer asked for, bytes: a DAQ block is 142 datagrams that arrive in a burst, and
+/// the kernel counts each small datagram at about 1 KiB; the default buffer (about 200 KiB)
+/// overflows when the receiver is late by a block or two.
+pub const TUNNEL_RCVBUF: usize = 8 << 20;
+
+/// Enlarges a socket's receive buffer (best effort: SO_RCVBUFFORCE where allowed, else
+/// SO_RCVBUF up to the system's limit, `net.core.rmem_max` on Linux).
+fn enlarge_receive_buffer(socket: &tokio::net::UdpSocket) {
+    #[cfg(unix)]
+    {
+        use std::os::fd::AsRawFd;
+        let fd = socket.as_raw_fd();
+        let size = TUNNEL_RCVBUF as libc::c_int;
+        let set = |opt: libc::c_int| {
+            // SAFETY: setsockopt on a descriptor the socket owns, with a c_int option value.
+            unsafe {
+                libc::setsockopt(
+                    fd,
+                    libc::SOL_SOCKET,
+                    opt,
+                    (&size as *const libc::c_int).cast(),
+                    std::mem::size_of::<libc::c_int>() as libc::socklen_t,
+                )
+            }
+        };
+        #[cfg(target_os = "linux")]
+        if set(libc::SO_RCVBUFFORCE) == 0 {
+            return;
+        }
+        let _ = set(libc::SO_RCVBUF);
+    }
+    #[cfg(not(unix))]
+    let _ = socket;
 }
 
 fn gone(what: &str, e: std::io::Error) -> TransportError {

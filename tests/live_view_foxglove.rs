@@ -10,6 +10,9 @@
 //!   MCAP log times the channel scale, at about 200 points per rig second (10,240 Hz sampled);
 //! - the server sends what is queued, then stops when the session ends (the connection closes,
 //!   the command succeeds);
+//! - with `--twin`, the twin's status and step comparisons are served with the log's schemas,
+//!   and `/live/twin` holds its predicted channels decimated in `/live/daq`'s bins, equal to the
+//!   logged `/twin/blocks`;
 //! - a malformed or busy `--foxglove` address fails at once with an error naming the flag.
 
 mod cli_support;
@@ -86,9 +89,9 @@ struct Seen {
     negotiated: Option<String>,
 }
 
-/// Connects to `url`, subscribes to every topic of [`TOPICS`] as it is advertised, and reads
+/// Connects to `url`, subscribes to every topic of `topics` as it is advertised, and reads
 /// until the server closes the connection (or `deadline`).
-async fn watch(url: &str, deadline: Duration) -> Seen {
+async fn watch(url: &str, deadline: Duration, topics: &[&str]) -> Seen {
     let mut request = url.into_client_request().unwrap();
     request
         .headers_mut()
@@ -137,7 +140,7 @@ async fn watch(url: &str, deadline: Duration) -> Seen {
                                     .to_string(),
                                 schema: c["schema"].as_str().unwrap().to_string(),
                             };
-                            if TOPICS.contains(&a.topic.as_str()) {
+                            if topics.contains(&a.topic.as_str()) {
                                 let sub = subscriptions.len() as u32 + 1;
                                 subscriptions.insert(sub, a.topic.clone());
                                 subscribe.push(serde_json::json!({"id": sub, "channelId": a.id}));
@@ -241,7 +244,7 @@ fn a_foxglove_client_sees_the_session_live_decimated_and_the_server_stops_at_the
         .build()
         .unwrap();
     let t_connect = Instant::now();
-    let seen = runtime.block_on(watch(&url, Duration::from_secs(900)));
+    let seen = runtime.block_on(watch(&url, Duration::from_secs(900), &TOPICS));
     let output = child.wait_with_output().unwrap();
     let rest: Vec<String> = lines.try_iter().collect();
     let out = format!(
@@ -406,6 +409,117 @@ fn a_foxglove_client_sees_the_session_live_decimated_and_the_server_stops_at_the
     );
 
     // The oracle: Python's jsonschema checks every schema and validates every payload.
+    check_with_jsonschema(dir.path(), &seen);
+}
+
+#[test]
+fn a_foxglove_client_sees_the_live_twin_beside_the_measurement() {
+    let dir = tempfile::tempdir().unwrap();
+    let plan = dir.path().join("plan.toml");
+    // One step at omega_2 (a dwell), in the impact band.
+    let one_step = PLAN
+        .replace("steps = 2", "steps = 1")
+        .replace("omega_start = 1.01", "omega_start = 1.0")
+        .replace("omega_end = 0.99", "omega_end = 1.0");
+    std::fs::write(&plan, one_step).unwrap();
+    let mcap = dir.path().join("session.mcap");
+    let mut child = rigtwin()
+        .args(["run", "--plan", plan.to_str().unwrap(), "--quiet", "--twin"])
+        .arg("--out")
+        .arg(&mcap)
+        .args(["--foxglove", "0"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let (url, lines) = wait_for_url(&mut child);
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    let twin_topics = ["/twin/status", "/twin/steps", "/live/twin"];
+    let wanted: Vec<&str> = TOPICS.iter().chain(&twin_topics).copied().collect();
+    let seen = runtime.block_on(watch(&url, Duration::from_secs(900), &wanted));
+    let output = child.wait_with_output().unwrap();
+    let rest: Vec<String> = lines.try_iter().collect();
+    let out = format!(
+        "{}\n{}",
+        rest.join("\n"),
+        String::from_utf8_lossy(&output.stderr)
+    );
+    assert!(output.status.success(), "{out}");
+
+    let log = read_session(&mcap).unwrap();
+    for topic in ["/twin/status", "/twin/steps"] {
+        let a = &seen.channels[topic];
+        let logged = log.channel(topic).unwrap().schema.clone().unwrap();
+        assert_eq!(a.schema_name, logged.name, "{topic}");
+        assert_eq!(a.schema.as_bytes(), logged.data.as_slice(), "{topic}");
+    }
+    assert_eq!(seen.channels["/live/twin"].schema_name, "LiveTwinPoint");
+    let got = |t: &str| seen.messages.get(t).map_or(&[][..], Vec::as_slice);
+    assert_eq!(got("/twin/steps").len(), 1, "{out}");
+    assert!(got("/twin/steps")[0].1["twin"]["rms_error_upper"].is_f64());
+    assert!(!got("/twin/status").is_empty());
+
+    // /live/twin: the logged predictions (single precision) decimated in /live/daq's bins.
+    let layout: DaqLayout = serde_json::from_value(got("/daq/layout")[0].1.clone()).unwrap();
+    let bin = (layout.sample_rate / 200.0).round() as u64;
+    let blocks: Vec<rigtwin::twin::TwinSamples> = log
+        .decode::<rigtwin::twin::TwinSamples>(rigtwin::twin::TOPIC_TWIN_BLOCKS)
+        .unwrap()
+        .into_iter()
+        .map(|x| x.2)
+        .collect();
+    let upper = |s: u64| -> f64 {
+        let b = &blocks[(s / layout.block_size as u64) as usize];
+        assert_eq!(b.first_sample, s - s % layout.block_size as u64);
+        f64::from(b.upper_tip[(s - b.first_sample) as usize])
+    };
+    let daq_bins: BTreeSet<u64> = got("/live/daq")
+        .iter()
+        .map(|(_, p, _)| p["first_sample"].as_u64().unwrap())
+        .collect();
+    let points = got("/live/twin");
+    assert!(points.len() > 100, "{} twin points", points.len());
+    let mut contact_seen = false;
+    for (t, p, _) in points {
+        let first = p["first_sample"].as_u64().unwrap();
+        let n = p["samples"].as_u64().unwrap();
+        assert_eq!(*t, ns(p["time"].as_f64().unwrap()), "{p}");
+        assert_eq!(first % bin, 0, "{p}");
+        let raw: Vec<f64> = (first..first + n).map(upper).collect();
+        let lo = raw.iter().copied().fold(f64::INFINITY, f64::min);
+        let hi = raw.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        let (plo, phi) = (
+            p["upper_tip"]["min"].as_f64().unwrap(),
+            p["upper_tip"]["max"].as_f64().unwrap(),
+        );
+        // The view decimates the twin's f64 output, the log holds it in f32.
+        let tol = 1e-6 * hi.abs().max(lo.abs()).max(1e-9);
+        assert!(
+            (plo - lo).abs() <= tol && (phi - hi).abs() <= tol,
+            "{p} vs {lo} {hi}"
+        );
+        let c = p["contact"]["mean"].as_f64().unwrap();
+        assert!((0.0..=1.0).contains(&c), "{p}");
+        contact_seen |= c > 0.0;
+    }
+    assert!(
+        contact_seen,
+        "the twin predicts impacts at omega_2 in this plan"
+    );
+    // Same bins as /live/daq (each topic's first points may predate the subscription: the
+    // session starts as the URL is printed, and the twin lags the DAQ).
+    let shared = points
+        .iter()
+        .filter(|(_, p, _)| daq_bins.contains(&p["first_sample"].as_u64().unwrap()))
+        .count();
+    assert!(
+        shared > points.len() / 2,
+        "{shared} of {} twin bins are /live/daq bins",
+        points.len()
+    );
     check_with_jsonschema(dir.path(), &seen);
 }
 

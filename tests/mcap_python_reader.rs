@@ -159,7 +159,11 @@ fn official_python_reader_reads_session_logs() {
             env!("CARGO_PKG_VERSION"),
             "{ctx}"
         );
-        assert_eq!(metadata["rigtwin"]["format_version"], "1", "{ctx}");
+        assert_eq!(
+            metadata["rigtwin"]["format_version"],
+            rigtwin::log::FORMAT_VERSION.to_string(),
+            "{ctx}"
+        );
         assert_eq!(metadata["session"]["backend"], "sim", "{ctx}");
         assert_eq!(
             py["attachments"]["rig.toml"],

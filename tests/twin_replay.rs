@@ -3,7 +3,9 @@
 //!   (`tests[].steps[].twin`), the twin following the measurement closely outside the
 //!   impact band (same model as the simulated rig's structure, fewer modes);
 //! - the same recording and model give the same bits; a changed model changes them;
-//! - a bad model argument is a clear error.
+//! - a bad model argument is a clear error;
+//! - the live twin's predicted channels are logged (`/twin/blocks`), a replay's copy of the log
+//!   (`--out`) holds the same bytes, and `report` draws them.
 
 mod cli_support;
 
@@ -82,16 +84,26 @@ fn replay_with_the_twin_compares_every_step_deterministically() {
             "rms_error_upper",
             "rms_error_lower",
             "contact_fraction_error",
+            "spectrum_distance_db",
         ] {
             assert!(w[key].as_f64().is_some(), "{key} missing in {w}");
         }
+        assert_eq!(w["spectrum_upper"].as_array().unwrap().len(), 20, "{w}");
     }
     // 1.08 and 1.04 omega_2 are outside the impact band: the twin (the rig's own model, fewer
     // modes, driven by the measured base acceleration) follows the upper tip within 2 %.
+    // Its spectrum too: the fundamental's band dominates and the level difference over the
+    // bands above the noise floor stays within a few dB.
     for st in &steps[..2] {
         assert_eq!(st["contact_fraction"], 0.0, "{st}");
         let e = st["twin"]["rms_error_upper"].as_f64().unwrap();
         assert!(e.abs() < 0.02, "{e} at {}", st["omega_ratio"]);
+        let d = st["twin"]["spectrum_distance_db"].as_f64().unwrap();
+        assert!(
+            (0.0..6.0).contains(&d),
+            "spectrum distance {d} dB at {}",
+            st["omega_ratio"]
+        );
     }
 
     // A changed model (the twin's time step) changes the twin's output.
@@ -173,6 +185,91 @@ fn the_live_twin_equals_its_replay_and_is_logged() {
         .decode::<rigtwin::twin::TwinStatus>(rigtwin::twin::TOPIC_TWIN_STATUS)
         .unwrap();
     assert!(!status.is_empty());
+
+    // The predicted channels of every block are logged, and a replay that writes a copy of the
+    // log (`--out`) logs the same bytes: predictions and comparisons alike.
+    let copy = dir.path().join("copy.mcap");
+    let o = rigtwin(&[
+        "replay",
+        mcap.to_str().unwrap(),
+        "--twin",
+        "--out",
+        copy.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let c = rigtwin::log::read_session(&copy).unwrap();
+    assert!(c.complete);
+    let payloads = |s: &rigtwin::log::SessionRead, topic: &str| -> Vec<(u64, Vec<u8>)> {
+        s.messages_on(topic)
+            .map(|m| (m.log_time, m.data.clone()))
+            .collect()
+    };
+    let blocks = payloads(&s, rigtwin::twin::TOPIC_TWIN_BLOCKS);
+    assert_eq!(
+        blocks.len(),
+        s.messages_on(rigtwin::log::recorder::TOPIC_DAQ).count(),
+        "one twin message per DAQ block"
+    );
+    assert!(
+        blocks == payloads(&c, rigtwin::twin::TOPIC_TWIN_BLOCKS),
+        "twin blocks differ"
+    );
+    assert_eq!(
+        payloads(&s, rigtwin::twin::TOPIC_TWIN_STEPS),
+        payloads(&c, rigtwin::twin::TOPIC_TWIN_STEPS)
+    );
+    // The rest of the session is copied as it was; the copy names its model.
+    for topic in [
+        rigtwin::log::recorder::TOPIC_DAQ,
+        rigtwin::log::recorder::TOPIC_EVENTS,
+        rigtwin::log::recorder::TOPIC_STEPS,
+    ] {
+        assert!(
+            payloads(&s, topic) == payloads(&c, topic),
+            "{topic} differs"
+        );
+    }
+    assert!(c
+        .messages_on(rigtwin::twin::TOPIC_TWIN_STATUS)
+        .next()
+        .is_none());
+    assert!(
+        c.metadata(rigtwin::twin::TWIN_REPLAY_METADATA).unwrap()["model"]
+            .contains("the rig description in the log")
+    );
+    let samples = s
+        .decode::<rigtwin::twin::TwinSamples>(rigtwin::twin::TOPIC_TWIN_BLOCKS)
+        .unwrap();
+    let b = &samples[samples.len() / 2].2;
+    assert_eq!(b.upper_tip.len(), b.len);
+    assert!(b.upper_tip.iter().any(|v| *v != 0.0));
+
+    // The report draws the twin beside the measurement in the time-domain figures too.
+    let figures = dir.path().join("figures");
+    let o = rigtwin(&[
+        "report",
+        copy.to_str().unwrap(),
+        "--out",
+        figures.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(
+        figures.join("scalogram_high-down_twin.png").is_file(),
+        "{}",
+        text(&o)
+    );
+    assert!(figures.join("time_histories.png").is_file());
+
+    // The copy never replaces its source.
+    let o = rigtwin(&[
+        "replay",
+        mcap.to_str().unwrap(),
+        "--twin",
+        "--out",
+        mcap.to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    assert!(text(&o).contains("overwrite"), "{}", text(&o));
 }
 
 /// A twin that cannot keep up (throttled to 4 wall seconds per second of data, queue of 8

@@ -2,8 +2,11 @@
 //! from the raw recording (the same signal processing as the live summary): RMS response and
 //! amplitude ranges of every test, time histories and contact activity of the step nearest
 //! Omega = omega_2 of each test, and its Morlet scalogram; plus the replayed summary as JSON.
-//! A session run with `--twin` has the twin's RMS response and amplitude ranges drawn dashed
-//! beside the measurement's (from `/twin/steps`).
+//! A session run with `--twin` (or a log written by `replay --twin --out`) has the twin drawn
+//! beside the measurement in every figure: its RMS response and amplitude ranges dashed (from
+//! `/twin/steps`), its time histories and contact activity over the same record windows dashed
+//! in the measurement's colour, and its own scalogram (`scalogram_TEST_twin.png`), from
+//! `/twin/blocks`.
 
 use anyhow::Context;
 use clap::Args;
@@ -55,6 +58,36 @@ fn test_curve(t: &TestSummary, source: Source, steps: &[(f64, &StepMetrics)]) ->
         amp_mean_lower: col(|m| m.amp_mean_lower),
         amp_max_lower: col(|m| m.amp_max_lower),
     }
+}
+
+/// The twin's logged prediction (`/twin/blocks`) over the record window of `info` (samples `dt`
+/// s apart): `None` when the log has no twin output there (a session without `--twin`, or
+/// blocks the twin skipped). Only the blocks around the window are decoded.
+fn twin_window(
+    session: &crate::log::SessionRead,
+    info: &StepInfo,
+    dt: f64,
+) -> anyhow::Result<Option<crate::twin::TwinTrace>> {
+    let topic = crate::twin::TOPIC_TWIN_BLOCKS;
+    let (from, n) = (info.record_first_sample, info.record_samples);
+    // Log time = rig time of a block's first sample: blocks starting up to a second before the
+    // window (far longer than any block) down to its last sample.
+    let t0 = crate::log::recorder::log_time_ns((from as f64 * dt - 1.0).max(0.0));
+    let t1 = crate::log::recorder::log_time_ns((from + n as u64) as f64 * dt);
+    let blocks = session
+        .messages_on(topic)
+        .filter(|m| m.log_time >= t0 && m.log_time <= t1)
+        .map(|m| {
+            serde_json::from_slice::<crate::twin::TwinSamples>(&m.data).with_context(|| {
+                format!(
+                    "{}: {topic} message {} does not decode",
+                    session.path.display(),
+                    m.sequence
+                )
+            })
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    Ok(crate::twin::TwinTrace::cut(&blocks, from, n))
 }
 
 /// Draws the figures of the session log `file` into `out` (created); returns the files
@@ -135,33 +168,59 @@ pub(crate) fn figures(file: &Path, out: &Path) -> anyhow::Result<Vec<PathBuf>> {
         };
         let w = window_signals(&rec.layout, info, &counts)?;
         let s = 1.0 / (info.omega * l);
-        histories.push(TimeHistory {
-            name: info.test.clone(),
-            source: Source::Measurement,
-            omega_ratio: info.omega_ratio,
-            t: (0..w.upper.len()).map(|k| k as f64 * w.dt).collect(),
-            upper: w.upper.iter().map(|v| v * s).collect(),
-            lower: w.lower.iter().map(|v| v * s).collect(),
-            contact_closed: w.closed.clone(),
-            normal_force: Vec::new(),
-            tangential_force: Vec::new(),
-        });
-        let p = a.out.join(format!(
-            "scalogram_{}.png",
-            super::simulate::sanitize(&info.test)
-        ));
-        super::simulate::scalogram_of(
-            &w.upper,
-            w.dt,
-            info.omega,
-            l,
-            &format!(
-                "measurement, {}, upper beam, Omega/omega_2 = {:.3}",
-                info.test, info.omega_ratio
-            ),
-            &p,
-        )?;
-        written.push(p);
+        // The measurement, then the twin over the same window where the log holds its
+        // predicted channels: one time history and one scalogram each.
+        let mut sources = vec![(
+            w.upper.clone(),
+            TimeHistory {
+                name: info.test.clone(),
+                source: Source::Measurement,
+                omega_ratio: info.omega_ratio,
+                t: (0..w.upper.len()).map(|k| k as f64 * w.dt).collect(),
+                upper: w.upper.iter().map(|v| v * s).collect(),
+                lower: w.lower.iter().map(|v| v * s).collect(),
+                contact_closed: w.closed.clone(),
+                normal_force: Vec::new(),
+                tangential_force: Vec::new(),
+            },
+        )];
+        if let Some(twin) = twin_window(&session, info, w.dt)? {
+            sources.push((
+                twin.upper_tip.clone(),
+                TimeHistory {
+                    name: info.test.clone(),
+                    source: Source::Twin,
+                    omega_ratio: info.omega_ratio,
+                    t: (0..twin.upper_tip.len()).map(|k| k as f64 * w.dt).collect(),
+                    upper: twin.upper_tip.iter().map(|v| v * s).collect(),
+                    lower: twin.lower_tip.iter().map(|v| v * s).collect(),
+                    contact_closed: twin.contact,
+                    normal_force: twin.normal_force,
+                    tangential_force: twin.tangential_force,
+                },
+            ));
+        }
+        for (upper, h) in sources {
+            let source = h.source;
+            let suffix = if source == Source::Twin { "_twin" } else { "" };
+            let p = a.out.join(format!(
+                "scalogram_{}{suffix}.png",
+                super::simulate::sanitize(&info.test)
+            ));
+            super::simulate::scalogram_of(
+                &upper,
+                w.dt,
+                info.omega,
+                l,
+                &format!(
+                    "{source}, {}, upper beam, Omega/omega_2 = {:.3}",
+                    info.test, info.omega_ratio
+                ),
+                &p,
+            )?;
+            written.push(p);
+            histories.push(h);
+        }
     }
     let period = nearest
         .iter()

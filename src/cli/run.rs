@@ -163,6 +163,10 @@ pub struct ReplayArgs {
     /// Rebuild the twin ROM even if cached (with `--twin`).
     #[arg(long, requires = "twin")]
     pub rebuild: bool,
+    /// With `--twin`: write a copy of the session log holding the re-run twin's output
+    /// (`/twin/blocks`, `/twin/steps`) in place of the recorded twin's, for `rigtwin report`.
+    #[arg(long, requires = "twin")]
+    pub out: Option<PathBuf>,
 }
 
 /// The twin model of `rigtwin replay --twin`: ROM, `[twin]` settings and where it came from.
@@ -409,13 +413,12 @@ pub(crate) fn run_session_on(
         let engine = crate::twin::Twin::new(&twin, &cfg.twin, &layout, cfg.contact.clearance)
             .context("the twin")?;
         let (task, rx) = crate::twin::TwinTask::spawn(engine, &cfg.twin).context("the twin")?;
-        Some(crate::twin::TwinRecorder::new(
-            task,
-            rx,
-            l,
-            layout.dt(),
-            Some(handle.clone()),
-        )?)
+        let recorder =
+            crate::twin::TwinRecorder::new(task, rx, l, layout.dt(), Some(handle.clone()))?;
+        Some(match &live_recorder {
+            Some(live) => recorder.with_live(live.clone()),
+            None => recorder,
+        })
     } else {
         None
     };
@@ -557,7 +560,7 @@ fn print_summary(s: &SessionSummary) {
             );
             if let Some(w) = &st.twin {
                 println!(
-                    "        twin     rms upper {:7.2} ({:+.1} %) lower {:7.2} ({:+.1} %)  contact {:.3} ({:+.3})  impacts/period {:.2}",
+                    "        twin     rms upper {:7.2} ({:+.1} %) lower {:7.2} ({:+.1} %)  contact {:.3} ({:+.3})  impacts/period {:.2}  spectrum {}",
                     w.metrics.rms_upper,
                     100.0 * w.rms_error_upper,
                     w.metrics.rms_lower,
@@ -565,6 +568,8 @@ fn print_summary(s: &SessionSummary) {
                     w.metrics.contact_fraction,
                     w.contact_fraction_error,
                     w.metrics.impacts_per_period,
+                    w.spectrum_distance_db
+                        .map_or("-".to_string(), |d| format!("{d:.1} dB")),
                 );
             }
         }
@@ -690,12 +695,32 @@ pub(crate) fn replay(a: ReplayArgs) -> anyhow::Result<()> {
     let mut summary = r.summary;
     if a.twin {
         let (rom, spec, source) = replay_twin_model(&a, r.rig_toml.as_deref())?;
+        let mut copy = match &a.out {
+            Some(out) => {
+                let session = crate::log::read_session(&a.file)?;
+                Some(
+                    crate::twin::TwinLogCopy::create(
+                        out,
+                        &session,
+                        &source,
+                        r.recording.layout.dt(),
+                    )
+                    .with_context(|| format!("--out {}", out.display()))?,
+                )
+            }
+            None => None,
+        };
+        let sink: &mut dyn crate::twin::TwinSink = match &mut copy {
+            Some(c) => c,
+            None => &mut (),
+        };
         let stats = crate::twin::replay_twin(
             &r.recording,
             &mut summary,
             &rom,
             &spec,
             rom.meta.beam_length,
+            sink,
         )
         .with_context(|| format!("twin replay of {}", a.file.display()))?;
         println!(
@@ -703,6 +728,16 @@ pub(crate) fn replay(a: ReplayArgs) -> anyhow::Result<()> {
              per rig second",
             stats.blocks, stats.steps_compared, stats.solver_failures, stats.wall_per_rig_second
         );
+        if let (Some(c), Some(out)) = (copy, &a.out) {
+            let st = c
+                .close()
+                .with_context(|| format!("--out {}", out.display()))?;
+            println!(
+                "session log with the re-run twin: {} ({:.1} MB)",
+                out.display(),
+                st.bytes_written as f64 / 1e6
+            );
+        }
     }
     if let Some(j) = &a.json {
         super::write_json(j, &summary)?;

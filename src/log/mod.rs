@@ -47,8 +47,12 @@ pub use writer::{
 pub const RIGTWIN_METADATA: &str = "rigtwin";
 
 /// Version of the session log layout (channels, encodings, metadata); bumped when readers
-/// must change.
-pub const FORMAT_VERSION: u32 = 1;
+/// must change. History:
+/// - 1: DAQ blocks, control state, events, rig status, steps; the twin's status and steps.
+/// - 2: `/rig/status` messages carry the rig's time as `block_time` (was a second `time`
+///   key); steps carry `spectrum_upper`; the twin's predicted channels on `/twin/blocks`.
+///   Readers of version 2 read version 1 logs (the new fields default).
+pub const FORMAT_VERSION: u32 = 2;
 
 /// Message encoding of every rigtwin channel.
 pub const MESSAGE_ENCODING: &str = "json";

@@ -404,6 +404,28 @@ impl LogHandle {
         log_time_ns: u64,
         json: Vec<u8>,
     ) -> Result<(), LogError> {
+        self.queue_json(channel, log_time_ns, json, false)
+    }
+
+    /// Like [`LogHandle::log_json`], but waits for queue space instead of dropping: for
+    /// offline tools that write a whole log as fast as they can (e.g. `rigtwin replay --out`).
+    /// Never call it from a control loop.
+    pub fn log_json_waiting(
+        &self,
+        channel: &RawChannel,
+        log_time_ns: u64,
+        json: Vec<u8>,
+    ) -> Result<(), LogError> {
+        self.queue_json(channel, log_time_ns, json, true)
+    }
+
+    fn queue_json(
+        &self,
+        channel: &RawChannel,
+        log_time_ns: u64,
+        json: Vec<u8>,
+        wait: bool,
+    ) -> Result<(), LogError> {
         let shared = &self.inner.shared;
         if !self.owns(channel) {
             return Err(LogError::ForeignChannel {
@@ -424,6 +446,13 @@ impl LogHandle {
             log_time: log_time_ns,
             data: json,
         };
+        if wait {
+            return self
+                .inner
+                .tx
+                .send(command)
+                .map_err(|_| shared.closed_error());
+        }
         match self.inner.tx.try_send(command) {
             Ok(()) => Ok(()),
             Err(TrySendError::Full(_)) => {

@@ -9,6 +9,7 @@
 use super::contact_activity::count_impacts;
 use super::error::{require_finite, require_len, require_positive, SignalError};
 use super::periods::{split, PeriodGrid};
+use super::spectrum::{band_spectrum, SPECTRUM_BANDS};
 
 /// Borrowed view of one recorded step: uniformly sampled channels of equal length plus the
 /// excitation. Nothing is copied.
@@ -71,6 +72,10 @@ pub struct StepMetrics {
     pub peak_normal_force: Option<f64>,
     /// Number of whole excitation periods in the window.
     pub periods: usize,
+    /// RMS of the upper tip velocity / (Omega q) in the half-harmonic bands `k Omega / 2`,
+    /// k = 1 ..= 20 ([`super::spectrum`]); zeros in summaries written before it existed.
+    #[serde(default)]
+    pub spectrum_upper: [f64; SPECTRUM_BANDS],
 }
 
 /// Min, mean and max of the per-period amplitudes of one channel (same unit as the channel
@@ -213,6 +218,7 @@ pub fn step_metrics(
         impacts_per_period: impacts as f64 / grid.periods() as f64,
         peak_normal_force,
         periods: grid.periods(),
+        spectrum_upper: band_spectrum(upper, record.dt, record.omega, &grid)?.map(|v| v * scale),
     })
 }
 
@@ -520,6 +526,7 @@ mod tests {
             "impacts_per_period",
             "peak_normal_force",
             "periods",
+            "spectrum_upper",
         ] {
             assert!(json.get(key).is_some(), "missing {key}");
         }

@@ -2,7 +2,8 @@
 //! whole-period bookkeeping and quadrature ([`periods`]), the step metrics of the reference's
 //! frequency-response figures ([`metrics`]), synchronous demodulation of the fundamental in
 //! batch and streaming form ([`demod`]), contact intervals, impacts per period and impact
-//! clusters ([`mod@contact_activity`]), drift-free integration of measured accelerations ([`integrate`]), the analytic Morlet wavelet transform ([`wavelet`]) and
+//! clusters ([`mod@contact_activity`]), drift-free integration of measured accelerations ([`integrate`]), the analytic Morlet wavelet transform ([`wavelet`]), half-harmonic band spectra and their
+//! log-spectral distance ([`spectrum`]) and
 //! the relative RMS error of the convergence studies ([`relative_error`]).
 //!
 //! Everything here is pure and deterministic: slices in, values out, no I/O, no clock; the
@@ -18,6 +19,7 @@ pub mod integrate;
 pub mod metrics;
 pub mod periods;
 pub mod relative_error;
+pub mod spectrum;
 pub mod wavelet;
 
 pub use contact_activity::{
@@ -30,4 +32,5 @@ pub use integrate::integrate_periodic;
 pub use metrics::{step_metrics, MetricsParams, StepMetrics, StepRecord};
 pub use periods::PeriodGrid;
 pub use relative_error::relative_rms_error;
+pub use spectrum::{band_spectrum, spectrum_distance_db, SPECTRUM_BANDS};
 pub use wavelet::{log_spaced, morlet_scalogram, MorletParams, Scalogram, WaveletNorm};

@@ -18,7 +18,7 @@ use serde::{Deserialize, Serialize};
 use crate::control::{EventKind, SessionSummary, StepInfo, StepSummary};
 use crate::log::replay::Recording;
 use crate::rom::Rom;
-use crate::signal::{StepMetrics, StepRecord};
+use crate::signal::{spectrum_distance_db, StepMetrics, StepRecord};
 
 use super::{Twin, TwinBlock, TwinError, TwinSpec};
 
@@ -36,6 +36,13 @@ pub struct TwinComparison {
     pub contact_fraction_error: f64,
     /// `impacts_per_period(twin) - impacts_per_period(measured)`, -.
     pub impacts_per_period_error: f64,
+    /// Log-spectral distance of the twin's upper-tip band spectrum from the measurement's,
+    /// dB ([`crate::signal::spectrum_distance_db`]: RMS over the half-harmonic bands up to
+    /// 10 Omega of the level difference, floor 60 dB below the measurement's strongest band);
+    /// `None` when the measurement's spectrum is empty (a summary written before spectra
+    /// were measured).
+    #[serde(default)]
+    pub spectrum_distance_db: Option<f64>,
 }
 
 /// Index of the lower and upper tip in the twin's sensors ([`super::TWIN_SENSORS`]).
@@ -179,6 +186,11 @@ fn compare(twin: StepMetrics, measured: &StepMetrics) -> TwinComparison {
         rms_error_lower: twin.rms_lower / measured.rms_lower - 1.0,
         contact_fraction_error: twin.contact_fraction - measured.contact_fraction,
         impacts_per_period_error: twin.impacts_per_period - measured.impacts_per_period,
+        spectrum_distance_db: Some(spectrum_distance_db(
+            &twin.spectrum_upper,
+            &measured.spectrum_upper,
+        ))
+        .filter(|d| d.is_finite()),
         metrics: twin,
     }
 }
@@ -196,16 +208,37 @@ pub struct TwinReplayStats {
     pub wall_per_rig_second: f64,
 }
 
+/// Where a twin replay's output goes besides the summary (e.g. a copy of the session log,
+/// [`super::TwinLogCopy`]). `()` keeps nothing.
+pub trait TwinSink {
+    /// The twin's prediction for one block, in block order.
+    fn block(&mut self, block: &TwinBlock) -> Result<(), TwinError>;
+    /// A step's comparison as its record window completes (`None`: the twin missed part of
+    /// the window).
+    fn step(&mut self, info: &StepInfo, twin: Option<&TwinComparison>) -> Result<(), TwinError>;
+}
+
+impl TwinSink for () {
+    fn block(&mut self, _: &TwinBlock) -> Result<(), TwinError> {
+        Ok(())
+    }
+    fn step(&mut self, _: &StepInfo, _: Option<&TwinComparison>) -> Result<(), TwinError> {
+        Ok(())
+    }
+}
+
 /// Runs the twin (ROM `rom`, settings `spec`, beam length `beam_length` m for the plan's
 /// clearances) over the recording `rec` and writes each step's comparison into `summary`
 /// (`tests[].steps[].twin`, in the order of the recording's record windows; `summary` is the
-/// replayed summary of the same recording).
+/// replayed summary of the same recording). Every output block and comparison also goes to
+/// `sink`.
 pub fn replay_twin(
     rec: &Recording,
     summary: &mut SessionSummary,
     rom: &Rom,
     spec: &TwinSpec,
     beam_length: f64,
+    sink: &mut dyn TwinSink,
 ) -> Result<TwinReplayStats, TwinError> {
     let wall = std::time::Instant::now();
     let mut clearances: VecDeque<(u64, f64)> = VecDeque::new();
@@ -228,9 +261,12 @@ pub fn replay_twin(
     let mut results: Vec<Option<TwinComparison>> = Vec::new();
     let mut out = TwinWindows::default();
     let mut stats = TwinReplayStats::default();
-    let mut take = |done: Vec<Completed>| -> Result<(), TwinError> {
+    let take = |done: Vec<Completed>,
+                results: &mut Vec<Option<TwinComparison>>,
+                sink: &mut dyn TwinSink|
+     -> Result<(), TwinError> {
         for (info, c) in done {
-            results.push(match c {
+            let c = match c {
                 Some(Ok(c)) => Some(c),
                 Some(Err(e)) => {
                     return Err(TwinError::Metrics(format!(
@@ -239,7 +275,9 @@ pub fn replay_twin(
                     )))
                 }
                 None => None,
-            });
+            };
+            sink.step(&info, c.as_ref())?;
+            results.push(c);
         }
         Ok(())
     };
@@ -258,10 +296,11 @@ pub fn replay_twin(
             .iter()
             .map(|&f| u64::from(f))
             .sum::<u64>();
+        sink.block(&tb)?;
         out.push(&tb);
-        take(out.complete(&mut pending, dt, false))?;
+        take(out.complete(&mut pending, dt, false), &mut results, sink)?;
     }
-    take(out.complete(&mut pending, dt, true))?;
+    take(out.complete(&mut pending, dt, true), &mut results, sink)?;
     stats.steps_compared = summary.attach_twin(results);
     let rig = rec
         .blocks

@@ -34,4 +34,7 @@ pub enum TwinError {
     /// The twin task's thread is gone (it panicked, or the task was shut down).
     #[error("twin task: {0}")]
     Task(String),
+    /// Writing the twin's output to a session log failed.
+    #[error("twin log: {0}")]
+    Log(String),
 }

@@ -4,18 +4,23 @@
 //! (the rule of [`super::replay_twin`], so live and replay cut at the same place), collects
 //! the twin's output, and compares it with the measurement as each record window completes.
 //!
-//! Logged (when given a log): `/twin/status` (lag, queue, skipped blocks, speed) about once a
-//! second of rig time, `/twin/steps` (the comparison of every step) as it completes.
+//! Logged (when given a log): `/twin/blocks` (the predicted channels of every block the twin
+//! processed, [`TwinSamples`]), `/twin/status` (lag, queue, skipped blocks, speed) about once a
+//! second of rig time, `/twin/steps` (the comparison of every step) as it completes. With a
+//! live view ([`TwinRecorder::with_live`]) the same status and comparisons, and the predicted
+//! channels decimated, go to the Foxglove app.
 
 use std::collections::VecDeque;
 
 use serde::{Deserialize, Serialize};
 
 use crate::control::{EventKind, SessionEvent, SessionRecorder, StepInfo, StepSummary};
+use crate::log::live::LiveRecorder;
 use crate::log::recorder::log_time_ns;
 use crate::log::{LogChannel, LogHandle};
 use crate::rig::{DaqBlock, DaqLayout, RigStatus};
 
+use super::output::{TwinSamples, TOPIC_TWIN_BLOCKS};
 use super::{Pushed, TwinComparison, TwinEvent, TwinReceiver, TwinStatus, TwinTask, TwinWindows};
 
 /// Topic of the twin's status.
@@ -36,8 +41,26 @@ pub struct TwinStepMessage {
     pub twin: Option<TwinComparison>,
 }
 
+impl TwinStepMessage {
+    /// The message of a step's comparison.
+    pub fn of(info: &StepInfo, twin: Option<&TwinComparison>) -> TwinStepMessage {
+        TwinStepMessage {
+            test: info.test.clone(),
+            step: info.step,
+            omega_ratio: info.omega_ratio,
+            twin: twin.cloned(),
+        }
+    }
+
+    /// Its log time: the end of the step's record window (samples `dt` s apart), s.
+    pub fn log_time(info: &StepInfo, dt: f64) -> f64 {
+        (info.record_first_sample + info.record_samples as u64) as f64 * dt
+    }
+}
+
 struct Logs {
     log: LogHandle,
+    blocks: LogChannel<TwinSamples>,
     status: LogChannel<TwinStatus>,
     steps: LogChannel<TwinStepMessage>,
 }
@@ -54,6 +77,7 @@ pub struct TwinRecorder {
     /// Comparisons in step order (`None`: the twin missed part of the window).
     results: Vec<Option<TwinComparison>>,
     logs: Option<Logs>,
+    live: Option<LiveRecorder>,
     last_status: f64,
     /// Twin errors (reported once at the end; the session goes on without the twin).
     errors: Vec<String>,
@@ -91,6 +115,7 @@ impl TwinRecorder {
     ) -> Result<TwinRecorder, crate::log::LogError> {
         let logs = match log {
             Some(log) => Some(Logs {
+                blocks: log.channel(TOPIC_TWIN_BLOCKS)?,
                 status: log.channel(TOPIC_TWIN_STATUS)?,
                 steps: log.channel(TOPIC_TWIN_STEPS)?,
                 log,
@@ -107,10 +132,17 @@ impl TwinRecorder {
             out: TwinWindows::default(),
             results: Vec::new(),
             logs,
+            live: None,
             last_status: f64::NEG_INFINITY,
             errors: Vec::new(),
             failed: false,
         })
+    }
+
+    /// Also feeds the live view: the twin's status, comparisons and decimated predictions.
+    pub fn with_live(mut self, live: LiveRecorder) -> TwinRecorder {
+        self.live = Some(live);
+        self
     }
 
     fn fail(&mut self, e: impl std::fmt::Display) {
@@ -125,7 +157,18 @@ impl TwinRecorder {
     fn drain(&mut self, all: bool) {
         while let Ok(ev) = self.rx.try_recv() {
             match ev {
-                TwinEvent::Block(b) => self.out.push(&b),
+                TwinEvent::Block(b) => {
+                    if let Some(l) = &self.logs {
+                        // A full log queue drops the message and counts it (the log's stats).
+                        let _ = l
+                            .log
+                            .log(&l.blocks, log_time_ns(b.time), &TwinSamples::from(&b));
+                    }
+                    if let Some(live) = &self.live {
+                        live.twin_block(&b);
+                    }
+                    self.out.push(&b);
+                }
                 TwinEvent::Error { seq, message } => {
                     // The twin skipped that block and goes on: a gap in its output.
                     if self.errors.len() < 16 {
@@ -146,18 +189,13 @@ impl TwinRecorder {
                 }
                 None => None,
             };
+            let end = TwinStepMessage::log_time(&info, self.dt);
+            let message = TwinStepMessage::of(&info, c.as_ref());
             if let Some(l) = &self.logs {
-                let end = info.record_first_sample + info.record_samples as u64;
-                let _ = l.log.log(
-                    &l.steps,
-                    log_time_ns(end as f64 * self.dt),
-                    &TwinStepMessage {
-                        test: info.test.clone(),
-                        step: info.step,
-                        omega_ratio: info.omega_ratio,
-                        twin: c.clone(),
-                    },
-                );
+                let _ = l.log.log(&l.steps, log_time_ns(end), &message);
+            }
+            if let Some(live) = &self.live {
+                live.twin_step(end, &message);
             }
             self.results.push(c);
         }
@@ -208,10 +246,12 @@ impl SessionRecorder for TwinRecorder {
         self.drain(false);
         if block.time - self.last_status >= 1.0 {
             self.last_status = block.time;
+            let status = self.task.status();
             if let Some(l) = &self.logs {
-                let _ = l
-                    .log
-                    .log(&l.status, log_time_ns(block.time), &self.task.status());
+                let _ = l.log.log(&l.status, log_time_ns(block.time), &status);
+            }
+            if let Some(live) = &self.live {
+                live.twin_status(block.time, &status);
             }
         }
         Ok(())

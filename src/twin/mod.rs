@@ -8,7 +8,11 @@
 //!   runs it directly).
 //! - [`task`]: [`TwinTask`], the core on a dedicated thread behind a bounded queue that never
 //!   blocks the producer, with lag and skipped blocks in its status.
-//! - [`output`]: the logged types ([`TwinBlock`], [`TwinStatus`], [`TwinEvent`]).
+//! - [`output`]: the logged types ([`TwinBlock`], [`TwinSamples`], [`TwinStatus`],
+//!   [`TwinEvent`]).
+//! - [`compare`]: the per-step comparison with the measurement and the twin replay.
+//! - [`live`]: the twin beside a running session ([`TwinRecorder`]).
+//! - [`relog`]: a copy of a session log with a re-run twin's output ([`TwinLogCopy`]).
 //! - [`error`]: the error type [`TwinError`].
 
 // NOTE: validation uses negated comparisons such as `!(dt < limit)` on purpose: they reject
@@ -21,15 +25,20 @@ pub mod error;
 pub mod input;
 pub mod live;
 pub mod output;
+pub mod relog;
 pub mod spec;
 pub mod task;
 
-pub use compare::{replay_twin, TwinComparison, TwinReplayStats, TwinWindows};
+pub use compare::{replay_twin, TwinComparison, TwinReplayStats, TwinSink, TwinWindows};
 pub use engine::{Twin, TwinCounters};
 pub use error::TwinError;
 pub use input::{InputMap, TwinInput};
 pub use live::{TwinOutcome, TwinRecorder, TwinStepMessage, TOPIC_TWIN_STATUS, TOPIC_TWIN_STEPS};
-pub use output::{TwinBlock, TwinEvent, TwinGap, TwinStatus, TWIN_SENSORS};
+pub use output::{
+    TwinBlock, TwinEvent, TwinGap, TwinSamples, TwinStatus, TwinTrace, TOPIC_TWIN_BLOCKS,
+    TWIN_SENSORS,
+};
+pub use relog::{TwinLogCopy, TWIN_REPLAY_METADATA};
 pub use spec::{AfterGap, TwinSpec};
 pub use task::{Pushed, TwinReceiver, TwinTask};
 

@@ -76,6 +76,131 @@ impl TwinBlock {
     }
 }
 
+/// The twin's prediction for one DAQ block as logged on [`TOPIC_TWIN_BLOCKS`]: the channels of
+/// a [`TwinBlock`] in single precision, one array per sensor (so the Foxglove app can plot
+/// `/twin/blocks.upper_tip`), contact as 0/1.
+///
+/// NOTE: single precision halves the log's size against `f64` (shortest round-trip JSON of an
+/// `f32` has about 9 digits, of an `f64` 17); its relative resolution, 6e-8, is far below any
+/// sensor's noise. The step comparisons are computed from the twin's `f64` output before it is
+/// logged, so they do not depend on this.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
+pub struct TwinSamples {
+    /// Sequence number of the input block.
+    pub seq: u64,
+    /// Index of the block's first sample since the stream started.
+    pub first_sample: u64,
+    /// Rig time of the first sample, s.
+    pub time: f64,
+    /// Samples per channel.
+    pub len: usize,
+    /// Relative velocity of the lower tip sensor, m/s.
+    pub lower_tip: Vec<f32>,
+    /// Relative velocity of the lower mid sensor, m/s.
+    pub lower_mid: Vec<f32>,
+    /// Relative velocity of the upper tip sensor (the vibrometer's spot), m/s.
+    pub upper_tip: Vec<f32>,
+    /// Relative velocity of the upper mid sensor, m/s.
+    pub upper_mid: Vec<f32>,
+    /// 1 where any contact pair was closed in a twin step of the sample, else 0.
+    pub contact: Vec<u8>,
+    /// Mean integrated normal contact force over the sample interval, N.
+    pub normal_force: Vec<f32>,
+    /// Mean integrated tangential contact force over the sample interval, N.
+    pub tangential_force: Vec<f32>,
+    /// Contact solves of the block that stopped at the sweep limit or diverged.
+    pub solver_failures: u64,
+    /// The gap in the input before this block, if any.
+    pub gap: Option<TwinGap>,
+    /// Samples at which the twin restarted at rest after a non-finite state.
+    pub restarts: Vec<u64>,
+}
+
+/// Topic of the twin's predicted channels ([`TwinSamples`], one message per DAQ block).
+pub const TOPIC_TWIN_BLOCKS: &str = "/twin/blocks";
+
+impl From<&TwinBlock> for TwinSamples {
+    fn from(b: &TwinBlock) -> TwinSamples {
+        let f32s = |x: &[f64]| x.iter().map(|&v| v as f32).collect::<Vec<f32>>();
+        // TWIN_SENSORS order: lower tip, lower mid, upper tip, upper mid.
+        TwinSamples {
+            seq: b.seq,
+            first_sample: b.first_sample,
+            time: b.time,
+            len: b.len,
+            lower_tip: f32s(b.sensor(0)),
+            lower_mid: f32s(b.sensor(1)),
+            upper_tip: f32s(b.sensor(2)),
+            upper_mid: f32s(b.sensor(3)),
+            contact: b.contact.iter().map(|&c| u8::from(c)).collect(),
+            normal_force: f32s(&b.normal_force),
+            tangential_force: f32s(&b.tangential_force),
+            solver_failures: b.solver_failures.iter().map(|&f| u64::from(f)).sum(),
+            gap: b.gap,
+            restarts: b.restarts.clone(),
+        }
+    }
+}
+
+/// The logged twin channels over a range of samples (e.g. a record window), in `f64`.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct TwinTrace {
+    /// Upper tip relative velocity, m/s.
+    pub upper_tip: Vec<f64>,
+    /// Lower tip relative velocity, m/s.
+    pub lower_tip: Vec<f64>,
+    /// Contact closed per sample.
+    pub contact: Vec<bool>,
+    /// Integrated normal contact force, N.
+    pub normal_force: Vec<f64>,
+    /// Integrated tangential contact force, N.
+    pub tangential_force: Vec<f64>,
+}
+
+impl TwinTrace {
+    /// The samples `from .. from + n` cut from logged blocks (any order); `None` unless the
+    /// blocks cover every one of them (the twin skipped or lost part of the range).
+    pub fn cut(blocks: &[TwinSamples], from: u64, n: usize) -> Option<TwinTrace> {
+        let to = from + n as u64;
+        let mut t = TwinTrace {
+            upper_tip: vec![f64::NAN; n],
+            lower_tip: vec![f64::NAN; n],
+            contact: vec![false; n],
+            normal_force: vec![f64::NAN; n],
+            tangential_force: vec![f64::NAN; n],
+        };
+        let mut seen = vec![false; n];
+        for b in blocks {
+            let (lo, hi) = (
+                b.first_sample.max(from),
+                (b.first_sample + b.len as u64).min(to),
+            );
+            let consistent = [
+                &b.upper_tip,
+                &b.lower_tip,
+                &b.normal_force,
+                &b.tangential_force,
+            ]
+            .iter()
+            .all(|v| v.len() == b.len)
+                && b.contact.len() == b.len;
+            if lo >= hi || !consistent {
+                continue;
+            }
+            for s in lo..hi {
+                let (i, j) = ((s - b.first_sample) as usize, (s - from) as usize);
+                seen[j] = true;
+                t.upper_tip[j] = f64::from(b.upper_tip[i]);
+                t.lower_tip[j] = f64::from(b.lower_tip[i]);
+                t.contact[j] = b.contact[i] != 0;
+                t.normal_force[j] = f64::from(b.normal_force[i]);
+                t.tangential_force[j] = f64::from(b.tangential_force[i]);
+            }
+        }
+        seen.iter().all(|&s| s).then_some(t)
+    }
+}
+
 /// The twin task's state, computed on demand by [`super::TwinTask::status`].
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct TwinStatus {

@@ -588,3 +588,65 @@ fn outputs_round_trip_through_json_and_have_schemas() {
     let event_schema = serde_json::to_string(&schemars::schema_for!(TwinEvent)).unwrap();
     assert!(event_schema.contains("\"kind\""), "{event_schema}");
 }
+
+/// A twin block whose channel `k` at sample `s` is `k + s / 1000` (contact on odd samples).
+fn marked_block(first_sample: u64, len: usize) -> TwinBlock {
+    let v = |k: usize, i: usize| k as f64 + (first_sample + i as u64) as f64 / 1000.0;
+    TwinBlock {
+        seq: first_sample / len as u64,
+        first_sample,
+        time: first_sample as f64 / FS,
+        len,
+        velocity: (0..4)
+            .flat_map(|k| (0..len).map(move |i| v(k, i)))
+            .collect(),
+        contact: (0..len)
+            .map(|i| (first_sample + i as u64) % 2 == 1)
+            .collect(),
+        normal_force: (0..len).map(|i| v(10, i)).collect(),
+        tangential_force: (0..len).map(|i| v(20, i)).collect(),
+        solver_failures: vec![1; len],
+        gap: None,
+        restarts: Vec::new(),
+    }
+}
+
+#[test]
+fn logged_samples_keep_the_sensor_order_and_cut_record_windows() {
+    assert_eq!(
+        TWIN_SENSORS,
+        ["lower_tip", "lower_mid", "upper_tip", "upper_mid"],
+        "TwinSamples names its arrays in this order"
+    );
+    let blocks: Vec<TwinSamples> = [0u64, 8, 16]
+        .iter()
+        .map(|&f| TwinSamples::from(&marked_block(f, 8)))
+        .collect();
+    let s = &blocks[1];
+    assert_eq!(s.lower_tip[2], 0.0 + 10.0 / 1000.0);
+    assert_eq!(s.upper_tip[2], (2.0 + 10.0 / 1000.0) as f32);
+    assert_eq!(s.upper_mid[0], (3.0 + 8.0 / 1000.0) as f32);
+    assert_eq!(s.contact[..2], [0, 1]);
+    assert_eq!(s.solver_failures, 8);
+
+    // A window across block boundaries, blocks in any order.
+    let shuffled = [blocks[2].clone(), blocks[0].clone(), blocks[1].clone()];
+    let t = TwinTrace::cut(&shuffled, 5, 14).unwrap();
+    assert_eq!(t.upper_tip.len(), 14);
+    for (j, s) in (5..19).enumerate() {
+        assert_eq!(t.upper_tip[j], f64::from((2.0 + s as f64 / 1000.0) as f32));
+        assert_eq!(t.lower_tip[j], f64::from((s as f64 / 1000.0) as f32));
+        assert_eq!(t.contact[j], s % 2 == 1);
+        assert_eq!(
+            t.normal_force[j],
+            f64::from((10.0 + s as f64 / 1000.0) as f32)
+        );
+    }
+    // A missing block (skipped by the twin) or a window past the end: no trace.
+    assert!(TwinTrace::cut(&[blocks[0].clone(), blocks[2].clone()], 5, 14).is_none());
+    assert!(TwinTrace::cut(&blocks, 20, 8).is_none());
+    // A malformed logged block is not used.
+    let mut bad = blocks[1].clone();
+    bad.upper_tip.pop();
+    assert!(TwinTrace::cut(&[blocks[0].clone(), bad, blocks[2].clone()], 5, 14).is_none());
+}

@@ -43,7 +43,8 @@ pub fn bin_samples(sample_rate: f64, points_per_second: f64) -> usize {
     }
 }
 
-/// Min/max decimator of one DAQ stream.
+/// Min/max decimator of one DAQ stream (or of any set of channels sampled on the DAQ's time
+/// base, such as the twin's predictions: [`MinMaxDecimator::push_values`]).
 #[derive(Clone, Debug)]
 pub struct MinMaxDecimator {
     /// Samples per bin.
@@ -56,9 +57,11 @@ pub struct MinMaxDecimator {
     next: u64,
     /// Samples in the open bin (0: no bin open).
     n: u64,
-    lo: Vec<i32>,
-    hi: Vec<i32>,
-    sum: Vec<i64>,
+    // NOTE: accumulated in f64 in the channels' raw units (counts for DAQ blocks): sums of up
+    // to 2^29 counts of 24-bit ADCs are exact in f64, so DAQ points equal integer accumulation.
+    lo: Vec<f64>,
+    hi: Vec<f64>,
+    sum: Vec<f64>,
     /// Physical values of the bin being handed out.
     out_min: Vec<f64>,
     out_max: Vec<f64>,
@@ -70,17 +73,25 @@ pub struct MinMaxDecimator {
 impl MinMaxDecimator {
     /// A decimator for `layout`'s channels with `bin_samples` samples per bin (at least 1).
     pub fn new(layout: &DaqLayout, bin_samples: usize) -> Self {
-        let k = layout.channels.len();
+        let scales = layout.channels.iter().map(|c| c.scale).collect();
+        Self::with_scales(layout.sample_rate, scales, bin_samples)
+    }
+
+    /// A decimator for channels sampled at `sample_rate` (Hz) whose raw values become physical
+    /// ones times `scales` (1.0 for values already in physical units), `bin_samples` samples per
+    /// bin (at least 1).
+    pub fn with_scales(sample_rate: f64, scales: Vec<f64>, bin_samples: usize) -> Self {
+        let k = scales.len();
         Self {
             bin: bin_samples.max(1) as u64,
-            sample_rate: layout.sample_rate,
-            scales: layout.channels.iter().map(|c| c.scale).collect(),
+            sample_rate,
+            scales,
             start: 0,
             next: 0,
             n: 0,
-            lo: vec![0; k],
-            hi: vec![0; k],
-            sum: vec![0; k],
+            lo: vec![0.0; k],
+            hi: vec![0.0; k],
+            sum: vec![0.0; k],
             out_min: vec![0.0; k],
             out_max: vec![0.0; k],
             out_mean: vec![0.0; k],
@@ -107,31 +118,62 @@ impl MinMaxDecimator {
     /// not continue the previous one (lost blocks) first closes the open bin as it is. A block
     /// whose counts do not match the layout is skipped (and closes the open bin).
     pub fn push(&mut self, block: &DaqBlock, emit: &mut dyn FnMut(&DecimatedPoint<'_>)) {
-        let channels = self.scales.len();
-        if block.counts.len() != channels * block.len {
+        if block.counts.len() != self.scales.len() * block.len {
             self.skipped += 1;
             self.finish(emit);
             return;
         }
+        let counts = &block.counts;
+        self.push_with(block.first_sample, block.len, emit, |at| {
+            f64::from(counts[at])
+        });
+    }
+
+    /// Adds `len` samples per channel from sample `first_sample` on, channel-major in
+    /// `values` (`values[k * len + i]`), like [`MinMaxDecimator::push`]. Values that do not
+    /// match the channel count are skipped like a bad block.
+    pub fn push_values(
+        &mut self,
+        first_sample: u64,
+        len: usize,
+        values: &[f64],
+        emit: &mut dyn FnMut(&DecimatedPoint<'_>),
+    ) {
+        if values.len() != self.scales.len() * len {
+            self.skipped += 1;
+            self.finish(emit);
+            return;
+        }
+        self.push_with(first_sample, len, emit, |at| values[at]);
+    }
+
+    fn push_with(
+        &mut self,
+        first_sample: u64,
+        len: usize,
+        emit: &mut dyn FnMut(&DecimatedPoint<'_>),
+        value: impl Fn(usize) -> f64,
+    ) {
+        let channels = self.scales.len();
         let mut i = 0usize;
-        while i < block.len {
-            let s = block.first_sample + i as u64;
+        while i < len {
+            let s = first_sample + i as u64;
             if self.n > 0 && s != self.next {
                 self.emit(emit);
             }
             let bin_end = (s / self.bin + 1) * self.bin;
-            let take = ((bin_end - s) as usize).min(block.len - i);
+            let take = ((bin_end - s) as usize).min(len - i);
             for k in 0..channels {
-                let seg = &block.counts[k * block.len + i..k * block.len + i + take];
                 let (mut lo, mut hi, mut sum) = if self.n == 0 {
-                    (i32::MAX, i32::MIN, 0i64)
+                    (f64::INFINITY, f64::NEG_INFINITY, 0.0)
                 } else {
                     (self.lo[k], self.hi[k], self.sum[k])
                 };
-                for &c in seg {
+                for at in k * len + i..k * len + i + take {
+                    let c = value(at);
                     lo = lo.min(c);
                     hi = hi.max(c);
-                    sum += i64::from(c);
+                    sum += c;
                 }
                 self.lo[k] = lo;
                 self.hi[k] = hi;
@@ -159,9 +201,9 @@ impl MinMaxDecimator {
     fn emit(&mut self, emit: &mut dyn FnMut(&DecimatedPoint<'_>)) {
         let n = self.n as f64;
         for (k, &scale) in self.scales.iter().enumerate() {
-            self.out_min[k] = f64::from(self.lo[k]) * scale;
-            self.out_max[k] = f64::from(self.hi[k]) * scale;
-            self.out_mean[k] = self.sum[k] as f64 / n * scale;
+            self.out_min[k] = self.lo[k] * scale;
+            self.out_max[k] = self.hi[k] * scale;
+            self.out_mean[k] = self.sum[k] / n * scale;
         }
         let point = DecimatedPoint {
             first_sample: self.start,
@@ -229,18 +271,22 @@ mod tests {
         mean: Vec<f64>,
     }
 
-    fn collect(d: &mut MinMaxDecimator, blocks: &[DaqBlock], finish: bool) -> Vec<Owned> {
-        let mut out = Vec::new();
-        let mut emit = |p: &DecimatedPoint<'_>| {
-            out.push(Owned {
+    impl Owned {
+        fn of(p: &DecimatedPoint<'_>) -> Owned {
+            Owned {
                 first: p.first_sample,
                 time: p.time,
                 samples: p.samples,
                 min: p.min.to_vec(),
                 max: p.max.to_vec(),
                 mean: p.mean.to_vec(),
-            })
-        };
+            }
+        }
+    }
+
+    fn collect(d: &mut MinMaxDecimator, blocks: &[DaqBlock], finish: bool) -> Vec<Owned> {
+        let mut out = Vec::new();
+        let mut emit = |p: &DecimatedPoint<'_>| out.push(Owned::of(p));
         for b in blocks {
             d.push(b, &mut emit);
         }
@@ -279,6 +325,49 @@ mod tests {
                 p.mean,
                 vec![0.5 * (s0 as f64 + 1.5), -2.0 * (s0 as f64 + 1.5)]
             );
+        }
+    }
+
+    #[test]
+    fn values_in_physical_units_decimate_like_counts_times_their_scales() {
+        // The same samples as scaled counts (DAQ) and as physical values (the twin's path),
+        // over blocks of 7 with a gap: identical points.
+        let l = layout(1000.0, 7, &[0.5, 2.0]);
+        let f = |ch: usize, s: u64| ((s * 37 + ch as u64 * 11) % 23) as i32 - 11;
+        let blocks: Vec<DaqBlock> = [0u64, 1, 2, 4]
+            .iter()
+            .map(|&b| block(b, b * 7, 7, 2, f))
+            .collect();
+        let from_counts = collect(&mut MinMaxDecimator::new(&l, 5), &blocks, true);
+        let mut d = MinMaxDecimator::with_scales(1000.0, vec![1.0, 1.0], 5);
+        let mut from_values = Vec::new();
+        let mut emit = |p: &DecimatedPoint<'_>| from_values.push(Owned::of(p));
+        for b in &blocks {
+            let values: Vec<f64> = (0..2)
+                .flat_map(|k| {
+                    b.channel(k)
+                        .iter()
+                        .map(move |&c| f64::from(c) * [0.5, 2.0][k])
+                })
+                .collect();
+            d.push_values(b.first_sample, b.len, &values, &mut emit);
+        }
+        d.push_values(99, 3, &[0.0; 5], &mut emit);
+        d.finish(&mut emit);
+        assert_eq!(
+            d.skipped_blocks(),
+            1,
+            "values of the wrong length are skipped"
+        );
+        assert_eq!(from_values.len(), from_counts.len());
+        for (a, b) in from_values.iter().zip(&from_counts) {
+            assert_eq!(
+                (a.first, a.samples, &a.min, &a.max),
+                (b.first, b.samples, &b.min, &b.max)
+            );
+            for (x, y) in a.mean.iter().zip(&b.mean) {
+                assert!((x - y).abs() <= 1e-12 * y.abs().max(1.0), "{x} {y}");
+            }
         }
     }
 

@@ -16,12 +16,17 @@
 //! [`TOPIC_STATUS`], [`TOPIC_STEPS`]), except the raw DAQ blocks: they become [`TOPIC_LIVE_DAQ`],
 //! one message per decimated time point with every channel's min, max and mean in physical
 //! units (`/live/daq.upper_tip.max` in a Plot panel). Log time = rig time of the sample.
+//! With the live twin (`--twin`): its [`TOPIC_TWIN_STATUS`] and [`TOPIC_TWIN_STEPS`] as in the
+//! MCAP log, and [`TOPIC_LIVE_TWIN`], its predicted channels decimated in the bins of
+//! [`TOPIC_LIVE_DAQ`] (its raw `/twin/blocks` are the log's only).
 //!
 //! [`TOPIC_LAYOUT`]: super::recorder::TOPIC_LAYOUT
 //! [`TOPIC_CONTROL`]: super::recorder::TOPIC_CONTROL
 //! [`TOPIC_EVENTS`]: super::recorder::TOPIC_EVENTS
 //! [`TOPIC_STATUS`]: super::recorder::TOPIC_STATUS
 //! [`TOPIC_STEPS`]: super::recorder::TOPIC_STEPS
+//! [`TOPIC_TWIN_STATUS`]: crate::twin::TOPIC_TWIN_STATUS
+//! [`TOPIC_TWIN_STEPS`]: crate::twin::TOPIC_TWIN_STEPS
 
 pub mod decimate;
 mod publisher;
@@ -37,6 +42,46 @@ pub const TOPIC_LIVE_DAQ: &str = "/live/daq";
 
 /// Schema name of [`TOPIC_LIVE_DAQ`] (its JSON Schema lists the session's channels).
 pub const LIVE_DAQ_SCHEMA: &str = "LiveDaqPoint";
+
+/// The live twin's prediction decimated like [`TOPIC_LIVE_DAQ`], in the same bins (sessions run
+/// with `--twin`): `/live/twin.upper_tip.max` beside `/live/daq.vibrometer.max`.
+pub const TOPIC_LIVE_TWIN: &str = "/live/twin";
+
+/// Schema name of [`TOPIC_LIVE_TWIN`].
+pub const LIVE_TWIN_SCHEMA: &str = "LiveTwinPoint";
+
+/// The channels of [`TOPIC_LIVE_TWIN`]: key, what it is, unit. The velocities are relative to
+/// the base (the twin's coordinates); `contact`'s mean is the share of the bin's samples with a
+/// closed pair.
+pub const LIVE_TWIN_CHANNELS: [(&str, &str, &str); 7] = [
+    (
+        "lower_tip",
+        "relative velocity of the lower tip sensor",
+        "m/s",
+    ),
+    (
+        "lower_mid",
+        "relative velocity of the lower mid sensor",
+        "m/s",
+    ),
+    (
+        "upper_tip",
+        "relative velocity of the upper tip sensor (the vibrometer's spot)",
+        "m/s",
+    ),
+    (
+        "upper_mid",
+        "relative velocity of the upper mid sensor",
+        "m/s",
+    ),
+    ("contact", "1 while a contact pair is closed, else 0", "-"),
+    ("normal_force", "integrated normal contact force", "N"),
+    (
+        "tangential_force",
+        "integrated tangential contact force",
+        "N",
+    ),
+];
 
 /// Errors of starting the live view.
 #[derive(Debug, thiserror::Error)]

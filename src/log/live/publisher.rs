@@ -20,7 +20,10 @@ use crate::rig::DaqLayout;
 
 use super::decimate::{bin_samples, DecimatedPoint, MinMaxDecimator};
 use super::view::{LiveStats, Record};
-use super::{LIVE_DAQ_SCHEMA, TOPIC_LIVE_DAQ};
+use super::{
+    LIVE_DAQ_SCHEMA, LIVE_TWIN_CHANNELS, LIVE_TWIN_SCHEMA, TOPIC_LIVE_DAQ, TOPIC_LIVE_TWIN,
+};
+use crate::twin::{TwinBlock, TwinStatus, TwinStepMessage, TOPIC_TWIN_STATUS, TOPIC_TWIN_STEPS};
 
 /// Keys of a live DAQ point besides the channels; a channel with one of these names is published
 /// as `ch_NAME`.
@@ -108,12 +111,32 @@ impl ServerListener for LayoutLatch {
     }
 }
 
-/// The decimated DAQ topic of a session (made when the layout arrives).
-struct DaqTopic {
+/// A decimated topic (`/live/daq`, made when the layout arrives; `/live/twin`, made with the
+/// twin's first block).
+struct PointTopic {
     channel: Arc<RawChannel>,
     /// Key per channel in the messages.
     keys: Vec<String>,
     decimator: MinMaxDecimator,
+}
+
+impl PointTopic {
+    fn finish(&mut self, buf: &mut Vec<u8>, stats: &mut LiveStats) {
+        let (channel, keys) = (&self.channel, &self.keys);
+        self.decimator.finish(&mut |p| {
+            publish_point(channel, keys, p, buf, stats);
+        });
+    }
+}
+
+/// The live twin's topics (made with its first record).
+struct TwinTopics {
+    status: Arc<RawChannel>,
+    steps: Arc<RawChannel>,
+    /// `/live/twin`, made with the first twin block after the layout (which gives the rate).
+    points: Option<PointTopic>,
+    /// Reused buffer of a twin block's decimated channels, channel-major.
+    values: Vec<f64>,
 }
 
 /// The publisher thread's state.
@@ -122,7 +145,10 @@ pub(super) struct Publisher {
     channels: Channels,
     latch: Arc<LayoutLatch>,
     points_per_second: f64,
-    daq: Option<DaqTopic>,
+    daq: Option<PointTopic>,
+    /// The DAQ's sample rate, Hz (from the layout).
+    sample_rate: Option<f64>,
+    twin: Option<TwinTopics>,
     /// Reused serialisation buffer.
     buf: Vec<u8>,
     stats: LiveStats,
@@ -141,6 +167,8 @@ impl Publisher {
             latch,
             points_per_second,
             daq: None,
+            sample_rate: None,
+            twin: None,
             buf: Vec::with_capacity(4096),
             stats: LiveStats::default(),
         }
@@ -155,10 +183,10 @@ impl Publisher {
             }
         }
         if let Some(d) = &mut self.daq {
-            let (buf, stats) = (&mut self.buf, &mut self.stats);
-            d.decimator.finish(&mut |p| {
-                publish_point(&d.channel, &d.keys, p, buf, stats);
-            });
+            d.finish(&mut self.buf, &mut self.stats);
+        }
+        if let Some(t) = self.twin.as_mut().and_then(|t| t.points.as_mut()) {
+            t.finish(&mut self.buf, &mut self.stats);
         }
         self.stats.skipped_blocks = self
             .daq
@@ -174,6 +202,7 @@ impl Publisher {
                 self.latch.set(&self.buf);
                 let ch = Arc::clone(&self.channels.layout);
                 self.send(&ch, 0.0);
+                self.sample_rate = Some(layout.sample_rate);
                 self.daq = self.daq_topic(&layout);
             }
             Record::Block(block) => {
@@ -188,22 +217,100 @@ impl Publisher {
             Record::Event(e) => self.publish(TopicOf::Events, e.time, &e),
             Record::Status(s) => self.publish(TopicOf::Status, s.block_time, &s),
             Record::Step(time, s) => self.publish(TopicOf::Steps, time, &s),
+            Record::TwinBlock(b) => self.twin_block(&b),
+            Record::TwinStatus(time, s) => self.publish(TopicOf::TwinStatus, time, &s),
+            Record::TwinStep(time, s) => self.publish(TopicOf::TwinSteps, time, &s),
             Record::Close => {}
         }
     }
 
-    fn channel(&self, which: TopicOf) -> &Arc<RawChannel> {
-        match which {
+    /// The twin's topics, made on first use.
+    fn twin_topics(&mut self) -> Option<&mut TwinTopics> {
+        if self.twin.is_none() {
+            let made =
+                json_channel::<TwinStatus>(&self.ctx, TOPIC_TWIN_STATUS).and_then(|status| {
+                    Ok(TwinTopics {
+                        status,
+                        steps: json_channel::<TwinStepMessage>(&self.ctx, TOPIC_TWIN_STEPS)?,
+                        points: None,
+                        values: Vec::new(),
+                    })
+                });
+            match made {
+                Ok(t) => self.twin = Some(t),
+                Err(e) => tracing::warn!("live view: cannot create the twin's topics: {e}"),
+            }
+        }
+        self.twin.as_mut()
+    }
+
+    /// Decimates a twin block onto `/live/twin` (bins aligned with `/live/daq`'s).
+    fn twin_block(&mut self, b: &TwinBlock) {
+        let (Some(rate), pps) = (self.sample_rate, self.points_per_second) else {
+            return; // no layout yet: nothing to put the twin beside
+        };
+        let ctx = Arc::clone(&self.ctx);
+        self.twin_topics();
+        let Some(t) = self.twin.as_mut() else {
+            return;
+        };
+        if t.points.is_none() {
+            let bin = bin_samples(rate, pps);
+            let keys: Vec<String> = LIVE_TWIN_CHANNELS.iter().map(|c| c.0.to_string()).collect();
+            match raw_channel(
+                &ctx,
+                TOPIC_LIVE_TWIN,
+                LIVE_TWIN_SCHEMA,
+                twin_point_schema(rate, bin),
+            ) {
+                Ok(channel) => {
+                    t.points = Some(PointTopic {
+                        channel,
+                        decimator: MinMaxDecimator::with_scales(rate, vec![1.0; keys.len()], bin),
+                        keys,
+                    })
+                }
+                Err(e) => {
+                    tracing::warn!("live view: cannot create {TOPIC_LIVE_TWIN}: {e}");
+                    return;
+                }
+            }
+        }
+        let Some(points) = t.points.as_mut() else {
+            return;
+        };
+        // LIVE_TWIN_CHANNELS order: the four sensors, contact, normal and tangential force.
+        t.values.clear();
+        t.values.extend_from_slice(&b.velocity);
+        t.values
+            .extend(b.contact.iter().map(|&c| if c { 1.0 } else { 0.0 }));
+        t.values.extend_from_slice(&b.normal_force);
+        t.values.extend_from_slice(&b.tangential_force);
+        let (buf, stats) = (&mut self.buf, &mut self.stats);
+        let (channel, keys) = (&points.channel, &points.keys);
+        points
+            .decimator
+            .push_values(b.first_sample, b.len, &t.values, &mut |p| {
+                publish_point(channel, keys, p, buf, stats);
+            });
+    }
+
+    fn channel(&mut self, which: TopicOf) -> Option<&Arc<RawChannel>> {
+        Some(match which {
             TopicOf::Control => &self.channels.control,
             TopicOf::Events => &self.channels.events,
             TopicOf::Status => &self.channels.status,
             TopicOf::Steps => &self.channels.steps,
-        }
+            TopicOf::TwinStatus => &self.twin_topics()?.status,
+            TopicOf::TwinSteps => &self.twin_topics()?.steps,
+        })
     }
 
     /// Serialises and sends `value` if some client subscribed to the topic.
     fn publish<T: Serialize>(&mut self, which: TopicOf, time: f64, value: &T) {
-        let ch = Arc::clone(self.channel(which));
+        let Some(ch) = self.channel(which).map(Arc::clone) else {
+            return;
+        };
         if !ch.has_sinks() {
             return;
         }
@@ -228,7 +335,7 @@ impl Publisher {
         *self.stats.sent.entry(ch.topic().to_string()).or_insert(0) += 1;
     }
 
-    fn daq_topic(&self, layout: &DaqLayout) -> Option<DaqTopic> {
+    fn daq_topic(&self, layout: &DaqLayout) -> Option<PointTopic> {
         let keys: Vec<String> = layout
             .channels
             .iter()
@@ -243,7 +350,7 @@ impl Publisher {
         let bin = bin_samples(layout.sample_rate, self.points_per_second);
         let schema = daq_point_schema(layout, &keys, bin);
         match raw_channel(&self.ctx, TOPIC_LIVE_DAQ, LIVE_DAQ_SCHEMA, schema) {
-            Ok(channel) => Some(DaqTopic {
+            Ok(channel) => Some(PointTopic {
                 channel,
                 keys,
                 decimator: MinMaxDecimator::new(layout, bin),
@@ -262,6 +369,8 @@ enum TopicOf {
     Events,
     Status,
     Steps,
+    TwinStatus,
+    TwinSteps,
 }
 
 /// Serialises a decimated point into `buf` and sends it if a client subscribed.
@@ -281,7 +390,7 @@ fn publish_point(
         return;
     }
     channel.log_with_meta(buf, PartialMetadata::with_log_time(log_time_ns(point.time)));
-    *stats.sent.entry(TOPIC_LIVE_DAQ.to_string()).or_insert(0) += 1;
+    *stats.sent.entry(channel.topic().to_string()).or_insert(0) += 1;
 }
 
 /// A decimated point as JSON: `{"time", "first_sample", "samples", CHANNEL: {"min", "max",
@@ -319,9 +428,67 @@ impl Serialize for PointJson<'_> {
     }
 }
 
+/// One channel of a decimated topic's schema: its key, what it is, its unit.
+struct PointChannel {
+    key: String,
+    what: String,
+    unit: &'static str,
+}
+
 /// The JSON Schema of a decimated point of `layout`: every channel a property, so the Foxglove
 /// app completes `/live/daq.upper_tip.max`.
 fn daq_point_schema(layout: &DaqLayout, keys: &[String], bin: usize) -> Vec<u8> {
+    let channels: Vec<PointChannel> = layout
+        .channels
+        .iter()
+        .zip(keys)
+        .map(|(c, key)| {
+            let kind = serde_json::to_value(c.kind)
+                .ok()
+                .and_then(|v| v.as_str().map(str::to_string))
+                .unwrap_or_default();
+            PointChannel {
+                key: key.clone(),
+                what: format!("DAQ channel {} ({kind})", c.name),
+                unit: c.kind.unit(),
+            }
+        })
+        .collect();
+    point_schema(
+        LIVE_DAQ_SCHEMA,
+        &format!(
+            "DAQ samples decimated for plotting: bins of {bin} samples at {} Hz, every \
+             channel's min, max and mean in physical units",
+            layout.sample_rate
+        ),
+        &channels,
+        bin,
+    )
+}
+
+/// The JSON Schema of a decimated point of the twin's prediction ([`LIVE_TWIN_CHANNELS`]).
+fn twin_point_schema(sample_rate: f64, bin: usize) -> Vec<u8> {
+    let channels: Vec<PointChannel> = LIVE_TWIN_CHANNELS
+        .iter()
+        .map(|&(key, what, unit)| PointChannel {
+            key: key.to_string(),
+            what: format!("twin: {what}"),
+            unit,
+        })
+        .collect();
+    point_schema(
+        LIVE_TWIN_SCHEMA,
+        &format!(
+            "The live twin's prediction decimated for plotting, in the same bins as {}: bins \
+             of {bin} samples at {sample_rate} Hz, every channel's min, max and mean",
+            TOPIC_LIVE_DAQ
+        ),
+        &channels,
+        bin,
+    )
+}
+
+fn point_schema(title: &str, description: &str, channels: &[PointChannel], bin: usize) -> Vec<u8> {
     let number = |d: &str| serde_json::json!({"type": "number", "description": d});
     let mut properties = serde_json::Map::new();
     properties.insert(
@@ -339,17 +506,13 @@ fn daq_point_schema(layout: &DaqLayout, keys: &[String], bin: usize) -> Vec<u8> 
             "Samples in the bin: {bin}, fewer when a gap in the stream or the end of the \
              session cut the bin short")}),
     );
-    for (c, key) in layout.channels.iter().zip(keys) {
-        let unit = c.kind.unit();
-        let kind = serde_json::to_value(c.kind)
-            .ok()
-            .and_then(|v| v.as_str().map(str::to_string))
-            .unwrap_or_default();
+    for c in channels {
+        let unit = c.unit;
         properties.insert(
-            key.clone(),
+            c.key.clone(),
             serde_json::json!({
                 "type": "object",
-                "description": format!("DAQ channel {} ({kind}) over the bin, {unit}", c.name),
+                "description": format!("{} over the bin, {unit}", c.what),
                 "properties": {
                     "min": number(&format!("Smallest sample, {unit}")),
                     "max": number(&format!("Largest sample, {unit}")),
@@ -363,14 +526,12 @@ fn daq_point_schema(layout: &DaqLayout, keys: &[String], bin: usize) -> Vec<u8> 
     let required: Vec<&str> = POINT_KEYS
         .iter()
         .copied()
-        .chain(keys.iter().map(String::as_str))
+        .chain(channels.iter().map(|c| c.key.as_str()))
         .collect();
     let schema = serde_json::json!({
         "$schema": "https://json-schema.org/draft/2020-12/schema",
-        "title": LIVE_DAQ_SCHEMA,
-        "description": format!(
-            "DAQ samples decimated for plotting: bins of {bin} samples at {} Hz, every \
-             channel's min, max and mean in physical units", layout.sample_rate),
+        "title": title,
+        "description": description,
         "type": "object",
         "properties": properties,
         "required": required,

@@ -11,6 +11,7 @@ use std::thread::JoinHandle;
 use crate::control::{ControlState, SessionEvent, SessionRecorder, StepInfo, StepSummary};
 use crate::log::recorder::{StatusMessage, StepMessage};
 use crate::rig::{DaqBlock, DaqLayout, RigStatus};
+use crate::twin::{TwinBlock, TwinStatus, TwinStepMessage};
 
 use super::publisher::{Channels, LayoutLatch, Publisher};
 use super::{LiveError, LiveOptions};
@@ -24,6 +25,12 @@ pub(super) enum Record {
     Status(StatusMessage),
     /// A finished step and its log time (end of its record window), s.
     Step(f64, Box<StepMessage>),
+    /// The live twin's prediction for one DAQ block.
+    TwinBlock(Box<TwinBlock>),
+    /// The live twin's status at a rig time, s.
+    TwinStatus(f64, Box<TwinStatus>),
+    /// The live twin's comparison of a step and its log time (end of its record window), s.
+    TwinStep(f64, Box<TwinStepMessage>),
     /// Publish what is queued, close the open decimation bin and stop.
     Close,
 }
@@ -59,7 +66,8 @@ impl LiveStats {
 
 /// The session side of the live view: queues every record for the publisher thread. Never
 /// blocks and never fails: the live view must not stop a session. Records that do not fit the
-/// queue are dropped and counted.
+/// queue are dropped and counted. Clones feed the same view (the live twin holds one).
+#[derive(Clone)]
 pub struct LiveRecorder {
     tx: SyncSender<Record>,
     shared: Arc<Shared>,
@@ -86,6 +94,22 @@ impl LiveRecorder {
             // The publisher stopped (it panicked): nothing to show, the session goes on.
             Err(TrySendError::Disconnected(_)) => {}
         }
+    }
+
+    /// The live twin's prediction for a block (published decimated on `/live/twin`).
+    pub fn twin_block(&self, block: &TwinBlock) {
+        self.offer(|| Record::TwinBlock(Box::new(block.clone())));
+    }
+
+    /// The live twin's status at rig time `time` (s), published on `/twin/status`.
+    pub fn twin_status(&self, time: f64, status: &TwinStatus) {
+        self.offer(|| Record::TwinStatus(time, Box::new(status.clone())));
+    }
+
+    /// The live twin's comparison of a step, logged at rig time `time` (s, the end of its record
+    /// window), published on `/twin/steps`.
+    pub fn twin_step(&self, time: f64, step: &TwinStepMessage) {
+        self.offer(|| Record::TwinStep(time, Box::new(step.clone())));
     }
 }
 

@@ -17,8 +17,19 @@ use crate::report::draw::{
 use crate::report::render::{check_output, err, render, Figure, Format};
 use crate::report::{FigureOptions, ReportError};
 
+/// Line style of a history: the twin dashed (over the measurement it is compared with), the
+/// rest solid.
+fn history_kind(h: &TimeHistory) -> LineKind {
+    if h.source == Source::Twin {
+        LineKind::Dashed
+    } else {
+        LineKind::Solid
+    }
+}
+
 /// Colour of each history: fixed per source when every history has its own source
-/// (measurement black, simulation blue, twin orange), else the palette by position.
+/// (measurement black, simulation blue, twin orange), else the palette by name, so a test's
+/// measurement and twin share a colour (the twin dashed).
 fn history_colors(h: &[TimeHistory]) -> Vec<RGBColor> {
     let distinct = h
         .iter()
@@ -34,7 +45,13 @@ fn history_colors(h: &[TimeHistory]) -> Vec<RGBColor> {
                     Source::Twin => palette(3),
                 }
             } else {
-                palette(i)
+                let first = h.iter().position(|y| y.name == x.name).unwrap_or(i);
+                let names = h[..first]
+                    .iter()
+                    .enumerate()
+                    .filter(|(j, y)| h[..*j].iter().all(|z| z.name != y.name))
+                    .count();
+                palette(names)
             }
         })
         .collect()
@@ -201,7 +218,7 @@ pub fn time_histories(
                 .map(|(i, r)| Series {
                     runs: r.clone(),
                     color: colors[i],
-                    kind: LineKind::Solid,
+                    kind: history_kind(&histories[i]),
                     width: 1,
                 })
                 .collect(),
@@ -228,7 +245,7 @@ pub fn time_histories(
         .map(|(i, h)| LegendEntry {
             label: format!("{} ({})", h.name, h.source),
             color: colors[i],
-            kind: LineKind::Solid,
+            kind: history_kind(h),
         })
         .collect();
     let fig = Stack {
@@ -437,7 +454,7 @@ pub fn contact_activity(
                 .map(|(i, r)| Series {
                     runs: r.clone(),
                     color: colors[i],
-                    kind: LineKind::Solid,
+                    kind: history_kind(&histories[i]),
                     width: 1,
                 })
                 .collect(),
@@ -452,7 +469,7 @@ pub fn contact_activity(
         .map(|(i, h)| LegendEntry {
             label: format!("{} ({})", h.name, h.source),
             color: colors[i],
-            kind: LineKind::Solid,
+            kind: history_kind(h),
         })
         .collect();
     let fig = Stack {

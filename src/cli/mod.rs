@@ -5,6 +5,8 @@
 
 mod demo;
 mod fe;
+mod firmware_sim;
+mod hw;
 mod progress;
 mod report;
 mod rom;
@@ -40,8 +42,11 @@ pub enum Command {
     Fe(fe::FeCommand),
     /// Virtual stepped sine of a test plan on the ROM, or a convergence study.
     Simulate(simulate::SimulateArgs),
-    /// A stepped-sine session on a rig (the simulated rig: --backend sim), logged to MCAP.
+    /// A stepped-sine session on a rig (the simulated rig: --backend sim; the rig's
+    /// electronics over CAN and serial links: --backend hw), logged to MCAP.
     Run(run::RunArgs),
+    /// The rig's electronics, simulated: the other end of --backend hw's CAN and serial links.
+    FirmwareSim(firmware_sim::FirmwareSimArgs),
     /// Recompute a recorded session's summary from its raw DAQ blocks.
     Replay(run::ReplayArgs),
     /// The paper-style figures of a recorded session.
@@ -64,7 +69,10 @@ fn default_sigpipe() {
 /// Entry point of the binary.
 pub fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
-    if !matches!(cli.command, Command::Run(_) | Command::Demo(_)) {
+    if !matches!(
+        cli.command,
+        Command::Run(_) | Command::Demo(_) | Command::FirmwareSim(_)
+    ) {
         default_sigpipe();
     }
     let filter = tracing_subscriber::EnvFilter::try_new(&cli.log)
@@ -79,6 +87,7 @@ pub fn main() -> std::process::ExitCode {
         Command::Fe(c) => fe::run(c),
         Command::Simulate(a) => simulate::run(a),
         Command::Run(a) => run::run(a),
+        Command::FirmwareSim(a) => firmware_sim::run(a),
         Command::Replay(a) => run::replay(a),
         Command::Report(a) => report::run(a),
     };

@@ -1,5 +1,5 @@
-//! `rigtwin run`: a stepped-sine session on a rig backend (the simulated rig today), logged to
-//! MCAP, with a JSON summary and optionally served live to the Foxglove app (`--foxglove`);
+//! `rigtwin run`: a stepped-sine session on a rig backend (the simulated rig, or the hardware
+//! over CAN and serial links), logged to MCAP, with a JSON summary and optionally served live to the Foxglove app (`--foxglove`);
 //! `rigtwin replay`: the summary recomputed from a recording.
 
 use anyhow::{bail, Context};
@@ -16,8 +16,10 @@ use crate::log::live::{LiveOptions, LiveStats, LiveView};
 use crate::log::recorder::McapRecorder;
 use crate::log::{Attachment, LogOptions, SessionLog};
 use crate::plan::Plan;
+use crate::rig::hw::{HwBackend, HwOptions};
 use crate::rig::sim::{InjectedFault, SimRig};
 use crate::rig::sim_backend::SimBackend;
+use crate::rig::{LinkCounters, RigBackend};
 use crate::rom::Rom;
 
 /// Which rig to run on.
@@ -25,6 +27,67 @@ use crate::rom::Rom;
 pub enum BackendArg {
     /// The simulated rig (truth model + shaker + sensors + DAQ).
     Sim,
+    /// The rig's electronics over CAN FD (--can) and serial links (--ldv, --amp), as
+    /// firmware-interfaces/ documents; `rigtwin firmware-sim` stands in for them.
+    Hw,
+}
+
+/// The session's backend: control code is generic, this picks one at run time.
+#[derive(Debug)]
+enum Backend {
+    Sim(Box<SimBackend>),
+    Hw(Box<HwBackend>),
+}
+
+impl RigBackend for Backend {
+    fn layout(&self) -> &crate::rig::DaqLayout {
+        match self {
+            Backend::Sim(b) => b.layout(),
+            Backend::Hw(b) => b.layout(),
+        }
+    }
+    async fn start(&mut self) -> Result<(), crate::rig::RigError> {
+        match self {
+            Backend::Sim(b) => b.start().await,
+            Backend::Hw(b) => b.start().await,
+        }
+    }
+    async fn set_drive(
+        &mut self,
+        command: crate::rig::DriveCommand,
+    ) -> Result<(), crate::rig::RigError> {
+        match self {
+            Backend::Sim(b) => b.set_drive(command).await,
+            Backend::Hw(b) => b.set_drive(command).await,
+        }
+    }
+    async fn next_block(&mut self) -> Result<Option<crate::rig::DaqBlock>, crate::rig::RigError> {
+        match self {
+            Backend::Sim(b) => b.next_block().await,
+            Backend::Hw(b) => b.next_block().await,
+        }
+    }
+    async fn begin_test(
+        &mut self,
+        test: &crate::plan::TestSpec,
+    ) -> Result<(), crate::rig::RigError> {
+        match self {
+            Backend::Sim(b) => b.begin_test(test).await,
+            Backend::Hw(b) => b.begin_test(test).await,
+        }
+    }
+    fn status(&self) -> crate::rig::RigStatus {
+        match self {
+            Backend::Sim(b) => b.status(),
+            Backend::Hw(b) => b.status(),
+        }
+    }
+    async fn stop(&mut self) -> Result<(), crate::rig::RigError> {
+        match self {
+            Backend::Sim(b) => b.stop().await,
+            Backend::Hw(b) => b.stop().await,
+        }
+    }
 }
 
 /// `rigtwin run`
@@ -38,6 +101,9 @@ pub struct RunArgs {
     /// Rig backend.
     #[arg(long, value_enum, default_value = "sim")]
     pub backend: BackendArg,
+    /// The hardware links (with --backend hw).
+    #[command(flatten)]
+    pub hw: super::hw::HwArgs,
     /// Session log (MCAP).
     #[arg(long)]
     pub out: PathBuf,
@@ -164,6 +230,8 @@ pub(crate) struct RunOutcome {
     pub live: Option<LiveStats>,
     /// What the twin did (with `--twin`).
     pub twin: Option<crate::twin::TwinOutcome>,
+    /// The hardware links' counters (with `--backend hw`).
+    pub link: Option<LinkCounters>,
 }
 
 /// A session on the simulated rig.
@@ -215,6 +283,15 @@ fn start_live_view(addr: SocketAddr) -> anyhow::Result<(crate::log::live::LiveRe
 
 /// Runs the plan on the simulated rig, logging to the session's file.
 pub(crate) fn run_sim_session(session: &SimSession<'_>) -> anyhow::Result<RunOutcome> {
+    run_session_on(session, None)
+}
+
+/// Runs the plan on the simulated rig, or on the hardware with `hw`, logging to the
+/// session's file.
+pub(crate) fn run_session_on(
+    session: &SimSession<'_>,
+    hw: Option<&HwOptions>,
+) -> anyhow::Result<RunOutcome> {
     let SimSession {
         cfg,
         config_text,
@@ -229,14 +306,38 @@ pub(crate) fn run_sim_session(session: &SimSession<'_>) -> anyhow::Result<RunOut
     } = *session;
     // First, so that a port in use fails before the ROMs are built.
     let (live_recorder, live_view) = foxglove.map(start_live_view).transpose()?.unzip();
-    let (twin, truth, twin_path) = roms(cfg, rebuild, quiet)?;
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .context("starting the async runtime")?;
     let l = cfg.rig.beam_length;
     let spec = cfg.sim_rig_spec();
-    let rig = SimRig::new(&truth, &spec, cfg.contact.clearance).context("simulated rig")?;
-    let mut backend = SimBackend::new(rig, l, realtime);
-    for f in inject {
-        backend.inject(f.clone());
-    }
+    let (twin, truth, twin_path, mut backend) = match hw {
+        None => {
+            let (twin, truth, twin_path) = roms(cfg, rebuild, quiet)?;
+            let rig = SimRig::new(&truth, &spec, cfg.contact.clearance).context("simulated rig")?;
+            let mut backend = SimBackend::new(rig, l, realtime);
+            for f in inject {
+                backend.inject(f.clone());
+            }
+            (
+                twin,
+                Some(truth),
+                twin_path,
+                Backend::Sim(Box::new(backend)),
+            )
+        }
+        Some(h) => {
+            let (twin, twin_path, _) = super::demo::cached_rom(cfg, rebuild, quiet)?;
+            // The rig description's channel map: every block header is checked against it.
+            let layout = crate::rig::sim::daq::layout(&spec.daq);
+            let backend = runtime
+                .block_on(HwBackend::connect(layout, h.clone()))
+                .context("connecting to the rig (--backend hw)")?;
+            (twin, None, twin_path, Backend::Hw(Box::new(backend)))
+        }
+    };
     let setup = SessionSetup {
         plan: plan.clone(),
         control: cfg.control.clone(),
@@ -245,7 +346,15 @@ pub(crate) fn run_sim_session(session: &SimSession<'_>) -> anyhow::Result<RunOut
         beam_length: l,
     };
     let mut session_meta = BTreeMap::new();
-    session_meta.insert("backend".to_string(), "sim".to_string());
+    session_meta.insert(
+        "backend".to_string(),
+        if hw.is_some() { "hw" } else { "sim" }.to_string(),
+    );
+    if let Some(h) = hw {
+        session_meta.insert("can".to_string(), format!("{:?}", h.can));
+        session_meta.insert("ldv".to_string(), h.ldv.clone());
+        session_meta.insert("amp".to_string(), h.amp.clone());
+    }
     session_meta.insert("realtime".to_string(), realtime.to_string());
     session_meta.insert("plan".to_string(), plan.name.clone().unwrap_or_default());
     session_meta.insert("plan_source".to_string(), plan.source.clone());
@@ -269,11 +378,13 @@ pub(crate) fn run_sim_session(session: &SimSession<'_>) -> anyhow::Result<RunOut
     rom_meta.insert("config_hash".to_string(), twin.meta.config_hash.clone());
     rom_meta.insert("modes".to_string(), twin.n_modes().to_string());
     rom_meta.insert("pairs".to_string(), twin.n_pairs().to_string());
-    rom_meta.insert(
-        "truth_config_hash".to_string(),
-        truth.meta.config_hash.clone(),
-    );
-    rom_meta.insert("truth_modes".to_string(), truth.n_modes().to_string());
+    if let Some(truth) = &truth {
+        rom_meta.insert(
+            "truth_config_hash".to_string(),
+            truth.meta.config_hash.clone(),
+        );
+        rom_meta.insert("truth_modes".to_string(), truth.n_modes().to_string());
+    }
     let mut plan_text = String::new();
     if let Ok(t) = std::fs::read_to_string(&plan.source) {
         plan_text = t;
@@ -298,7 +409,7 @@ pub(crate) fn run_sim_session(session: &SimSession<'_>) -> anyhow::Result<RunOut
     )
     .with_context(|| format!("creating the session log {}", out.display()))?;
     let twin_recorder = if with_twin {
-        let layout = crate::rig::RigBackend::layout(&backend).clone();
+        let layout = backend.layout().clone();
         let engine = crate::twin::Twin::new(&twin, &cfg.twin, &layout, cfg.contact.clearance)
             .context("the twin")?;
         let (task, rx) = crate::twin::TwinTask::spawn(engine, &cfg.twin).context("the twin")?;
@@ -327,11 +438,6 @@ pub(crate) fn run_sim_session(session: &SimSession<'_>) -> anyhow::Result<RunOut
     );
     bar.enable_steady_tick(std::time::Duration::from_millis(150));
     let t0 = Instant::now();
-    let runtime = tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(2)
-        .enable_all()
-        .build()
-        .context("starting the async runtime")?;
     let summary = runtime.block_on(async {
         let shutdown = async {
             let _ = tokio::signal::ctrl_c().await;
@@ -348,9 +454,10 @@ pub(crate) fn run_sim_session(session: &SimSession<'_>) -> anyhow::Result<RunOut
             ));
         };
         let s = run_session(&mut backend, &setup, &mut recorder, shutdown, &mut progress).await?;
-        anyhow::Ok((s, crate::rig::RigBackend::status(&backend).overruns))
+        let status = backend.status();
+        anyhow::Ok((s, status.overruns, status.link))
     })?;
-    let (mut summary, overruns) = summary;
+    let (mut summary, overruns, link) = summary;
     bar.finish_and_clear();
     let twin_outcome = recorder.1.take().map(crate::twin::TwinRecorder::finish);
     if let Some(t) = &twin_outcome {
@@ -368,6 +475,7 @@ pub(crate) fn run_sim_session(session: &SimSession<'_>) -> anyhow::Result<RunOut
         overruns,
         live,
         twin: twin_outcome,
+        link,
     })
 }
 
@@ -407,6 +515,27 @@ pub(crate) fn print_session(o: &RunOutcome) {
         for e in &t.errors {
             println!("twin error: {e}");
         }
+    }
+    if let Some(c) = &o.link {
+        println!(
+            "links: {} frames received, {} sent, {} malformed, {} sequence gaps, {} reordered, \
+             {} duplicates, {} CRC errors, {} heartbeat misses; serial: {} timeouts, {} \
+             checksum errors, {} garbage{}",
+            c.frames_received,
+            c.frames_sent,
+            c.malformed,
+            c.sequence_gaps,
+            c.reordered,
+            c.duplicates,
+            c.crc_errors,
+            c.heartbeat_misses,
+            c.serial_timeouts,
+            c.serial_checksum_errors,
+            c.serial_garbage,
+            c.last_error
+                .as_ref()
+                .map_or(String::new(), |e| format!("; last problem: {e}"))
+        );
     }
     print_summary(&o.summary);
 }
@@ -451,9 +580,27 @@ fn print_summary(s: &SessionSummary) {
 }
 
 pub(crate) fn run(a: RunArgs) -> anyhow::Result<()> {
-    if a.backend != BackendArg::Sim {
-        bail!("only --backend sim is available");
-    }
+    let hw = match a.backend {
+        BackendArg::Sim => {
+            if a.hw.can.is_some()
+                || a.hw.ldv.is_some()
+                || a.hw.amp.is_some()
+                || a.hw.can_log.is_some()
+            {
+                bail!("--can, --ldv, --amp and --can-log are for --backend hw");
+            }
+            None
+        }
+        BackendArg::Hw => {
+            if !a.inject.is_empty() || a.realtime {
+                bail!(
+                    "--inject and --realtime are for --backend sim (the hardware runs in real \
+                     time; inject faults into `rigtwin firmware-sim`)"
+                );
+            }
+            Some((a.hw.can.clone(), a.hw.ldv.clone(), a.hw.amp.clone()))
+        }
+    };
     let (cfg, text) = match &a.config {
         Some(p) => {
             let text = std::fs::read_to_string(p)
@@ -480,18 +627,32 @@ pub(crate) fn run(a: RunArgs) -> anyhow::Result<()> {
                 .with_context(|| format!("--inject {s}: not a fault description"))
         })
         .collect::<anyhow::Result<_>>()?;
-    let o = run_sim_session(&SimSession {
-        cfg: &cfg,
-        config_text: &text,
-        plan: &plan,
-        out: &a.out,
-        realtime: a.realtime,
-        inject: &inject,
-        rebuild: a.rebuild,
-        quiet: a.quiet,
-        foxglove: a.foxglove,
-        twin: a.twin,
-    })?;
+    let hw = match hw {
+        None => None,
+        Some((Some(can), Some(ldv), Some(amp))) => {
+            let mut o = HwOptions::new(can, ldv, amp, cfg.shaker.amplifier_gain);
+            o.can_log = a.hw.can_log.clone();
+            o.vibrometer_filter_hz =
+                (cfg.daq.anti_alias_cutoff * cfg.daq.sample_rate).round() as u32;
+            Some(o)
+        }
+        Some(_) => bail!("--backend hw needs --can, --ldv and --amp"),
+    };
+    let o = run_session_on(
+        &SimSession {
+            cfg: &cfg,
+            config_text: &text,
+            plan: &plan,
+            out: &a.out,
+            realtime: a.realtime,
+            inject: &inject,
+            rebuild: a.rebuild,
+            quiet: a.quiet,
+            foxglove: a.foxglove,
+            twin: a.twin,
+        },
+        hw.as_ref(),
+    )?;
     print_session(&o);
     println!("log: {}", a.out.display());
     if let Some(j) = &a.json {

@@ -473,6 +473,8 @@ pub async fn run_session<B: RigBackend, R: SessionRecorder>(
         tokio::time::sleep(Duration::from_secs_f64(ramp)).await;
     }
     let _ = backend.stop().await;
+    // The final status (faults, link counters) is always in the log, also after an abort.
+    let _ = run.recorder.status(run.last_block_end, &backend.status());
     let end = SessionEvent {
         time: run.last_block_end,
         sample: (run.last_block_end * layout.sample_rate).round() as u64,

@@ -192,8 +192,23 @@ pub enum RigFault {
         channel: String,
     },
     /// The backend reports a broken link or device.
-    #[error("{0}")]
-    Device(String),
+    // NOTE: a struct variant: serde's internally tagged enums cannot serialize a newtype
+    // variant holding a string (as `Device(String)` was, which made every abort and status
+    // with a device fault fail to log).
+    #[error("{message}")]
+    Device {
+        /// What happened.
+        message: String,
+    },
+}
+
+impl RigFault {
+    /// A device fault with this message.
+    pub fn device(message: impl Into<String>) -> RigFault {
+        RigFault::Device {
+            message: message.into(),
+        }
+    }
 }
 
 /// Backend status.
@@ -209,4 +224,64 @@ pub struct RigStatus {
     pub faults: Vec<RigFault>,
     /// Blocks delivered later than the wall clock allowed (real-time pacing only).
     pub overruns: u64,
+    /// Link counters of a hardware backend (CAN and serial links); absent for the simulated
+    /// rig and in logs written before the hardware backend existed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub link: Option<LinkCounters>,
+}
+
+/// What a hardware backend's links saw since the start: counted, never silently dropped.
+/// Logged with the rig status on `/rig/status`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
+pub struct LinkCounters {
+    /// CAN frames received (all messages, well-formed or not).
+    pub frames_received: u64,
+    /// CAN frames sent.
+    pub frames_sent: u64,
+    /// CAN frames that did not decode (unknown id, wrong length, bad field, wrong direction,
+    /// sample frames of a block without header).
+    pub malformed: u64,
+    /// DAQ blocks lost (incomplete when a later block was due, or missing headers).
+    pub sequence_gaps: u64,
+    /// Frames that arrived after a later frame of the same or a later block.
+    pub reordered: u64,
+    /// Frames received twice.
+    pub duplicates: u64,
+    /// DAQ blocks whose payload CRC-32 did not match the header's (dropped).
+    pub crc_errors: u64,
+    /// Device heartbeats that did not arrive in time.
+    pub heartbeat_misses: u64,
+    /// Serial requests without an answer in time (both ports).
+    pub serial_timeouts: u64,
+    /// Serial lines with a wrong checksum.
+    pub serial_checksum_errors: u64,
+    /// Serial input that is not a protocol line (bad bytes, overlong, no checksum, bad reply).
+    pub serial_garbage: u64,
+    /// Last time-sync round trip, s (None before the first).
+    pub round_trip_s: Option<f64>,
+    /// Device clock minus host clock from the last time sync, s.
+    pub clock_offset_s: Option<f64>,
+    /// The last link problem, as text.
+    pub last_error: Option<String>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_fault_serializes_and_reads_back() {
+        for f in [
+            RigFault::DriveSaturated { limit_v: 1.5 },
+            RigFault::OverRange {
+                channel: "vibrometer".into(),
+            },
+            RigFault::Device {
+                message: "link gone".into(),
+            },
+        ] {
+            let j = serde_json::to_string(&f).unwrap();
+            assert_eq!(serde_json::from_str::<RigFault>(&j).unwrap(), f, "{j}");
+        }
+    }
 }

@@ -1,11 +1,12 @@
-//! The rig: the [`RigBackend`] trait every backend implements (the simulated rig here, the
-//! CAN/serial hardware later) and the data it streams ([`daq`]).
+//! The rig: the [`RigBackend`] trait every backend implements (the simulated rig, [`sim`], and
+//! the CAN/serial hardware, [`hw`]) and the data it streams ([`daq`]).
 //!
 //! Control code is generic over the backend and never knows which one it talks to. A backend
 //! delivers DAQ blocks with gap-free sequence numbers at a fixed sample rate, applies drive
 //! commands from the next block on, and reports faults in its status.
 
 pub mod daq;
+pub mod hw;
 pub mod sim;
 pub mod sim_backend;
 
@@ -14,7 +15,8 @@ use std::future::Future;
 use crate::plan::TestSpec;
 
 pub use daq::{
-    ChannelKind, ChannelSpec, DaqBlock, DaqLayout, DriveCommand, DriveState, RigFault, RigStatus,
+    ChannelKind, ChannelSpec, DaqBlock, DaqLayout, DriveCommand, DriveState, LinkCounters,
+    RigFault, RigStatus,
 };
 
 /// Errors of a backend.

@@ -505,7 +505,9 @@ impl SimRig {
     fn latch_block_faults(&mut self) {
         if !self.failure_reported {
             if let Some(msg) = self.truth.failure() {
-                self.faults.push(RigFault::Device(msg.to_string()));
+                self.faults.push(RigFault::Device {
+                    message: msg.to_string(),
+                });
                 self.failure_reported = true;
             }
         }

@@ -275,7 +275,7 @@ fn a_non_finite_truth_is_reported_not_a_panic() {
     assert!(rig.truth().failed);
     assert_eq!(rig.faults().len(), 1, "{:?}", rig.faults());
     match &rig.faults()[0] {
-        RigFault::Device(msg) => assert!(msg.contains("non-finite"), "{msg}"),
+        RigFault::Device { message: msg } => assert!(msg.contains("non-finite"), "{msg}"),
         other => panic!("{other:?}"),
     }
 }

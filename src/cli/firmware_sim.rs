@@ -1,0 +1,119 @@
+//! `rigtwin firmware-sim`: the rig's electronics, simulated — the other end of `rigtwin run
+//! --backend hw`'s links (CAN FD over a UDP tunnel, two pseudo-terminals), driven by the
+//! simulated rig and speaking exactly the protocols of `firmware-interfaces/`. Prints one JSON
+//! line with where to connect, then one per finished session.
+
+use anyhow::Context;
+use clap::{Args, ValueEnum};
+use std::io::Write;
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::time::Duration;
+
+use crate::config::RigConfig;
+use crate::rig::hw::firmware_sim::{FirmwareOptions, FirmwareSim, Inject, Pace};
+use crate::rig::sim::SimRig;
+
+/// How the device paces its DAQ blocks.
+#[derive(Clone, Copy, Debug, ValueEnum, PartialEq, Eq)]
+pub enum PaceArg {
+    /// Like a real DAQ: block k leaves at the wall time of its last sample.
+    Realtime,
+    /// As fast as it computes, at most three blocks ahead of the host (HOST_HEARTBEAT
+    /// ConsumedSeq): for tests.
+    Virtual,
+}
+
+/// `rigtwin firmware-sim`
+#[derive(Args, Debug)]
+pub struct FirmwareSimArgs {
+    /// Rig description (TOML). Without it: the embedded default rig.
+    pub config: Option<PathBuf>,
+    /// UDP address of the CAN tunnel (loopback by default; port 0: a free port).
+    #[arg(long, default_value = "127.0.0.1:0")]
+    pub can_listen: SocketAddr,
+    /// The simulated rig's clearance / beam length (default: the rig description's).
+    #[arg(long)]
+    pub clearance: Option<f64>,
+    /// Block pacing.
+    #[arg(long, value_enum, default_value = "realtime")]
+    pub pace: PaceArg,
+    /// Serve one session, then exit.
+    #[arg(long)]
+    pub once: bool,
+    /// Inject a fault, as JSON (repeatable): the simulated rig's (as `rigtwin run --inject`)
+    /// or a link fault: drop_frame {block, frame}, swap_frames {block}, corrupt_sample
+    /// {block}, bad_frames {block}, interlock {at_s}, serial_garbage {at_s, port: ldv|amp},
+    /// serial_silent {at_s, port}, mute {at_s}, vanish {at_s}.
+    #[arg(long)]
+    pub inject: Vec<String>,
+    /// Rebuild the truth ROM even if cached.
+    #[arg(long)]
+    pub rebuild: bool,
+    /// No progress display while building the ROM.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+pub(crate) fn run(a: FirmwareSimArgs) -> anyhow::Result<()> {
+    let cfg = match &a.config {
+        Some(p) => RigConfig::from_path(p)?,
+        None => RigConfig::default_rig(),
+    };
+    let inject: Vec<Inject> = a
+        .inject
+        .iter()
+        .map(|s| {
+            serde_json::from_str(s)
+                .with_context(|| format!("--inject {s}: not a fault description"))
+        })
+        .collect::<anyhow::Result<_>>()?;
+    let mut truth_cfg = cfg.clone();
+    truth_cfg.reduction = crate::config::ReductionSpec {
+        cutoff_ratio: Some(cfg.truth.cutoff_ratio),
+        cutoff_hz: None,
+        modes: None,
+    };
+    let (truth, _, _) = super::demo::cached_rom(&truth_cfg, a.rebuild, a.quiet)?;
+    let spec = cfg.sim_rig_spec();
+    let clearance_m = a
+        .clearance
+        .map_or(cfg.contact.clearance, |c| c * cfg.rig.beam_length);
+    let rig = SimRig::new(&truth, &spec, clearance_m).context("simulated rig")?;
+    let opts = FirmwareOptions {
+        listen: a.can_listen,
+        pace: match a.pace {
+            PaceArg::Realtime => Pace::Realtime,
+            PaceArg::Virtual => Pace::Virtual,
+        },
+        heartbeat_period: Duration::from_millis(100),
+        heartbeat_timeout: Duration::from_millis(500),
+        ramp_down_s: cfg.safety.ramp_down_s,
+        once: a.once,
+        inject,
+    };
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .context("starting the async runtime")?;
+    runtime.block_on(async {
+        let mut fw = FirmwareSim::bind(
+            rig,
+            opts,
+            spec.shaker.amplifier_gain,
+            spec.shaker.amplifier_limit_v,
+        )
+        .await
+        .map_err(anyhow::Error::msg)?;
+        let line = serde_json::json!({ "firmware_sim": fw.endpoints() });
+        println!("{line}");
+        std::io::stdout().flush()?;
+        fw.run(|r| {
+            println!("{}", serde_json::json!({ "session_end": r }));
+            let _ = std::io::stdout().flush();
+        })
+        .await
+        .map_err(anyhow::Error::msg)
+    })
+}

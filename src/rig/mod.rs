@@ -2,8 +2,10 @@
 //! the CAN/serial hardware, [`hw`]) and the data it streams ([`daq`]).
 //!
 //! Control code is generic over the backend and never knows which one it talks to. A backend
-//! delivers DAQ blocks with gap-free sequence numbers at a fixed sample rate, applies drive
-//! commands from the next block on, and reports faults in its status.
+//! delivers DAQ blocks in order at a fixed sample rate, their sequence numbers +1 per block;
+//! a block lost on the way is passed on as a gap in the sequence numbers (never filled in),
+//! which the session treats as lost data and aborts on. It applies drive commands from the
+//! next block on and reports faults in its status.
 
 pub mod daq;
 pub mod hw;

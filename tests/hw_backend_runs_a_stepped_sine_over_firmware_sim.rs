@@ -13,7 +13,7 @@ mod cli_support;
 mod hw_support;
 
 use cli_support::{json, rigtwin, text};
-use hw_support::{run_hw, FirmwareSim};
+use hw_support::{hw_args, run_hw, FirmwareSim};
 use rigtwin::log::read_session;
 use rigtwin::log::recorder::{TOPIC_DAQ, TOPIC_STATUS};
 
@@ -128,22 +128,13 @@ fn missing_links_and_missing_socketcan_are_clear_errors() {
         "{}",
         text(&o)
     );
-    let o = rigtwin(&[
-        "run",
-        "--plan",
+    let o = rigtwin(&hw_args(
         &plan,
-        "--quiet",
-        "--backend",
-        "hw",
-        "--can",
         "udp:nohost",
-        "--ldv",
         "a",
-        "--amp",
         "b",
-        "--out",
         out.to_str().unwrap(),
-    ]);
+    ));
     assert!(!o.status.success());
     assert!(
         text(&o).contains("udp:nohost") && text(&o).contains("HOST:PORT"),
@@ -152,22 +143,13 @@ fn missing_links_and_missing_socketcan_are_clear_errors() {
     );
     // A serial port that does not exist is named.
     let fw_less = "udp:127.0.0.1:9";
-    let o = rigtwin(&[
-        "run",
-        "--plan",
+    let o = rigtwin(&hw_args(
         &plan,
-        "--quiet",
-        "--backend",
-        "hw",
-        "--can",
         fw_less,
-        "--ldv",
         "/dev/rigtwin-no-such-tty",
-        "--amp",
         "/dev/rigtwin-no-such-tty2",
-        "--out",
         out.to_str().unwrap(),
-    ]);
+    ));
     assert!(!o.status.success());
     assert!(
         text(&o).contains("/dev/rigtwin-no-such-tty"),
@@ -176,22 +158,7 @@ fn missing_links_and_missing_socketcan_are_clear_errors() {
     );
     // SocketCAN: this kernel has no CAN address family; where it has one, can interface
     // `rtwnone0` does not exist.
-    let o = rigtwin(&[
-        "run",
-        "--plan",
-        &plan,
-        "--quiet",
-        "--backend",
-        "hw",
-        "--can",
-        "rtwnone0",
-        "--ldv",
-        "a",
-        "--amp",
-        "b",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let o = rigtwin(&hw_args(&plan, "rtwnone0", "a", "b", out.to_str().unwrap()));
     assert!(!o.status.success());
     let t = text(&o);
     let kernel_has_can = std::process::Command::new("python3")

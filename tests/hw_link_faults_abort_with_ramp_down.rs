@@ -13,7 +13,7 @@ mod cli_support;
 mod hw_support;
 
 use cli_support::{cache, json, text};
-use hw_support::{run_hw, FirmwareSim};
+use hw_support::{hw_args, run_hw, FirmwareSim};
 use rigtwin::control::{ControlState, EventKind, Phase, SessionEvent};
 use rigtwin::log::read_session;
 use rigtwin::log::recorder::{TOPIC_CONTROL, TOPIC_DAQ, TOPIC_EVENTS, TOPIC_STATUS};
@@ -255,22 +255,13 @@ fn the_device_ramps_down_by_itself_when_the_host_dies() {
     let mcap = dir.path().join("session.mcap");
     let mut host = std::process::Command::new(env!("CARGO_BIN_EXE_rigtwin"))
         .env("RIGTWIN_CACHE", cache())
-        .args([
-            "run",
-            "--plan",
+        .args(hw_args(
             &plan,
-            "--quiet",
-            "--backend",
-            "hw",
-            "--can",
             &fw.can,
-            "--ldv",
             &fw.ldv,
-            "--amp",
             &fw.amp,
-            "--out",
-        ])
-        .arg(&mcap)
+            mcap.to_str().unwrap(),
+        ))
         .stdout(std::process::Stdio::null())
         .stderr(std::process::Stdio::null())
         .spawn()

@@ -73,6 +73,33 @@ impl FirmwareSim {
     }
 }
 
+/// The arguments of `rigtwin run --plan PLAN --quiet --backend hw` on the links `can`, `ldv`
+/// and `amp`, logging to `out`.
+pub fn hw_args<'a>(
+    plan: &'a str,
+    can: &'a str,
+    ldv: &'a str,
+    amp: &'a str,
+    out: &'a str,
+) -> Vec<&'a str> {
+    vec![
+        "run",
+        "--plan",
+        plan,
+        "--quiet",
+        "--backend",
+        "hw",
+        "--can",
+        can,
+        "--ldv",
+        ldv,
+        "--amp",
+        amp,
+        "--out",
+        out,
+    ]
+}
+
 /// `rigtwin run PLAN --backend hw` against `fw`, with `extra` arguments: (output, mcap,
 /// summary json).
 pub fn run_hw(
@@ -84,24 +111,8 @@ pub fn run_hw(
     let plan = super::cli_support::write_plan(dir, plan_text);
     let mcap = dir.join("session.mcap");
     let summary = dir.join("summary.json");
-    let mut args = vec![
-        "run",
-        "--plan",
-        &plan,
-        "--quiet",
-        "--backend",
-        "hw",
-        "--can",
-        &fw.can,
-        "--ldv",
-        &fw.ldv,
-        "--amp",
-        &fw.amp,
-        "--out",
-        mcap.to_str().unwrap(),
-        "--json",
-        summary.to_str().unwrap(),
-    ];
+    let mut args = hw_args(&plan, &fw.can, &fw.ldv, &fw.amp, mcap.to_str().unwrap());
+    args.extend_from_slice(&["--json", summary.to_str().unwrap()]);
     args.extend_from_slice(extra);
     (super::cli_support::rigtwin(&args), mcap, summary)
 }

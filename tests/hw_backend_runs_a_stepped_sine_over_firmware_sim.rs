@@ -5,12 +5,15 @@
 //!   record window, as on the simulated backend;
 //! - the session log is complete: closed, DAQ blocks gap-free from 0, as many as the session
 //!   received, the same channel layout as the simulated rig, link counters on `/rig/status`
-//!   (all frames well-formed), and `rigtwin replay` recomputes the summary bit for bit;
+//!   (all frames well-formed), and `rigtwin replay` recomputes the summary bit for bit; the
+//!   official Python `mcap` reader reads it (skipped without it unless
+//!   `RIGTWIN_REQUIRE_MCAP_PY` is set);
 //! - the device ended the session with the drive at zero;
 //! - wrong or missing link arguments and a missing SocketCAN are clear errors.
 
 mod cli_support;
 mod hw_support;
+mod log_support;
 
 use cli_support::{json, rigtwin, text};
 use hw_support::{hw_args, run_hw, FirmwareSim};
@@ -104,6 +107,25 @@ fn a_stepped_sine_over_can_and_serial_holds_the_amplitude_and_logs_a_complete_se
     assert_eq!(
         std::fs::read_to_string(&summary).unwrap(),
         std::fs::read_to_string(&replayed).unwrap()
+    );
+
+    // The official Python reader reads the hardware session like a simulated one, the link
+    // counters included.
+    let Some(python) = log_support::mcap_python_or_skip("hw session log in python") else {
+        return;
+    };
+    let py = log_support::read_with_python(&python, &mcap);
+    for topic in [TOPIC_DAQ, TOPIC_STATUS, "/session/steps", "/session/events"] {
+        let ch = &py["channels"][topic];
+        assert_eq!(ch["message_encoding"], "json", "{topic}: {ch}");
+        assert_eq!(ch["schema_encoding"], "jsonschema", "{topic}: {ch}");
+        assert_eq!(py["sequences_contiguous_from_0"][topic], true, "{topic}");
+    }
+    assert_eq!(py["payload_errors"].as_array().unwrap().len(), 0);
+    assert_eq!(py["counts"][TOPIC_DAQ], s["blocks"]);
+    assert!(
+        py["first_payloads"][TOPIC_STATUS]["link"].is_object(),
+        "{py}"
     );
 }
 

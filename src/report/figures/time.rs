@@ -301,6 +301,10 @@ impl Lanes {
             .draw()
             .map_err(err)?;
         let span = self.x.1 - self.x.0;
+        // NOTE: an impact lasts a sample or two, far less than a pixel of a record of seconds:
+        // every bar is at least one pixel wide (of the whole area: a lower bound of the plot's
+        // pixel), so no contact disappears from the lanes.
+        let min_width = span / f64::from(area.dim_in_pixel().0.max(1));
         for (
             k,
             Lane {
@@ -314,7 +318,10 @@ impl Lanes {
             let lane = (self.lanes.len() - 1 - k) as f64;
             chart
                 .draw_series(runs.iter().map(|&(a, b)| {
-                    Rectangle::new([(a, lane + 0.1), (b, lane + 0.7)], color.filled())
+                    Rectangle::new(
+                        [(a, lane + 0.1), (b.max(a + min_width), lane + 0.7)],
+                        color.filled(),
+                    )
                 }))
                 .map_err(err)?;
             chart

@@ -6,6 +6,8 @@
 //! figures: the twin, the rig description's own ROM at its own step, against the simulated
 //! rig's finer truth with no hidden physics).
 
+mod cli_support;
+
 use std::path::PathBuf;
 use std::process::Command;
 
@@ -66,14 +68,7 @@ fn demo_reports_the_rom_and_runs_the_demo_plan() {
             .iter()
             .any(|s| s["impacts_per_period"].as_f64().unwrap() > 0.0));
         for st in steps {
-            let e = st["base_amp_measured"].as_f64().unwrap()
-                / st["base_amp_target"].as_f64().unwrap()
-                - 1.0;
-            assert!(
-                e.abs() <= 0.01,
-                "base amplitude {e:+.4} at {}",
-                st["omega_ratio"]
-            );
+            cli_support::assert_base_amplitude_within(st, 0.01);
         }
         twin_follows_the_rig(t["name"].as_str().unwrap(), steps);
     }

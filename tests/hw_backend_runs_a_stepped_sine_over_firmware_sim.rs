@@ -55,15 +55,7 @@ fn a_stepped_sine_over_can_and_serial_holds_the_amplitude_and_logs_a_complete_se
     let steps = s["tests"][0]["steps"].as_array().unwrap();
     assert_eq!(steps.len(), 2);
     for st in steps {
-        let (q, target) = (
-            st["base_amp_measured"].as_f64().unwrap(),
-            st["base_amp_target"].as_f64().unwrap(),
-        );
-        assert!(
-            (q / target - 1.0).abs() <= 0.01,
-            "base amplitude {q:e} vs target {target:e} at {}",
-            st["omega_ratio"]
-        );
+        cli_support::assert_base_amplitude_within(st, 0.01);
     }
 
     // The log: complete, every block in order, the simulated rig's layout.

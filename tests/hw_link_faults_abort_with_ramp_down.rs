@@ -267,18 +267,7 @@ fn the_device_ramps_down_by_itself_when_the_host_dies() {
         .spawn()
         .unwrap();
     // Kill once the log holds a few flushes of DAQ data (the drive is on by then).
-    let t0 = std::time::Instant::now();
-    while std::fs::metadata(&mcap).map_or(0, |m| m.len()) < 300_000 {
-        assert!(
-            t0.elapsed().as_secs() < 120,
-            "the session log does not grow"
-        );
-        assert!(
-            host.try_wait().unwrap().is_none(),
-            "the session ended before the kill"
-        );
-        std::thread::sleep(std::time::Duration::from_millis(20));
-    }
+    cli_support::wait_for_log_growth(&mut host, &mcap, 300_000);
     host.kill().unwrap();
     host.wait().unwrap();
     let end = fw.session_end();

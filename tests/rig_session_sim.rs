@@ -75,15 +75,7 @@ fn session_holds_the_base_amplitude_logs_standard_mcap_and_replays_bit_for_bit()
     assert_eq!(steps.len(), 3);
     let mut impacts = 0.0;
     for st in steps {
-        let (q, target) = (
-            st["base_amp_measured"].as_f64().unwrap(),
-            st["base_amp_target"].as_f64().unwrap(),
-        );
-        assert!(
-            (q / target - 1.0).abs() <= 0.01,
-            "base amplitude {q:e} vs target {target:e} at {}",
-            st["omega_ratio"]
-        );
+        cli_support::assert_base_amplitude_within(st, 0.01);
         for key in [
             "rms_upper",
             "rms_lower",
@@ -468,18 +460,7 @@ fn a_session_killed_mid_test_leaves_a_replayable_log() {
         .spawn()
         .unwrap();
     // Wait until the log holds a few flushes of DAQ data, then kill.
-    let t0 = std::time::Instant::now();
-    while std::fs::metadata(&mcap).map_or(0, |m| m.len()) < 300_000 {
-        assert!(
-            t0.elapsed().as_secs() < 120,
-            "the session log does not grow"
-        );
-        assert!(
-            child.try_wait().unwrap().is_none(),
-            "the session ended before the kill"
-        );
-        std::thread::sleep(std::time::Duration::from_millis(100));
-    }
+    cli_support::wait_for_log_growth(&mut child, &mcap, 300_000);
     std::thread::sleep(std::time::Duration::from_millis(1500));
     child.kill().unwrap(); // SIGKILL
     child.wait().unwrap();

@@ -57,3 +57,35 @@ pub fn default_rig_with(dir: &Path, extra: &str) -> PathBuf {
     std::fs::write(&p, t).unwrap();
     p
 }
+
+/// Asserts that a step of a session summary (`tests[].steps[]`) held the fundamental base
+/// displacement within `tolerance` (relative) of its target.
+pub fn assert_base_amplitude_within(step: &serde_json::Value, tolerance: f64) {
+    let (q, target) = (
+        step["base_amp_measured"].as_f64().unwrap(),
+        step["base_amp_target"].as_f64().unwrap(),
+    );
+    assert!(
+        (q / target - 1.0).abs() <= tolerance,
+        "base amplitude {q:e} vs target {target:e} ({:+.4} %) at {}",
+        100.0 * (q / target - 1.0),
+        step["omega_ratio"]
+    );
+}
+
+/// Waits (up to 120 s) until the session log `path` written by `child` holds `bytes`: a few
+/// flushes of DAQ data, so a kill lands mid-test. Fails if the session ends first.
+pub fn wait_for_log_growth(child: &mut std::process::Child, path: &Path, bytes: u64) {
+    let t0 = std::time::Instant::now();
+    while std::fs::metadata(path).map_or(0, |m| m.len()) < bytes {
+        assert!(
+            t0.elapsed().as_secs() < 120,
+            "the session log does not grow"
+        );
+        assert!(
+            child.try_wait().unwrap().is_none(),
+            "the session ended before the kill"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+}

@@ -97,7 +97,21 @@ pub struct TestSpec {
     pub steps_per_period: u32,
 }
 
+/// A length given in units of the beam length l (plan levels and clearances), in metres.
+///
+/// The one place where plan units become SI: plans, session events and summaries carry
+/// clearances and levels divided by l; the rig description, the ROM and the simulated rig
+/// work in metres.
+pub fn per_l_to_metres(value_over_l: f64, beam_length_m: f64) -> f64 {
+    value_over_l * beam_length_m
+}
+
 impl TestSpec {
+    /// The test's clearance in metres, for a rig of beam length `beam_length_m`.
+    pub fn clearance_m(&self, beam_length_m: f64) -> f64 {
+        per_l_to_metres(self.clearance, beam_length_m)
+    }
+
     /// The step frequencies Omega / omega_2 in the order they are run: `steps` values evenly
     /// spaced from `omega_start` to `omega_end`, both included exactly.
     pub fn omega_ratios(&self) -> Vec<f64> {

@@ -4,7 +4,8 @@
 //! session log, summary (not aborted, impacts in the band, base amplitude within 1 %) and
 //! figures from the recording; the live twin beside the session (issue 5's acceptance
 //! figures: the twin, the rig description's own ROM at its own step, against the simulated
-//! rig's finer truth with no hidden physics).
+//! rig's finer truth with no hidden physics). The session summary and the virtual stepped
+//! sine's results are pinned bit for bit (`tests/pinned/`).
 
 mod cli_support;
 
@@ -73,6 +74,12 @@ fn demo_reports_the_rom_and_runs_the_demo_plan() {
         twin_follows_the_rig(t["name"].as_str().unwrap(), steps);
     }
     assert!(out_dir.path().join("session.mcap").is_file());
+    // Bit for bit what the demo gave before the service layer was reshaped (issue 13).
+    cli_support::assert_matches_pinned("demo-session.json", &session);
+    cli_support::assert_matches_pinned(
+        "demo-stepped-sine.json",
+        &serde_json::json!({ "tests": sine["tests"] }),
+    );
     for f in ["rms_response.png", "time_histories.png", "summary.json"] {
         assert!(
             out_dir.path().join("session-figures").join(f).exists(),

@@ -89,3 +89,26 @@ pub fn wait_for_log_growth(child: &mut std::process::Child, path: &Path, bytes: 
         std::thread::sleep(std::time::Duration::from_millis(20));
     }
 }
+
+/// Compares `value` with the pinned output `tests/pinned/NAME` (JSON, compared as values: every
+/// number bit for bit). `RIGTWIN_WRITE_PINS=1` rewrites the file instead: only for a change
+/// meant to change the numbers, said so in its commit. On a difference the new output is
+/// written to the temporary folder and named in the panic.
+pub fn assert_matches_pinned(name: &str, value: &serde_json::Value) {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/pinned")
+        .join(name);
+    if std::env::var_os("RIGTWIN_WRITE_PINS").is_some() {
+        std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+        std::fs::write(&path, serde_json::to_string_pretty(value).unwrap() + "\n").unwrap();
+        return;
+    }
+    if &json(&path) != value {
+        let got = std::env::temp_dir().join(format!("{name}.got.json"));
+        std::fs::write(&got, serde_json::to_string_pretty(value).unwrap()).unwrap();
+        panic!(
+            "{name} differs from the pinned output tests/pinned/{name} (this run's output: {})",
+            got.display()
+        );
+    }
+}

@@ -7,10 +7,11 @@
 //! contact inside a leapfrog integrator). [`signal`] holds the per-period metrics shared by
 //! simulation and measurement. [`plan`] holds the stepped-sine test plans and [`report`]
 //! draws the paper-style figures. The experiment side: [`rig`] (the backend trait, the DAQ
-//! types, the simulated rig), [`control`] (amplitude control, settling, safety, the async
-//! stepped-sine session), [`twin`] (the live digital twin: the ROM on the measured base
-//! acceleration, on its own thread) and [`log`] (the MCAP session log, its recorder and replay). [`cli`]
-//! wires the commands of the `rigtwin` binary.
+//! types, the simulated rig, the hardware backend), [`control`] (amplitude control, settling,
+//! safety, the stepped-sine procedure), [`twin`] (the live digital twin: the ROM on the
+//! measured base acceleration, on its own thread), [`log`] (MCAP files: writer and reader) and
+//! [`session`] (the composition root: backend, procedure, recorders, log, twin and live view;
+//! replay; the session summary). [`cli`] parses the `rigtwin` binary's commands and prints.
 //!
 //! Numerical modules are synchronous, deterministic and never read the clock; async (tokio)
 //! lives in the session and the simulated rig's pacing.
@@ -25,6 +26,7 @@ pub mod plan;
 pub mod report;
 pub mod rig;
 pub mod rom;
+pub mod session;
 pub mod signal;
 pub mod sim;
 pub mod twin;

@@ -18,7 +18,7 @@ mod log_support;
 use cli_support::{json, rigtwin, text};
 use hw_support::{hw_args, run_hw, FirmwareSim};
 use rigtwin::log::read_session;
-use rigtwin::log::recorder::{TOPIC_DAQ, TOPIC_STATUS};
+use rigtwin::session::topics::{TOPIC_DAQ, TOPIC_STATUS};
 
 /// Two steps through the impact band at the high level; 100-period record windows as in the
 /// simulated-backend test (a 30-period window's fundamental scatters by up to 3 %).

@@ -16,7 +16,7 @@ use cli_support::{cache, json, text};
 use hw_support::{hw_args, run_hw, FirmwareSim};
 use rigtwin::control::{ControlState, EventKind, Phase, SessionEvent};
 use rigtwin::log::read_session;
-use rigtwin::log::recorder::{TOPIC_CONTROL, TOPIC_DAQ, TOPIC_EVENTS, TOPIC_STATUS};
+use rigtwin::session::topics::{TOPIC_CONTROL, TOPIC_DAQ, TOPIC_EVENTS, TOPIC_STATUS};
 
 /// Two steps through the impact band (about 4 s of rig time).
 const PLAN: &str = r#"

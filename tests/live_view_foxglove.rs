@@ -466,7 +466,7 @@ fn a_foxglove_client_sees_the_live_twin_beside_the_measurement() {
     let layout: DaqLayout = serde_json::from_value(got("/daq/layout")[0].1.clone()).unwrap();
     let bin = (layout.sample_rate / 200.0).round() as u64;
     let blocks: Vec<rigtwin::twin::TwinSamples> = log
-        .decode::<rigtwin::twin::TwinSamples>(rigtwin::twin::TOPIC_TWIN_BLOCKS)
+        .decode::<rigtwin::twin::TwinSamples>(rigtwin::session::topics::TOPIC_TWIN_BLOCKS)
         .unwrap()
         .into_iter()
         .map(|x| x.2)

@@ -21,7 +21,7 @@ use std::process::{Command, Output};
 use cli_support::{cache, json, rigtwin, text, write_plan};
 use rigtwin::control::{ControlState, EventKind, Phase, SessionEvent};
 use rigtwin::log::read_session;
-use rigtwin::log::recorder::{TOPIC_CONTROL, TOPIC_DAQ, TOPIC_EVENTS};
+use rigtwin::session::topics::{TOPIC_CONTROL, TOPIC_DAQ, TOPIC_EVENTS};
 
 /// Through the impact band at the high level: 1.01 -> 0.99 omega_2 in 3 steps.
 const PLAN: &str = r#"

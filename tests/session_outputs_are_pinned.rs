@@ -133,7 +133,10 @@ fn session_replay_and_twin_replay_match_the_pinned_outputs() {
     assert!(compared > 0, "the live twin compared no step");
     for (i, (l, r)) in live_twin.iter().zip(&replay_twin).enumerate() {
         if !l.is_null() {
-            assert_eq!(l, r, "step {i}: the live twin's comparison is not the replay's");
+            assert_eq!(
+                l, r,
+                "step {i}: the live twin's comparison is not the replay's"
+            );
         }
     }
 }

@@ -177,12 +177,14 @@ fn the_live_twin_equals_its_replay_and_is_logged() {
     );
     let s = rigtwin::log::read_session(&mcap).unwrap();
     let steps = s
-        .decode::<rigtwin::twin::TwinStepMessage>(rigtwin::twin::TOPIC_TWIN_STEPS)
+        .decode::<rigtwin::session::topics::TwinStepMessage>(
+            rigtwin::session::topics::TOPIC_TWIN_STEPS,
+        )
         .unwrap();
     assert_eq!(steps.len(), 2);
     assert!(steps.iter().all(|(_, _, m)| m.twin.is_some()));
     let status = s
-        .decode::<rigtwin::twin::TwinStatus>(rigtwin::twin::TOPIC_TWIN_STATUS)
+        .decode::<rigtwin::twin::TwinStatus>(rigtwin::session::topics::TOPIC_TWIN_STATUS)
         .unwrap();
     assert!(!status.is_empty());
 
@@ -204,25 +206,25 @@ fn the_live_twin_equals_its_replay_and_is_logged() {
             .map(|m| (m.log_time, m.data.clone()))
             .collect()
     };
-    let blocks = payloads(&s, rigtwin::twin::TOPIC_TWIN_BLOCKS);
+    let blocks = payloads(&s, rigtwin::session::topics::TOPIC_TWIN_BLOCKS);
     assert_eq!(
         blocks.len(),
-        s.messages_on(rigtwin::log::recorder::TOPIC_DAQ).count(),
+        s.messages_on(rigtwin::session::topics::TOPIC_DAQ).count(),
         "one twin message per DAQ block"
     );
     assert!(
-        blocks == payloads(&c, rigtwin::twin::TOPIC_TWIN_BLOCKS),
+        blocks == payloads(&c, rigtwin::session::topics::TOPIC_TWIN_BLOCKS),
         "twin blocks differ"
     );
     assert_eq!(
-        payloads(&s, rigtwin::twin::TOPIC_TWIN_STEPS),
-        payloads(&c, rigtwin::twin::TOPIC_TWIN_STEPS)
+        payloads(&s, rigtwin::session::topics::TOPIC_TWIN_STEPS),
+        payloads(&c, rigtwin::session::topics::TOPIC_TWIN_STEPS)
     );
     // The rest of the session is copied as it was; the copy names its model.
     for topic in [
-        rigtwin::log::recorder::TOPIC_DAQ,
-        rigtwin::log::recorder::TOPIC_EVENTS,
-        rigtwin::log::recorder::TOPIC_STEPS,
+        rigtwin::session::topics::TOPIC_DAQ,
+        rigtwin::session::topics::TOPIC_EVENTS,
+        rigtwin::session::topics::TOPIC_STEPS,
     ] {
         assert!(
             payloads(&s, topic) == payloads(&c, topic),
@@ -230,15 +232,15 @@ fn the_live_twin_equals_its_replay_and_is_logged() {
         );
     }
     assert!(c
-        .messages_on(rigtwin::twin::TOPIC_TWIN_STATUS)
+        .messages_on(rigtwin::session::topics::TOPIC_TWIN_STATUS)
         .next()
         .is_none());
-    assert!(
-        c.metadata(rigtwin::twin::TWIN_REPLAY_METADATA).unwrap()["model"]
-            .contains("the rig description in the log")
-    );
+    assert!(c
+        .metadata(rigtwin::session::topics::TWIN_REPLAY_METADATA)
+        .unwrap()["model"]
+        .contains("the rig description in the log"));
     let samples = s
-        .decode::<rigtwin::twin::TwinSamples>(rigtwin::twin::TOPIC_TWIN_BLOCKS)
+        .decode::<rigtwin::twin::TwinSamples>(rigtwin::session::topics::TOPIC_TWIN_BLOCKS)
         .unwrap();
     let b = &samples[samples.len() / 2].2;
     assert_eq!(b.upper_tip.len(), b.len);
@@ -320,7 +322,7 @@ fn a_twin_that_falls_behind_skips_visibly_and_does_not_stall_the_session() {
     // The lag is in the log.
     let s = rigtwin::log::read_session(&mcap).unwrap();
     let status = s
-        .decode::<rigtwin::twin::TwinStatus>(rigtwin::twin::TOPIC_TWIN_STATUS)
+        .decode::<rigtwin::twin::TwinStatus>(rigtwin::session::topics::TOPIC_TWIN_STATUS)
         .unwrap();
     assert!(
         status.iter().any(|(_, _, st)| st.behind && st.lag_s > 0.1),

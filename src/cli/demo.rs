@@ -7,8 +7,7 @@
 use clap::Args;
 use std::path::PathBuf;
 
-use super::progress::BuildProgress;
-use crate::rom::build::BuildOptions;
+use super::models::cached_rom;
 use crate::rom::info::RomInfo;
 
 /// The demo plan, embedded so that the demo runs from any folder.
@@ -26,29 +25,6 @@ pub struct DemoArgs {
     /// No progress display.
     #[arg(long)]
     pub quiet: bool,
-}
-
-/// Returns the cached ROM of `cfg`, building it if the cache has none for the current rig
-/// description (the cache key is the ROM's build hash).
-pub(crate) fn cached_rom(
-    cfg: &crate::config::RigConfig,
-    rebuild: bool,
-    quiet: bool,
-) -> anyhow::Result<(crate::rom::Rom, PathBuf, bool)> {
-    let progress = BuildProgress::new(quiet);
-    let (rom, path, outcome) = crate::rom::cache::load_or_build(
-        cfg,
-        &BuildOptions::default(),
-        &super::cache_dir(),
-        rebuild,
-        &mut |e| progress.event(&e),
-    )?;
-    progress.finish();
-    Ok((
-        rom,
-        path,
-        outcome == crate::rom::cache::CacheOutcome::Reused,
-    ))
 }
 
 pub(crate) fn run(a: DemoArgs) -> anyhow::Result<()> {
@@ -90,18 +66,21 @@ pub(crate) fn run(a: DemoArgs) -> anyhow::Result<()> {
 
     println!("stepped sine on the simulated rig (closed-loop base amplitude control):");
     let mcap = a.out.join("session.mcap");
-    let o = super::run::run_sim_session(&super::run::SimSession {
-        cfg: &cfg,
-        config_text: crate::config::DEFAULT_RIG_TOML,
-        plan: &plan,
-        out: &mcap,
-        realtime: false,
-        inject: &[],
-        rebuild: false,
-        quiet: a.quiet,
-        foxglove: None,
-        twin: true,
-    })?;
+    let o = super::run::run_session_on(
+        &super::run::SessionArgs {
+            cfg: &cfg,
+            config_text: crate::config::DEFAULT_RIG_TOML,
+            plan: &plan,
+            out: &mcap,
+            realtime: false,
+            inject: &[],
+            rebuild: false,
+            quiet: a.quiet,
+            foxglove: None,
+            twin: true,
+        },
+        None,
+    )?;
     super::run::print_session(&o);
     let json = a.out.join("session.json");
     super::write_json(&json, &o.summary)?;

@@ -30,7 +30,7 @@ pub struct ExportArgs {
 pub(crate) fn run(cmd: FeCommand) -> anyhow::Result<()> {
     match cmd {
         FeCommand::ExportCalculix(a) => {
-            let cfg = super::rom::load_config(a.config.as_deref())?;
+            let cfg = super::models::load_config(a.config.as_deref())?;
             let mesh = crate::fe::rig::mesh_rig(&cfg)?;
             let files = crate::fe::calculix::export(&mesh, &a.out, &a.job, a.modes)?;
             println!(

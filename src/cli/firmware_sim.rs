@@ -74,7 +74,7 @@ pub(crate) fn run(a: FirmwareSimArgs) -> anyhow::Result<()> {
         cutoff_hz: None,
         modes: None,
     };
-    let (truth, _, _) = super::demo::cached_rom(&truth_cfg, a.rebuild, a.quiet)?;
+    let (truth, _, _) = super::models::cached_rom(&truth_cfg, a.rebuild, a.quiet)?;
     let spec = cfg.sim_rig_spec();
     let clearance_m = a
         .clearance

@@ -7,7 +7,9 @@ mod demo;
 mod fe;
 mod firmware_sim;
 mod hw;
+mod models;
 mod progress;
+mod replay;
 mod report;
 mod rom;
 mod run;
@@ -48,7 +50,7 @@ pub enum Command {
     /// The rig's electronics, simulated: the other end of --backend hw's CAN and serial links.
     FirmwareSim(firmware_sim::FirmwareSimArgs),
     /// Recompute a recorded session's summary from its raw DAQ blocks.
-    Replay(run::ReplayArgs),
+    Replay(replay::ReplayArgs),
     /// The paper-style figures of a recorded session.
     Report(report::ReportArgs),
 }
@@ -88,7 +90,7 @@ pub fn main() -> std::process::ExitCode {
         Command::Simulate(a) => simulate::run(a),
         Command::Run(a) => run::run(a),
         Command::FirmwareSim(a) => firmware_sim::run(a),
-        Command::Replay(a) => run::replay(a),
+        Command::Replay(a) => replay::run(a),
         Command::Report(a) => report::run(a),
     };
     match result {

@@ -5,7 +5,6 @@ use clap::{Args, Subcommand};
 use std::path::PathBuf;
 
 use super::progress::BuildProgress;
-use crate::config::RigConfig;
 use crate::rom::build::{build_calculix, build_native, BuildOptions};
 use crate::rom::info::RomInfo;
 use crate::rom::ModeSelection;
@@ -77,18 +76,10 @@ pub struct InfoArgs {
     pub json: Option<PathBuf>,
 }
 
-/// Loads a rig description from a path, or the embedded default.
-pub(crate) fn load_config(path: Option<&std::path::Path>) -> anyhow::Result<RigConfig> {
-    Ok(match path {
-        Some(p) => RigConfig::from_path(p)?,
-        None => RigConfig::default_rig(),
-    })
-}
-
 pub(crate) fn run(cmd: RomCommand) -> anyhow::Result<()> {
     match cmd {
         RomCommand::Build(a) => {
-            let cfg = load_config(a.config.as_deref())?;
+            let cfg = super::models::load_config(a.config.as_deref())?;
             let opts = BuildOptions {
                 selection: a.selection.selection()?,
             };

@@ -1,6 +1,7 @@
 //! `rigtwin run`: a stepped-sine session on a rig backend (the simulated rig, or the hardware
-//! over CAN and serial links), logged to MCAP, with a JSON summary and optionally served live to the Foxglove app (`--foxglove`);
-//! `rigtwin replay`: the summary recomputed from a recording.
+//! over CAN and serial links), logged to MCAP, with a JSON summary and optionally served live to
+//! the Foxglove app (`--foxglove`). The session itself is [`crate::session`]'s; this builds the
+//! chosen backend and prints.
 
 use anyhow::{bail, Context};
 use clap::{Args, ValueEnum};
@@ -8,19 +9,20 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::collections::BTreeMap;
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
-use std::time::Instant;
 
 use crate::config::RigConfig;
-use crate::control::{run_session, SessionProgress, SessionSetup, SessionSummary, Tee};
-use crate::log::live::{LiveOptions, LiveStats, LiveView};
-use crate::log::recorder::McapRecorder;
-use crate::log::{Attachment, LogOptions, SessionLog};
 use crate::plan::Plan;
 use crate::rig::hw::{HwBackend, HwOptions};
 use crate::rig::sim::{InjectedFault, SimRig};
 use crate::rig::sim_backend::SimBackend;
-use crate::rig::{LinkCounters, RigBackend};
 use crate::rom::Rom;
+use crate::session::live::{LiveOptions, LiveRecorder, LiveView};
+use crate::session::topics::TOPIC_LIVE_DAQ;
+use crate::session::{
+    BackendMetadata, RunOutcome, SessionProgress, SessionRequest, SessionSummary,
+};
+
+use super::models;
 
 /// Which rig to run on.
 #[derive(Clone, Copy, Debug, ValueEnum, PartialEq, Eq)]
@@ -30,64 +32,6 @@ pub enum BackendArg {
     /// The rig's electronics over CAN FD (--can) and serial links (--ldv, --amp), as
     /// firmware-interfaces/ documents; `rigtwin firmware-sim` stands in for them.
     Hw,
-}
-
-/// The session's backend: control code is generic, this picks one at run time.
-#[derive(Debug)]
-enum Backend {
-    Sim(Box<SimBackend>),
-    Hw(Box<HwBackend>),
-}
-
-impl RigBackend for Backend {
-    fn layout(&self) -> &crate::rig::DaqLayout {
-        match self {
-            Backend::Sim(b) => b.layout(),
-            Backend::Hw(b) => b.layout(),
-        }
-    }
-    async fn start(&mut self) -> Result<(), crate::rig::RigError> {
-        match self {
-            Backend::Sim(b) => b.start().await,
-            Backend::Hw(b) => b.start().await,
-        }
-    }
-    async fn set_drive(
-        &mut self,
-        command: crate::rig::DriveCommand,
-    ) -> Result<(), crate::rig::RigError> {
-        match self {
-            Backend::Sim(b) => b.set_drive(command).await,
-            Backend::Hw(b) => b.set_drive(command).await,
-        }
-    }
-    async fn next_block(&mut self) -> Result<Option<crate::rig::DaqBlock>, crate::rig::RigError> {
-        match self {
-            Backend::Sim(b) => b.next_block().await,
-            Backend::Hw(b) => b.next_block().await,
-        }
-    }
-    async fn begin_test(
-        &mut self,
-        test: &crate::plan::TestSpec,
-    ) -> Result<(), crate::rig::RigError> {
-        match self {
-            Backend::Sim(b) => b.begin_test(test).await,
-            Backend::Hw(b) => b.begin_test(test).await,
-        }
-    }
-    fn status(&self) -> crate::rig::RigStatus {
-        match self {
-            Backend::Sim(b) => b.status(),
-            Backend::Hw(b) => b.status(),
-        }
-    }
-    async fn stop(&mut self) -> Result<(), crate::rig::RigError> {
-        match self {
-            Backend::Sim(b) => b.stop().await,
-            Backend::Hw(b) => b.stop().await,
-        }
-    }
 }
 
 /// `rigtwin run`
@@ -118,7 +62,7 @@ pub struct RunArgs {
     /// [IPv6]:PORT; port 0 picks a free port. Off by default. Topics as in the MCAP log, the
     /// DAQ decimated for plotting on /live/daq (min/max/mean per channel, 200 points per rig
     /// second; plot e.g. /live/daq.upper_tip.max). The server stops when the session ends.
-    #[arg(long, value_name = "ADDR", value_parser = crate::log::live::parse_addr)]
+    #[arg(long, value_name = "ADDR", value_parser = crate::session::live::parse_addr)]
     pub foxglove: Option<SocketAddr>,
     /// Run the twin beside the session: the rig description's own ROM driven by the measured
     /// base acceleration on its own thread (`[twin]` settings), compared with the measurement
@@ -140,102 +84,8 @@ pub struct RunArgs {
     pub quiet: bool,
 }
 
-/// `rigtwin replay`
-#[derive(Args, Debug)]
-pub struct ReplayArgs {
-    /// The session log (MCAP).
-    pub file: PathBuf,
-    /// Write the recomputed summary (JSON) here.
-    #[arg(long)]
-    pub json: Option<PathBuf>,
-    /// Re-run the twin on the recorded base motion and compare it with the measurement step
-    /// by step (`tests[].steps[].twin`). The model is the rig description the session ran
-    /// with (stored in the log) unless `--rom` or `--config` names another.
-    #[arg(long)]
-    pub twin: bool,
-    /// The twin's ROM file (with `--twin`; `[twin]` settings at their defaults).
-    #[arg(long, requires = "twin", conflicts_with = "config")]
-    pub rom: Option<PathBuf>,
-    /// The twin's rig description (with `--twin`): its ROM is built or taken from the cache,
-    /// its `[twin]` table sets the twin.
-    #[arg(long, requires = "twin")]
-    pub config: Option<PathBuf>,
-    /// Rebuild the twin ROM even if cached (with `--twin`).
-    #[arg(long, requires = "twin")]
-    pub rebuild: bool,
-    /// With `--twin`: write a copy of the session log holding the re-run twin's output
-    /// (`/twin/blocks`, `/twin/steps`) in place of the recorded twin's, for `rigtwin report`.
-    #[arg(long, requires = "twin")]
-    pub out: Option<PathBuf>,
-}
-
-/// The twin model of `rigtwin replay --twin`: ROM, `[twin]` settings and where it came from.
-fn replay_twin_model(
-    a: &ReplayArgs,
-    rig_toml: Option<&str>,
-) -> anyhow::Result<(Rom, crate::twin::TwinSpec, String)> {
-    if let Some(path) = &a.rom {
-        let rom =
-            crate::rom::file::read(path).with_context(|| format!("--rom {}", path.display()))?;
-        return Ok((
-            rom,
-            crate::twin::TwinSpec::default(),
-            path.display().to_string(),
-        ));
-    }
-    let (cfg, source) = match (&a.config, rig_toml) {
-        (Some(path), _) => (RigConfig::from_path(path)?, path.display().to_string()),
-        (None, Some(text)) => (
-            RigConfig::from_str(text, "rig.toml (attached to the log)")?,
-            "the rig description in the log".to_string(),
-        ),
-        (None, None) => bail!(
-            "{}: the log holds no rig description (rig.toml attachment); name the twin's model \
-             with --config or --rom",
-            a.file.display()
-        ),
-    };
-    let (rom, path, _) = super::demo::cached_rom(&cfg, a.rebuild, true)?;
-    Ok((
-        rom,
-        cfg.twin.clone(),
-        format!("{source} (ROM {})", path.display()),
-    ))
-}
-
-/// The twin ROM (the model) and the truth ROM (the simulated rig's structure: more modes).
-pub(crate) fn roms(
-    cfg: &RigConfig,
-    rebuild: bool,
-    quiet: bool,
-) -> anyhow::Result<(Rom, Rom, PathBuf)> {
-    let (twin, twin_path, _) = super::demo::cached_rom(cfg, rebuild, quiet)?;
-    let mut truth_cfg = cfg.clone();
-    truth_cfg.reduction = crate::config::ReductionSpec {
-        cutoff_ratio: Some(cfg.truth.cutoff_ratio),
-        cutoff_hz: None,
-        modes: None,
-    };
-    let (truth, _, _) = super::demo::cached_rom(&truth_cfg, rebuild, quiet)?;
-    Ok((twin, truth, twin_path))
-}
-
-/// What a finished session left behind.
-pub(crate) struct RunOutcome {
-    pub summary: SessionSummary,
-    pub wall_seconds: f64,
-    pub messages: u64,
-    pub overruns: u64,
-    /// What the live view did (with `--foxglove`).
-    pub live: Option<LiveStats>,
-    /// What the twin did (with `--twin`).
-    pub twin: Option<crate::twin::TwinOutcome>,
-    /// The hardware links' counters (with `--backend hw`).
-    pub link: Option<LinkCounters>,
-}
-
-/// A session on the simulated rig.
-pub(crate) struct SimSession<'a> {
+/// A session to run: the rig description, the plan and what to run it with.
+pub(crate) struct SessionArgs<'a> {
     /// The rig description.
     pub cfg: &'a RigConfig,
     /// Its text (stored in the log).
@@ -244,9 +94,9 @@ pub(crate) struct SimSession<'a> {
     pub plan: &'a Plan,
     /// The session log.
     pub out: &'a Path,
-    /// Pace to the wall clock.
+    /// Pace the simulated rig to the wall clock.
     pub realtime: bool,
-    /// Faults to inject.
+    /// Faults to inject into the simulated rig.
     pub inject: &'a [InjectedFault],
     /// Rebuild the ROMs.
     pub rebuild: bool,
@@ -259,7 +109,7 @@ pub(crate) struct SimSession<'a> {
 }
 
 /// Starts the live view on `addr` and prints where to connect.
-fn start_live_view(addr: SocketAddr) -> anyhow::Result<(crate::log::live::LiveRecorder, LiveView)> {
+fn start_live_view(addr: SocketAddr) -> anyhow::Result<(LiveRecorder, LiveView)> {
     let (recorder, view) = LiveView::start(addr, LiveOptions::default())
         .with_context(|| format!("--foxglove {addr}"))?;
     let bound = view.local_addr();
@@ -281,152 +131,8 @@ fn start_live_view(addr: SocketAddr) -> anyhow::Result<(crate::log::live::LiveRe
     Ok((recorder, view))
 }
 
-/// Runs the plan on the simulated rig, logging to the session's file.
-pub(crate) fn run_sim_session(session: &SimSession<'_>) -> anyhow::Result<RunOutcome> {
-    run_session_on(session, None)
-}
-
-/// Runs the plan on the simulated rig, or on the hardware with `hw`, logging to the
-/// session's file.
-pub(crate) fn run_session_on(
-    session: &SimSession<'_>,
-    hw: Option<&HwOptions>,
-) -> anyhow::Result<RunOutcome> {
-    let SimSession {
-        cfg,
-        config_text,
-        plan,
-        out,
-        realtime,
-        inject,
-        rebuild,
-        quiet,
-        foxglove,
-        twin: with_twin,
-    } = *session;
-    // First, so that a port in use fails before the ROMs are built.
-    let (live_recorder, live_view) = foxglove.map(start_live_view).transpose()?.unzip();
-    let runtime = tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(2)
-        .enable_all()
-        .build()
-        .context("starting the async runtime")?;
-    let l = cfg.rig.beam_length;
-    let spec = cfg.sim_rig_spec();
-    let (twin, truth, twin_path, mut backend) = match hw {
-        None => {
-            let (twin, truth, twin_path) = roms(cfg, rebuild, quiet)?;
-            let rig = SimRig::new(&truth, &spec, cfg.contact.clearance).context("simulated rig")?;
-            let mut backend = SimBackend::new(rig, l, realtime);
-            for f in inject {
-                backend.inject(f.clone());
-            }
-            (
-                twin,
-                Some(truth),
-                twin_path,
-                Backend::Sim(Box::new(backend)),
-            )
-        }
-        Some(h) => {
-            let (twin, twin_path, _) = super::demo::cached_rom(cfg, rebuild, quiet)?;
-            // The rig description's channel map: every block header is checked against it.
-            let layout = crate::rig::sim::daq::layout(&spec.daq);
-            let backend = runtime
-                .block_on(HwBackend::connect(layout, h.clone()))
-                .context("connecting to the rig (--backend hw)")?;
-            (twin, None, twin_path, Backend::Hw(Box::new(backend)))
-        }
-    };
-    let setup = SessionSetup {
-        plan: plan.clone(),
-        control: cfg.control.clone(),
-        safety: cfg.safety.clone(),
-        omega_ref: twin.omega_ref(),
-        beam_length: l,
-    };
-    let mut session_meta = BTreeMap::new();
-    session_meta.insert(
-        "backend".to_string(),
-        if hw.is_some() { "hw" } else { "sim" }.to_string(),
-    );
-    if let Some(h) = hw {
-        session_meta.insert("can".to_string(), format!("{:?}", h.can));
-        session_meta.insert("ldv".to_string(), h.ldv.clone());
-        session_meta.insert("amp".to_string(), h.amp.clone());
-    }
-    session_meta.insert("realtime".to_string(), realtime.to_string());
-    session_meta.insert("plan".to_string(), plan.name.clone().unwrap_or_default());
-    session_meta.insert("plan_source".to_string(), plan.source.clone());
-    session_meta.insert(
-        "omega_ref_rad_s".to_string(),
-        format!("{:e}", twin.omega_ref()),
-    );
-    session_meta.insert("beam_length_m".to_string(), format!("{l:e}"));
-    // The simulated rig's hidden physics (`[truth.variants]`, also in the rig.toml
-    // attachment), parsed: `{}` when none is on.
-    session_meta.insert("truth_variants".to_string(), spec.truth.variants.to_json());
-    session_meta.insert(
-        "started_unix_s".to_string(),
-        std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .map_or(0, |d| d.as_secs())
-            .to_string(),
-    );
-    let mut rom_meta = BTreeMap::new();
-    rom_meta.insert("path".to_string(), twin_path.display().to_string());
-    rom_meta.insert("config_hash".to_string(), twin.meta.config_hash.clone());
-    rom_meta.insert("modes".to_string(), twin.n_modes().to_string());
-    rom_meta.insert("pairs".to_string(), twin.n_pairs().to_string());
-    if let Some(truth) = &truth {
-        rom_meta.insert(
-            "truth_config_hash".to_string(),
-            truth.meta.config_hash.clone(),
-        );
-        rom_meta.insert("truth_modes".to_string(), truth.n_modes().to_string());
-    }
-    let mut plan_text = String::new();
-    if let Ok(t) = std::fs::read_to_string(&plan.source) {
-        plan_text = t;
-    }
-    let mut attachments = vec![Attachment {
-        name: "rig.toml".into(),
-        media_type: "application/toml".into(),
-        data: config_text.as_bytes().to_vec(),
-    }];
-    if !plan_text.is_empty() {
-        attachments.push(Attachment {
-            name: "plan.toml".into(),
-            media_type: "application/toml".into(),
-            data: plan_text.into_bytes(),
-        });
-    }
-    let (handle, join) = SessionLog::create(
-        out,
-        LogOptions::default(),
-        vec![("session".into(), session_meta), ("rom".into(), rom_meta)],
-        attachments,
-    )
-    .with_context(|| format!("creating the session log {}", out.display()))?;
-    let twin_recorder = if with_twin {
-        let layout = backend.layout().clone();
-        let engine = crate::twin::Twin::new(&twin, &cfg.twin, &layout, cfg.contact.clearance)
-            .context("the twin")?;
-        let (task, rx) = crate::twin::TwinTask::spawn(engine, &cfg.twin).context("the twin")?;
-        let recorder =
-            crate::twin::TwinRecorder::new(task, rx, l, layout.dt(), Some(handle.clone()))?;
-        Some(match &live_recorder {
-            Some(live) => recorder.with_live(live.clone()),
-            None => recorder,
-        })
-    } else {
-        None
-    };
-    let mut recorder = Tee(
-        Tee(McapRecorder::new(handle)?, live_recorder),
-        twin_recorder,
-    );
-
+/// The session's progress line on the terminal (hidden with `quiet`).
+fn progress_bar(quiet: bool) -> ProgressBar {
     let bar = if quiet {
         ProgressBar::hidden()
     } else {
@@ -437,46 +143,104 @@ pub(crate) fn run_session_on(
             .expect("template"),
     );
     bar.enable_steady_tick(std::time::Duration::from_millis(150));
-    let t0 = Instant::now();
-    let summary = runtime.block_on(async {
-        let shutdown = async {
-            let _ = tokio::signal::ctrl_c().await;
-        };
-        let mut progress = |p: &SessionProgress| {
-            bar.set_prefix(format!("{:.1}", p.time));
-            bar.set_message(format!(
-                "{} step {}/{} {:?} error {}",
-                p.test.1,
-                p.step.0 + 1,
-                p.step.1,
-                p.phase,
-                p.error.map_or("-".into(), |e| format!("{e:+.4}"))
-            ));
-        };
-        let s = run_session(&mut backend, &setup, &mut recorder, shutdown, &mut progress).await?;
-        let status = backend.status();
-        anyhow::Ok((s, status.overruns, status.link))
-    })?;
-    let (mut summary, overruns, link) = summary;
-    bar.finish_and_clear();
-    let twin_outcome = recorder.1.take().map(crate::twin::TwinRecorder::finish);
-    if let Some(t) = &twin_outcome {
-        summary.attach_twin(t.comparisons.iter().cloned());
-    }
-    let messages = recorder.0 .0.messages();
-    drop(recorder);
-    join.close().context("closing the session log")?;
-    let wall_seconds = t0.elapsed().as_secs_f64();
-    let live = live_view.map(LiveView::close);
-    Ok(RunOutcome {
-        summary,
-        wall_seconds,
-        messages,
-        overruns,
+    bar
+}
+
+/// Runs the plan on the simulated rig, or on the hardware with `hw`, logging to the
+/// session's file.
+pub(crate) fn run_session_on(
+    session: &SessionArgs<'_>,
+    hw: Option<&HwOptions>,
+) -> anyhow::Result<RunOutcome> {
+    let cfg = session.cfg;
+    // First, so that a port in use fails before the ROMs are built.
+    let live = session.foxglove.map(start_live_view).transpose()?;
+    let runtime = crate::session::runtime()?;
+    let (model, model_path, _) = models::cached_rom(cfg, session.rebuild, session.quiet)?;
+    let mut metadata = BackendMetadata::default();
+    metadata
+        .session
+        .insert("realtime".to_string(), session.realtime.to_string());
+    let bar = progress_bar(session.quiet);
+    let mut progress = |p: &SessionProgress| {
+        bar.set_prefix(format!("{:.1}", p.time));
+        bar.set_message(format!(
+            "{} step {}/{} {:?} error {}",
+            p.test.1,
+            p.step.0 + 1,
+            p.step.1,
+            p.phase,
+            p.error.map_or("-".into(), |e| format!("{e:+.4}"))
+        ));
+    };
+    let request = |metadata| SessionRequest {
+        cfg,
+        config_text: session.config_text,
+        plan: session.plan,
+        out: session.out,
+        model: &model,
+        model_path: &model_path,
+        twin: session.twin,
         live,
-        twin: twin_outcome,
-        link,
-    })
+        backend_metadata: metadata,
+    };
+    let outcome = match hw {
+        None => {
+            let truth = models::truth_rom(cfg, session.rebuild, session.quiet)?;
+            let backend = sim_backend(cfg, &truth, session)?;
+            metadata
+                .session
+                .insert("backend".to_string(), "sim".to_string());
+            metadata.session.extend(sim_metadata(cfg));
+            metadata.rom.insert(
+                "truth_config_hash".to_string(),
+                truth.meta.config_hash.clone(),
+            );
+            metadata
+                .rom
+                .insert("truth_modes".to_string(), truth.n_modes().to_string());
+            crate::session::run::run(&runtime, backend, request(metadata), &mut progress)
+        }
+        Some(h) => {
+            // The rig description's channel map: every block header is checked against it.
+            let layout = crate::rig::sim::daq::layout(&cfg.sim_rig_spec().daq);
+            let backend = runtime
+                .block_on(HwBackend::connect(layout, h.clone()))
+                .context("connecting to the rig (--backend hw)")?;
+            metadata
+                .session
+                .insert("backend".to_string(), "hw".to_string());
+            metadata
+                .session
+                .insert("can".to_string(), format!("{:?}", h.can));
+            metadata.session.insert("ldv".to_string(), h.ldv.clone());
+            metadata.session.insert("amp".to_string(), h.amp.clone());
+            crate::session::run::run(&runtime, backend, request(metadata), &mut progress)
+        }
+    };
+    bar.finish_and_clear();
+    Ok(outcome?)
+}
+
+/// The simulated rig on its truth ROM, with the faults to inject.
+fn sim_backend(
+    cfg: &RigConfig,
+    truth: &Rom,
+    session: &SessionArgs<'_>,
+) -> anyhow::Result<SimBackend> {
+    let rig =
+        SimRig::new(truth, &cfg.sim_rig_spec(), cfg.contact.clearance).context("simulated rig")?;
+    let mut backend = SimBackend::new(rig, cfg.rig.beam_length, session.realtime);
+    for f in session.inject {
+        backend.inject(f.clone());
+    }
+    Ok(backend)
+}
+
+/// The simulated rig's entries of the `session` metadata record: its hidden physics
+/// (`[truth.variants]`, also in the rig.toml attachment), parsed: `{}` when none is on.
+fn sim_metadata(cfg: &RigConfig) -> BTreeMap<String, String> {
+    BTreeMap::from([("truth_variants".to_string(), cfg.truth.variants.to_json())])
 }
 
 /// Prints a finished session: speed, then the steps.
@@ -494,7 +258,7 @@ pub(crate) fn print_session(o: &RunOutcome) {
         println!(
             "live view: stopped; {} messages sent to clients ({} on /live/daq), {} decimated DAQ points, {} records dropped",
             l.sent_total(),
-            l.sent.get(crate::log::live::TOPIC_LIVE_DAQ).copied().unwrap_or(0),
+            l.sent.get(TOPIC_LIVE_DAQ).copied().unwrap_or(0),
             l.points,
             l.dropped_records
         );
@@ -540,10 +304,11 @@ pub(crate) fn print_session(o: &RunOutcome) {
     print_summary(&o.summary);
 }
 
-fn print_summary(s: &SessionSummary) {
+pub(crate) fn print_summary(s: &SessionSummary) {
     for t in &s.tests {
         println!("  test {} ({} steps):", t.name, t.steps.len());
-        for st in &t.steps {
+        for step in &t.steps {
+            let st = &step.measured;
             println!(
                 "    Omega/omega_2 {:.4}  rms upper {:7.2} lower {:7.2}  contact {:.3}  impacts/period {:.2}  base {:.4e} m (target {:.4e}, {:+.2} %)  drive {:.4} V  settle {:.2} s{}",
                 st.omega_ratio,
@@ -558,7 +323,7 @@ fn print_summary(s: &SessionSummary) {
                 st.settle_seconds,
                 if st.settled { "" } else { " (not settled)" }
             );
-            if let Some(w) = &st.twin {
+            if let Some(w) = &step.twin {
                 println!(
                     "        twin     rms upper {:7.2} ({:+.1} %) lower {:7.2} ({:+.1} %)  contact {:.3} ({:+.3})  impacts/period {:.2}  spectrum {}",
                     w.metrics.rms_upper,
@@ -601,17 +366,7 @@ pub(crate) fn run(a: RunArgs) -> anyhow::Result<()> {
             Some((a.hw.can.clone(), a.hw.ldv.clone(), a.hw.amp.clone()))
         }
     };
-    let (cfg, text) = match &a.config {
-        Some(p) => {
-            let text = std::fs::read_to_string(p)
-                .with_context(|| format!("reading the rig description {}", p.display()))?;
-            (RigConfig::from_str(&text, &p.display().to_string())?, text)
-        }
-        None => (
-            RigConfig::default_rig(),
-            crate::config::DEFAULT_RIG_TOML.to_string(),
-        ),
-    };
+    let (cfg, text) = models::load_config_text(a.config.as_deref())?;
     let plan = Plan::from_path(&a.plan)?;
     if cfg.truth.variants.any() {
         println!(
@@ -639,7 +394,7 @@ pub(crate) fn run(a: RunArgs) -> anyhow::Result<()> {
         Some(_) => bail!("--backend hw needs --can, --ldv and --amp"),
     };
     let o = run_session_on(
-        &SimSession {
+        &SessionArgs {
             cfg: &cfg,
             config_text: &text,
             plan: &plan,
@@ -664,87 +419,6 @@ pub(crate) fn run(a: RunArgs) -> anyhow::Result<()> {
             "session aborted: {}",
             o.summary.abort_reason.as_deref().unwrap_or("unknown")
         );
-    }
-    Ok(())
-}
-
-pub(crate) fn replay(a: ReplayArgs) -> anyhow::Result<()> {
-    let r = crate::log::replay::replay(&a.file)?;
-    if !r.complete {
-        println!(
-            "note: the log was not closed ({}); replaying what it holds",
-            r.note.as_deref().unwrap_or("truncated")
-        );
-    }
-    let same = r.logged_steps.len() == r.summary.tests.iter().map(|t| t.steps.len()).sum::<usize>()
-        && r.logged_steps
-            .iter()
-            .zip(r.summary.tests.iter().flat_map(|t| t.steps.iter()))
-            .all(|(a, b)| &a.summary == b);
-    println!(
-        "replay: {} blocks, {:.1} s of rig time, {} steps recomputed ({} the logged summaries)",
-        r.summary.blocks,
-        r.summary.rig_seconds,
-        r.logged_steps.len(),
-        if same {
-            "identical to"
-        } else {
-            "DIFFERENT from"
-        }
-    );
-    let mut summary = r.summary;
-    if a.twin {
-        let (rom, spec, source) = replay_twin_model(&a, r.rig_toml.as_deref())?;
-        let mut copy = match &a.out {
-            Some(out) => {
-                let session = crate::log::read_session(&a.file)?;
-                Some(
-                    crate::twin::TwinLogCopy::create(
-                        out,
-                        &session,
-                        &source,
-                        r.recording.layout.dt(),
-                    )
-                    .with_context(|| format!("--out {}", out.display()))?,
-                )
-            }
-            None => None,
-        };
-        let sink: &mut dyn crate::twin::TwinSink = match &mut copy {
-            Some(c) => c,
-            None => &mut (),
-        };
-        let stats = crate::twin::replay_twin(
-            &r.recording,
-            &mut summary,
-            &rom,
-            &spec,
-            rom.meta.beam_length,
-            sink,
-        )
-        .with_context(|| format!("twin replay of {}", a.file.display()))?;
-        println!(
-            "twin: {source}: {} blocks, {} steps compared, {} contact-solver failures, {:.3} s \
-             per rig second",
-            stats.blocks, stats.steps_compared, stats.solver_failures, stats.wall_per_rig_second
-        );
-        if let (Some(c), Some(out)) = (copy, &a.out) {
-            let st = c
-                .close()
-                .with_context(|| format!("--out {}", out.display()))?;
-            println!(
-                "session log with the re-run twin: {} ({:.1} MB)",
-                out.display(),
-                st.bytes_written as f64 / 1e6
-            );
-        }
-    }
-    if let Some(j) = &a.json {
-        super::write_json(j, &summary)?;
-    }
-    print_summary(&summary);
-    if let Some(j) = &a.json {
-        println!("summary: {}", j.display());
     }
     Ok(())
 }

@@ -10,16 +10,14 @@ use std::time::Instant;
 
 use crate::contact::SweepMethod;
 use crate::plan::Plan;
-use crate::report::{
-    self, Beam, Convergence, ConvergenceKind, ConvergenceSignal, FigureOptions, FrequencyResponse,
-    ScalogramOptions, Source, TestCurve, TimeHistory, TimeWindow,
-};
+use crate::report::stepped::stepped_sine_figures;
+use crate::report::{self, Convergence, ConvergenceKind, ConvergenceSignal, FigureOptions};
 use crate::rom::Rom;
 use crate::sim::convergence::{
     dt_study, modes_study, stable_steps_per_period, ConvergenceSetup, ConvergenceStart,
     ConvergenceStudy,
 };
-use crate::sim::stepped::{run_plan, StepTrace, SteppedSineOptions, TestProgress, TestResult};
+use crate::sim::stepped::{run_plan, SteppedSineOptions, TestProgress, TestResult};
 use crate::sim::{Coupling, IntegratorParameters};
 
 /// `rigtwin simulate`
@@ -210,8 +208,8 @@ pub(crate) fn load_rom(source: &RomSource, quiet: bool) -> anyhow::Result<(Rom, 
         let rom = crate::rom::file::read(p).context("reading the ROM")?;
         return Ok((rom, p.display().to_string()));
     }
-    let cfg = super::rom::load_config(source.config.as_deref())?;
-    let (rom, path, _) = super::demo::cached_rom(&cfg, false, quiet)?;
+    let cfg = super::models::load_config(source.config.as_deref())?;
+    let (rom, path, _) = super::models::cached_rom(&cfg, false, quiet)?;
     Ok((rom, path.display().to_string()))
 }
 
@@ -390,7 +388,7 @@ pub(crate) fn run_plan_to_outputs(
         println!("results: {}", path.display());
     }
     if let Some(dir) = figures {
-        let written = stepped_sine_figures(&results, rom, dir)?;
+        let written = stepped_sine_figures(&results, rom.meta.beam_length, dir)?;
         println!("figures: {} files in {}", written.len(), dir.display());
     }
     Ok(results)
@@ -413,189 +411,6 @@ fn stepped_sine(a: RunArgs) -> anyhow::Result<()> {
             figures: a.figures.as_deref(),
             quiet: a.quiet,
         },
-    )?;
-    Ok(())
-}
-
-fn curve(r: &TestResult) -> TestCurve {
-    let col = |f: fn(&crate::signal::StepMetrics) -> f64| -> Vec<f64> {
-        r.steps.iter().map(|s| f(&s.metrics)).collect()
-    };
-    TestCurve {
-        name: r.spec.name.clone(),
-        level: r.spec.level,
-        direction: r.spec.direction,
-        source: Source::Simulation,
-        omega_ratio: r.steps.iter().map(|s| s.omega_ratio).collect(),
-        rms_upper: col(|m| m.rms_upper),
-        rms_lower: col(|m| m.rms_lower),
-        amp_min_upper: col(|m| m.amp_min_upper),
-        amp_mean_upper: col(|m| m.amp_mean_upper),
-        amp_max_upper: col(|m| m.amp_max_upper),
-        amp_min_lower: col(|m| m.amp_min_lower),
-        amp_mean_lower: col(|m| m.amp_mean_lower),
-        amp_max_lower: col(|m| m.amp_max_lower),
-    }
-}
-
-/// A trace as a time history u/(Omega l), time from the start of the record window.
-fn history(name: &str, tr: &StepTrace, l: f64) -> TimeHistory {
-    let s = 1.0 / (tr.omega * l);
-    let t0 = tr.time.first().copied().unwrap_or(0.0);
-    TimeHistory {
-        name: name.into(),
-        source: Source::Simulation,
-        omega_ratio: tr.omega_ratio,
-        t: tr.time.iter().map(|t| t - t0).collect(),
-        upper: tr.velocity_upper.iter().map(|v| v * s).collect(),
-        lower: tr.velocity_lower.iter().map(|v| v * s).collect(),
-        contact_closed: tr.any_closed.clone(),
-        normal_force: tr.normal_force.clone(),
-        tangential_force: tr.tangential_force.clone(),
-    }
-}
-
-/// Time histories and contact activity (whole records and a zoom on their last five
-/// excitation periods of length `period`, s) of `histories`; returns the files written.
-pub(crate) fn time_figures(
-    histories: &[TimeHistory],
-    period: f64,
-    dir: &Path,
-) -> anyhow::Result<Vec<PathBuf>> {
-    let fig = FigureOptions::default();
-    let mut written = Vec::new();
-    if histories.is_empty() {
-        return Ok(written);
-    }
-    // Zoom: the last five excitation periods of the shortest record.
-    let end = histories
-        .iter()
-        .filter_map(|h| h.t.last().copied())
-        .fold(f64::INFINITY, f64::min);
-    let zoom = TimeWindow {
-        start: (end - 5.0 * period).max(0.0),
-        end,
-    };
-    for (file, window) in [
-        ("time_histories.png", None),
-        ("time_histories_zoom.png", Some(zoom)),
-    ] {
-        let p = dir.join(file);
-        report::time_histories(histories, window, &p, &fig)?;
-        written.push(p);
-    }
-    for (file, window) in [
-        ("contact_activity.png", None),
-        ("contact_activity_zoom.png", Some(zoom)),
-    ] {
-        let p = dir.join(file);
-        match report::contact_activity(histories, window, &p, &fig) {
-            Ok(()) => written.push(p),
-            // No contact in any record: nothing to draw, which is a result, not an error.
-            Err(report::ReportError::NothingToPlot { .. }) => {}
-            Err(e) => return Err(e.into()),
-        }
-    }
-    Ok(written)
-}
-
-/// The figures of a stepped sine; returns the files written.
-pub(crate) fn stepped_sine_figures(
-    results: &[TestResult],
-    rom: &Rom,
-    dir: &Path,
-) -> anyhow::Result<Vec<PathBuf>> {
-    let fig = FigureOptions::default();
-    let mut written = Vec::new();
-    let data = FrequencyResponse {
-        tests: results
-            .iter()
-            .filter(|r| !r.steps.is_empty())
-            .map(curve)
-            .collect(),
-    };
-    let p = dir.join("rms_response.png");
-    report::rms_response(&data, &p, &fig)?;
-    written.push(p);
-    for (beam, file) in [
-        (Beam::Upper, "amplitude_upper.png"),
-        (Beam::Lower, "amplitude_lower.png"),
-    ] {
-        let p = dir.join(file);
-        report::amplitude_range(&data, beam, &p, &fig)?;
-        written.push(p);
-    }
-    let l = rom.meta.beam_length;
-    let histories: Vec<TimeHistory> = results
-        .iter()
-        .filter_map(|r| r.trace.as_ref().map(|tr| history(&r.spec.name, tr, l)))
-        .collect();
-    let period = results
-        .iter()
-        .filter_map(|r| r.trace.as_ref())
-        .map(|t| 2.0 * std::f64::consts::PI / t.omega)
-        .fold(0.0, f64::max);
-    written.extend(time_figures(&histories, period, dir)?);
-    for r in results {
-        let Some(tr) = &r.trace else { continue };
-        let p = dir.join(format!("scalogram_{}.png", sanitize(&r.spec.name)));
-        scalogram_figure(tr, l, &r.spec.name, &p)?;
-        written.push(p);
-    }
-    Ok(written)
-}
-
-pub(crate) fn sanitize(name: &str) -> String {
-    name.chars()
-        .map(|c| {
-            if c.is_ascii_alphanumeric() || c == '-' {
-                c
-            } else {
-                '_'
-            }
-        })
-        .collect()
-}
-
-/// Morlet scalogram of the upper tip velocity u/(Omega l) over the trace (decimated to about
-/// 100 samples per excitation period; analysis frequencies 0.2 to 12 x the excitation).
-fn scalogram_figure(tr: &StepTrace, l: f64, name: &str, out: &Path) -> anyhow::Result<()> {
-    let label = format!(
-        "simulation, {name}, upper beam, Omega/omega_2 = {:.3}",
-        tr.omega_ratio
-    );
-    scalogram_of(&tr.velocity_upper, tr.dt, tr.omega, l, &label, out)
-}
-
-/// Morlet scalogram of a velocity `v` (m/s, sampled every `dt` s) as u/(Omega l) (decimated
-/// to about 100 samples per excitation period; analysis frequencies 0.2 to 12 x the
-/// excitation; log10 colour scale over 4 decades).
-pub(crate) fn scalogram_of(
-    v: &[f64],
-    dt: f64,
-    omega: f64,
-    l: f64,
-    label: &str,
-    out: &Path,
-) -> anyhow::Result<()> {
-    let f_exc = omega / (2.0 * std::f64::consts::PI);
-    let per_period = (2.0 * std::f64::consts::PI / omega / dt).round().max(1.0);
-    let decim = ((per_period / 100.0).floor() as usize).max(1);
-    let s = 1.0 / (omega * l);
-    let x: Vec<f64> = v.iter().step_by(decim).map(|v| v * s).collect();
-    let dt = dt * decim as f64;
-    let freqs = crate::signal::log_spaced(0.2 * f_exc, 12.0 * f_exc, 120)?;
-    let sc = crate::signal::morlet_scalogram(&x, dt, &freqs, &Default::default())?;
-    report::scalogram(
-        &sc,
-        f_exc,
-        &ScalogramOptions {
-            t0: 0.0,
-            decades: 4.0,
-            label: label.to_string(),
-        },
-        out,
-        &FigureOptions::default(),
     )?;
     Ok(())
 }

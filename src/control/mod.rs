@@ -1,26 +1,22 @@
 //! The experiment side's control: closed-loop amplitude control of the fundamental base
 //! displacement ([`amplitude`]), settle detection ([`settle`]), safety limits and abort reasons
 //! ([`safety`]), the stepped-sine procedure as a synchronous state machine over DAQ blocks
-//! ([`procedure`]), the per-step summary from raw counts shared with replay ([`summary`]), the
-//! logged records ([`events`]) and the async session that drives a rig backend
-//! ([`session`]). `[control]` and `[safety]` of the rig description: [`spec`].
+//! ([`procedure`]), the per-step summary from raw counts shared with replay ([`summary`]) and
+//! the logged records ([`events`]). `[control]` and `[safety]` of the rig description:
+//! [`spec`]. The async session that drives a rig backend through the procedure is
+//! `crate::session`'s.
 
 pub mod amplitude;
 pub mod events;
 pub mod procedure;
 pub mod safety;
-pub mod session;
 pub mod settle;
 pub mod spec;
 pub mod summary;
 
 pub use amplitude::{AmplitudeController, ControlUpdate};
 pub use events::{ControlState, EventKind, Phase, SessionEvent};
-pub use procedure::{Procedure, SessionSetup};
+pub use procedure::{BlockOutcome, Procedure, SessionSetup, SetupError};
 pub use safety::{AbortReason, SafetyMonitor};
-pub use session::{
-    run_session, NullRecorder, SessionError, SessionProgress, SessionRecorder, SessionSummary, Tee,
-    TestSummary,
-};
 pub use spec::{ControlSpec, SafetySpec};
 pub use summary::{summarize, window_signals, StepInfo, StepSummary, WindowSignals};

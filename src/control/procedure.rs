@@ -95,21 +95,46 @@ pub struct Procedure {
 /// Blocks a step waits for the drive to take its frequency before the session aborts.
 const MAX_PENDING_BLOCKS: u32 = 20;
 
+/// Why a session cannot run its setup.
+#[derive(Debug, thiserror::Error)]
+pub enum SetupError {
+    /// The plan is invalid.
+    #[error(transparent)]
+    Plan(#[from] crate::plan::PlanError),
+    /// A `[control]` or `[safety]` value is out of range (the message names the key).
+    #[error("{0}")]
+    Settings(String),
+    /// The plan has no test.
+    #[error("plan {plan}: no tests")]
+    NoTests {
+        /// Where the plan came from.
+        plan: String,
+    },
+    /// The DAQ layout has no platform accelerometer (the base motion is not measured).
+    #[error("the DAQ layout has no platform accelerometer")]
+    NoPlatform,
+    /// The frequency or length reference is not positive.
+    #[error("omega_ref and beam_length must be > 0")]
+    BadReference,
+}
+
 impl Procedure {
     /// Procedure for `setup` on a stream with `layout`. Errors name what is missing.
-    pub fn new(setup: &SessionSetup, layout: &DaqLayout) -> Result<Procedure, String> {
-        setup.plan.validate().map_err(|e| e.to_string())?;
-        setup.control.validate()?;
-        setup.safety.validate()?;
+    pub fn new(setup: &SessionSetup, layout: &DaqLayout) -> Result<Procedure, SetupError> {
+        setup.plan.validate()?;
+        setup.control.validate().map_err(SetupError::Settings)?;
+        setup.safety.validate().map_err(SetupError::Settings)?;
         if setup.plan.tests.is_empty() {
-            return Err(format!("plan {}: no tests", setup.plan.source));
+            return Err(SetupError::NoTests {
+                plan: setup.plan.source.clone(),
+            });
         }
         let platform = layout.indices_of(ChannelKind::PlatformAcceleration);
         if platform.is_empty() {
-            return Err("the DAQ layout has no platform accelerometer".into());
+            return Err(SetupError::NoPlatform);
         }
         if !(setup.omega_ref > 0.0 && setup.beam_length > 0.0) {
-            return Err("omega_ref and beam_length must be > 0".into());
+            return Err(SetupError::BadReference);
         }
         let initial = if setup.control.initial_drive_v > 0.0 {
             setup.control.initial_drive_v

@@ -51,6 +51,19 @@ fn first_attempt() -> u32 {
     1
 }
 
+impl StepInfo {
+    /// One past the last sample of the record window (DAQ sample index).
+    pub fn record_end_sample(&self) -> u64 {
+        self.record_first_sample + self.record_samples as u64
+    }
+
+    /// Rig time of the end of the record window for samples `dt` s apart, s (the log time of
+    /// the step's summary and comparisons).
+    pub fn record_end_time(&self, dt: f64) -> f64 {
+        self.record_end_sample() as f64 * dt
+    }
+}
+
 /// One step of a measured stepped sine: the metric keys of `rigtwin simulate` plus the
 /// control quantities.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
@@ -76,10 +89,6 @@ pub struct StepSummary {
     /// [`StepInfo::record_attempt`]).
     #[serde(default = "first_attempt")]
     pub record_attempt: u32,
-    /// The twin over the same window (`rigtwin run --twin`, `rigtwin replay --twin`): its
-    /// metrics and its errors against these.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub twin: Option<crate::twin::TwinComparison>,
 }
 
 /// Errors of a step summary.
@@ -256,6 +265,5 @@ pub fn summarize(
         settled: info.settled,
         record_start_s: info.record_first_sample as f64 * w.dt,
         record_attempt: info.record_attempt,
-        twin: None,
     })
 }

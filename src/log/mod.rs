@@ -10,20 +10,16 @@
 //!   [`LogOptions::flush_interval`], so a crash loses at most the last interval.
 //! - [`reader`]: [`read_session`] reads a file back, also one cut off by a crash.
 //! - `scan` (private): the record walk that recovers truncated files.
-//! - [`recorder`]: the topics of a stepped-sine session and the recorder that logs them.
-//! - [`replay`]: a session's summary recomputed from its raw recording.
-//! - [`live`]: the live view, the session's channels served to the Foxglove app over
-//!   WebSocket (`rigtwin run --foxglove ADDR`), the DAQ decimated for plotting.
+//!
+//! What goes into a session's log (its topics, the recorder, replay) is the session's
+//! (`crate::session`); this module knows MCAP, not sessions.
 //!
 //! Every file carries a metadata record named [`RIGTWIN_METADATA`] with the crate version and
 //! [`FORMAT_VERSION`]; [`SessionRead::require_rigtwin`] checks it.
 
 mod error;
-pub mod live;
 mod options;
 pub mod reader;
-pub mod recorder;
-pub mod replay;
 mod scan;
 mod task;
 pub mod writer;
@@ -53,6 +49,11 @@ pub const RIGTWIN_METADATA: &str = "rigtwin";
 ///   key); steps carry `spectrum_upper`; the twin's predicted channels on `/twin/blocks`.
 ///   Readers of version 2 read version 1 logs (the new fields default).
 pub const FORMAT_VERSION: u32 = 2;
+
+/// Rig time (s) as MCAP log time (ns); negative times are logged at 0.
+pub fn log_time_ns(t: f64) -> u64 {
+    (t.max(0.0) * 1e9).round() as u64
+}
 
 /// Message encoding of every rigtwin channel.
 pub const MESSAGE_ENCODING: &str = "json";

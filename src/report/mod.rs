@@ -18,6 +18,8 @@ pub mod data;
 mod draw;
 pub mod figures;
 mod render;
+pub mod session;
+pub mod stepped;
 
 use std::path::PathBuf;
 
@@ -94,6 +96,15 @@ pub enum ReportError {
         /// Underlying I/O error.
         #[source]
         source: std::io::Error,
+    },
+    /// The signal processing behind the figure failed (e.g. a record too short to analyse).
+    #[error("{path}: {source}")]
+    Signal {
+        /// The figure that was not written.
+        path: PathBuf,
+        /// What failed.
+        #[source]
+        source: crate::signal::SignalError,
     },
     /// plotters failed while drawing or writing the file.
     #[error("{path}: drawing failed: {message}")]

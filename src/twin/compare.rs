@@ -2,25 +2,17 @@
 //! record window go through the same metrics as the measured ones ([`crate::signal`]), and the
 //! differences are reported ([`TwinComparison`], `tests[].steps[].twin` of a session summary).
 //!
-//! [`TwinWindows`] collects the twin's output samples and cuts the record windows out of them;
-//! [`replay_twin`] runs the twin over a recorded session (deterministic: the same recording
-//! and model give the same bits).
-//!
-//! Clearance schedule: a test's clearance applies from the first DAQ block that starts at or
-//! after the sample of its `test_start` event — in the live session the event is logged
-//! after the block that ended the previous test, and the simulated rig changes its clearance
-//! from the next block, so live and replay cut at the same place.
+//! [`TwinWindows`] collects the twin's output samples and cuts the record windows out of them
+//! (the live twin and the twin replay alike).
 
 use std::collections::VecDeque;
 
 use serde::{Deserialize, Serialize};
 
-use crate::control::{EventKind, SessionSummary, StepInfo, StepSummary};
-use crate::log::replay::Recording;
-use crate::rom::Rom;
+use crate::control::{StepInfo, StepSummary};
 use crate::signal::{spectrum_distance_db, StepMetrics, StepRecord};
 
-use super::{Twin, TwinBlock, TwinError, TwinSpec};
+use super::TwinBlock;
 
 /// The twin over one record window, against the measurement.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
@@ -112,10 +104,7 @@ impl TwinWindows {
         measured: &StepSummary,
         dt: f64,
     ) -> Option<Result<TwinComparison, crate::signal::SignalError>> {
-        let (from, to) = (
-            info.record_first_sample,
-            info.record_first_sample + info.record_samples as u64,
-        );
+        let (from, to) = (info.record_first_sample, info.record_end_sample());
         if from < self.first || to > self.end() {
             return None;
         }
@@ -162,7 +151,7 @@ impl TwinWindows {
     ) -> Vec<Completed> {
         let mut done = Vec::new();
         while let Some((info, _)) = pending.front() {
-            let end = info.record_first_sample + info.record_samples as u64;
+            let end = info.record_end_sample();
             if !all && end > self.end() {
                 break;
             }
@@ -193,119 +182,4 @@ fn compare(twin: StepMetrics, measured: &StepMetrics) -> TwinComparison {
         .filter(|d| d.is_finite()),
         metrics: twin,
     }
-}
-
-/// What a twin replay did.
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
-pub struct TwinReplayStats {
-    /// Blocks the twin ran through.
-    pub blocks: u64,
-    /// Steps compared.
-    pub steps_compared: usize,
-    /// Contact-solver failures over the session.
-    pub solver_failures: u64,
-    /// Twin seconds of computation per second of rig time, -.
-    pub wall_per_rig_second: f64,
-}
-
-/// Where a twin replay's output goes besides the summary (e.g. a copy of the session log,
-/// [`super::TwinLogCopy`]). `()` keeps nothing.
-pub trait TwinSink {
-    /// The twin's prediction for one block, in block order.
-    fn block(&mut self, block: &TwinBlock) -> Result<(), TwinError>;
-    /// A step's comparison as its record window completes (`None`: the twin missed part of
-    /// the window).
-    fn step(&mut self, info: &StepInfo, twin: Option<&TwinComparison>) -> Result<(), TwinError>;
-}
-
-impl TwinSink for () {
-    fn block(&mut self, _: &TwinBlock) -> Result<(), TwinError> {
-        Ok(())
-    }
-    fn step(&mut self, _: &StepInfo, _: Option<&TwinComparison>) -> Result<(), TwinError> {
-        Ok(())
-    }
-}
-
-/// Runs the twin (ROM `rom`, settings `spec`, beam length `beam_length` m for the plan's
-/// clearances) over the recording `rec` and writes each step's comparison into `summary`
-/// (`tests[].steps[].twin`, in the order of the recording's record windows; `summary` is the
-/// replayed summary of the same recording). Every output block and comparison also goes to
-/// `sink`.
-pub fn replay_twin(
-    rec: &Recording,
-    summary: &mut SessionSummary,
-    rom: &Rom,
-    spec: &TwinSpec,
-    beam_length: f64,
-    sink: &mut dyn TwinSink,
-) -> Result<TwinReplayStats, TwinError> {
-    let wall = std::time::Instant::now();
-    let mut clearances: VecDeque<(u64, f64)> = VecDeque::new();
-    let mut infos: Vec<StepInfo> = Vec::new();
-    for e in &rec.events {
-        match &e.kind {
-            EventKind::TestStart { clearance, .. } => {
-                clearances.push_back((e.sample, clearance * beam_length))
-            }
-            EventKind::RecordEnd { info } => infos.push(info.clone()),
-            _ => {}
-        }
-    }
-    let first_clearance = clearances.front().map_or(0.0, |c| c.1);
-    let mut twin = Twin::new(rom, spec, &rec.layout, first_clearance)?;
-    let dt = rec.layout.dt();
-    // The measured step summaries are in record-window order.
-    let mut pending: VecDeque<(StepInfo, StepSummary)> =
-        infos.into_iter().zip(summary.steps().cloned()).collect();
-    let mut results: Vec<Option<TwinComparison>> = Vec::new();
-    let mut out = TwinWindows::default();
-    let mut stats = TwinReplayStats::default();
-    let take = |done: Vec<Completed>,
-                results: &mut Vec<Option<TwinComparison>>,
-                sink: &mut dyn TwinSink|
-     -> Result<(), TwinError> {
-        for (info, c) in done {
-            let c = match c {
-                Some(Ok(c)) => Some(c),
-                Some(Err(e)) => {
-                    return Err(TwinError::Metrics(format!(
-                        "metrics of step {} of test {}: {e}",
-                        info.step, info.test
-                    )))
-                }
-                None => None,
-            };
-            sink.step(&info, c.as_ref())?;
-            results.push(c);
-        }
-        Ok(())
-    };
-    for b in &rec.blocks {
-        while let Some(&(sample, c)) = clearances.front() {
-            if sample > b.first_sample {
-                break;
-            }
-            twin.set_clearance(c)?;
-            clearances.pop_front();
-        }
-        let tb = twin.push_block(b)?;
-        stats.blocks += 1;
-        stats.solver_failures += tb
-            .solver_failures
-            .iter()
-            .map(|&f| u64::from(f))
-            .sum::<u64>();
-        sink.block(&tb)?;
-        out.push(&tb);
-        take(out.complete(&mut pending, dt, false), &mut results, sink)?;
-    }
-    take(out.complete(&mut pending, dt, true), &mut results, sink)?;
-    stats.steps_compared = summary.attach_twin(results);
-    let rig = rec
-        .blocks
-        .last()
-        .map_or(0.0, |b| b.time + b.len as f64 / rec.layout.sample_rate);
-    stats.wall_per_rig_second = wall.elapsed().as_secs_f64() / rig.max(f64::MIN_POSITIVE);
-    Ok(stats)
 }

@@ -10,35 +10,34 @@
 //!   blocks the producer, with lag and skipped blocks in its status.
 //! - [`output`]: the logged types ([`TwinBlock`], [`TwinSamples`], [`TwinStatus`],
 //!   [`TwinEvent`]).
-//! - [`compare`]: the per-step comparison with the measurement and the twin replay.
-//! - [`live`]: the twin beside a running session ([`TwinRecorder`]).
-//! - [`relog`]: a copy of a session log with a re-run twin's output ([`TwinLogCopy`]).
+//! - [`compare`]: the per-step comparison with the measurement ([`TwinComparison`]) over the
+//!   record windows cut from the twin's output ([`TwinWindows`]).
+//! - [`clearance`]: the twin's clearance test by test ([`ClearanceSchedule`]), one rule for
+//!   the live twin and the twin replay.
+//!
+//! The twin beside a running session and the twin re-run on a recording are the session's
+//! (`crate::session::twin`, `crate::session::twin_replay`): the twin itself knows no log.
 //! - [`error`]: the error type [`TwinError`].
 
 // NOTE: validation uses negated comparisons such as `!(dt < limit)` on purpose: they reject
 // NaN together with out-of-range values.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod clearance;
 pub mod compare;
 pub mod engine;
 pub mod error;
 pub mod input;
-pub mod live;
 pub mod output;
-pub mod relog;
 pub mod spec;
 pub mod task;
 
-pub use compare::{replay_twin, TwinComparison, TwinReplayStats, TwinSink, TwinWindows};
+pub use clearance::ClearanceSchedule;
+pub use compare::{Completed, TwinComparison, TwinWindows};
 pub use engine::{Twin, TwinCounters};
 pub use error::TwinError;
 pub use input::{InputMap, TwinInput};
-pub use live::{TwinOutcome, TwinRecorder, TwinStepMessage, TOPIC_TWIN_STATUS, TOPIC_TWIN_STEPS};
-pub use output::{
-    TwinBlock, TwinEvent, TwinGap, TwinSamples, TwinStatus, TwinTrace, TOPIC_TWIN_BLOCKS,
-    TWIN_SENSORS,
-};
-pub use relog::{TwinLogCopy, TWIN_REPLAY_METADATA};
+pub use output::{TwinBlock, TwinEvent, TwinGap, TwinSamples, TwinStatus, TwinTrace, TWIN_SENSORS};
 pub use spec::{AfterGap, TwinSpec};
 pub use task::{Pushed, TwinReceiver, TwinTask};
 

@@ -76,7 +76,7 @@ impl TwinBlock {
     }
 }
 
-/// The twin's prediction for one DAQ block as logged on [`TOPIC_TWIN_BLOCKS`]: the channels of
+/// The twin's prediction for one DAQ block as logged on the session's `/twin/blocks`: the channels of
 /// a [`TwinBlock`] in single precision, one array per sensor (so the Foxglove app can plot
 /// `/twin/blocks.upper_tip`), contact as 0/1.
 ///
@@ -115,9 +115,6 @@ pub struct TwinSamples {
     /// Samples at which the twin restarted at rest after a non-finite state.
     pub restarts: Vec<u64>,
 }
-
-/// Topic of the twin's predicted channels ([`TwinSamples`], one message per DAQ block).
-pub const TOPIC_TWIN_BLOCKS: &str = "/twin/blocks";
 
 impl From<&TwinBlock> for TwinSamples {
     fn from(b: &TwinBlock) -> TwinSamples {

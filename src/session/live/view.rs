@@ -1,39 +1,21 @@
 //! Starting and stopping the live view: the WebSocket server on its own runtime, the publisher
 //! thread, and the [`LiveRecorder`] the session records into.
 
-use std::collections::BTreeMap;
 use std::net::SocketAddr;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::mpsc::{self, SyncSender, TrySendError};
 use std::sync::Arc;
 use std::thread::JoinHandle;
 
-use crate::control::{ControlState, SessionEvent, SessionRecorder, StepInfo, StepSummary};
-use crate::log::recorder::{StatusMessage, StepMessage};
+use crate::control::{ControlState, SessionEvent, StepInfo, StepSummary};
 use crate::rig::{DaqBlock, DaqLayout, RigStatus};
-use crate::twin::{TwinBlock, TwinStatus, TwinStepMessage};
+use crate::twin::{TwinBlock, TwinStatus};
 
+use super::super::recorder::{RecordError, SessionRecorder};
+use super::super::topics::{StatusMessage, StepMessage, TwinStepMessage};
 use super::publisher::{Channels, LayoutLatch, Publisher};
+use super::record::{LiveStats, Record};
 use super::{LiveError, LiveOptions};
-
-/// What the session hands to the publisher thread.
-pub(super) enum Record {
-    Layout(DaqLayout),
-    Block(DaqBlock),
-    Control(ControlState),
-    Event(SessionEvent),
-    Status(StatusMessage),
-    /// A finished step and its log time (end of its record window), s.
-    Step(f64, Box<StepMessage>),
-    /// The live twin's prediction for one DAQ block.
-    TwinBlock(Box<TwinBlock>),
-    /// The live twin's status at a rig time, s.
-    TwinStatus(f64, Box<TwinStatus>),
-    /// The live twin's comparison of a step and its log time (end of its record window), s.
-    TwinStep(f64, Box<TwinStepMessage>),
-    /// Publish what is queued, close the open decimation bin and stop.
-    Close,
-}
 
 /// State shared by the recorder and the view.
 #[derive(Default)]
@@ -42,26 +24,6 @@ struct Shared {
     dropped: AtomicU64,
     /// Set when the view stops: later records are dropped silently.
     closed: AtomicBool,
-}
-
-/// What a live view did.
-#[derive(Clone, Debug, Default, PartialEq, Eq)]
-pub struct LiveStats {
-    /// Messages handed to the server per topic while at least one client was subscribed to it.
-    pub sent: BTreeMap<String, u64>,
-    /// Decimated DAQ points made (also those no client was subscribed to).
-    pub points: u64,
-    /// Records the session could not queue (the publisher thread was behind); never waited for.
-    pub dropped_records: u64,
-    /// DAQ blocks skipped by the decimator because they did not match the layout.
-    pub skipped_blocks: u64,
-}
-
-impl LiveStats {
-    /// Messages handed to the server, all topics.
-    pub fn sent_total(&self) -> u64 {
-        self.sent.values().sum()
-    }
 }
 
 /// The session side of the live view: queues every record for the publisher thread. Never
@@ -114,23 +76,23 @@ impl LiveRecorder {
 }
 
 impl SessionRecorder for LiveRecorder {
-    fn layout(&mut self, layout: &DaqLayout) -> Result<(), String> {
+    fn layout(&mut self, layout: &DaqLayout) -> Result<(), RecordError> {
         self.offer(|| Record::Layout(layout.clone()));
         Ok(())
     }
-    fn block(&mut self, block: &DaqBlock) -> Result<(), String> {
+    fn block(&mut self, block: &DaqBlock) -> Result<(), RecordError> {
         self.offer(|| Record::Block(block.clone()));
         Ok(())
     }
-    fn control(&mut self, state: &ControlState) -> Result<(), String> {
+    fn control(&mut self, state: &ControlState) -> Result<(), RecordError> {
         self.offer(|| Record::Control(state.clone()));
         Ok(())
     }
-    fn event(&mut self, event: &SessionEvent) -> Result<(), String> {
+    fn event(&mut self, event: &SessionEvent) -> Result<(), RecordError> {
         self.offer(|| Record::Event(event.clone()));
         Ok(())
     }
-    fn status(&mut self, time: f64, status: &RigStatus) -> Result<(), String> {
+    fn status(&mut self, time: f64, status: &RigStatus) -> Result<(), RecordError> {
         self.offer(|| {
             Record::Status(StatusMessage {
                 block_time: time,
@@ -139,7 +101,12 @@ impl SessionRecorder for LiveRecorder {
         });
         Ok(())
     }
-    fn step(&mut self, time: f64, info: &StepInfo, summary: &StepSummary) -> Result<(), String> {
+    fn step(
+        &mut self,
+        time: f64,
+        info: &StepInfo,
+        summary: &StepSummary,
+    ) -> Result<(), RecordError> {
         self.offer(|| {
             Record::Step(
                 time,

@@ -11,19 +11,18 @@ use serde::ser::{SerializeMap, Serializer};
 use serde::Serialize;
 
 use crate::control::{ControlState, SessionEvent};
-use crate::log::recorder::{
-    log_time_ns, StatusMessage, StepMessage, TOPIC_CONTROL, TOPIC_EVENTS, TOPIC_LAYOUT,
-    TOPIC_STATUS, TOPIC_STEPS,
-};
-use crate::log::{MESSAGE_ENCODING, SCHEMA_ENCODING};
+use crate::log::{log_time_ns, MESSAGE_ENCODING, SCHEMA_ENCODING};
 use crate::rig::DaqLayout;
+use crate::twin::{TwinBlock, TwinStatus};
 
-use super::decimate::{bin_samples, DecimatedPoint, MinMaxDecimator};
-use super::view::{LiveStats, Record};
-use super::{
-    LIVE_DAQ_SCHEMA, LIVE_TWIN_CHANNELS, LIVE_TWIN_SCHEMA, TOPIC_LIVE_DAQ, TOPIC_LIVE_TWIN,
+use super::super::topics::{
+    StatusMessage, StepMessage, TwinStepMessage, TOPIC_CONTROL, TOPIC_EVENTS, TOPIC_LAYOUT,
+    TOPIC_LIVE_DAQ, TOPIC_LIVE_TWIN, TOPIC_STATUS, TOPIC_STEPS, TOPIC_TWIN_STATUS,
+    TOPIC_TWIN_STEPS,
 };
-use crate::twin::{TwinBlock, TwinStatus, TwinStepMessage, TOPIC_TWIN_STATUS, TOPIC_TWIN_STEPS};
+use super::decimate::{bin_samples, DecimatedPoint, MinMaxDecimator};
+use super::record::{LiveStats, Record};
+use super::{LIVE_DAQ_SCHEMA, LIVE_TWIN_CHANNELS, LIVE_TWIN_SCHEMA};
 
 /// Keys of a live DAQ point besides the channels; a channel with one of these names is published
 /// as `ch_NAME`.

@@ -1,202 +1,33 @@
-//! The async stepped-sine session: drives a [`RigBackend`] through the [`Procedure`], checks
-//! the safety limits on every block, hands every record to a [`SessionRecorder`] (the MCAP
-//! log, teed with the live view by [`Tee`]) and ramps the drive down at the end or on an
-//! abort, recording the blocks of the ramp.
+//! The async stepped-sine session: drives a [`RigBackend`] through the control
+//! [`Procedure`], checks the safety limits on every block, hands every record to a
+//! [`SessionRecorder`] (the MCAP log, teed with the live view and the live twin by [`Tee`])
+//! and ramps the drive down at the end or on an abort, recording the blocks of the ramp.
 //!
 //! Shutdown (Ctrl-C) is a future passed in: when it completes, the session aborts with
 //! [`AbortReason::Operator`]. The DAQ watchdog is a wall-clock timeout on every block.
+//!
+//! [`Tee`]: super::recorder::Tee
 
 use std::future::Future;
 use std::time::Duration;
 
+use crate::control::{
+    AbortReason, BlockOutcome, ControlState, EventKind, Phase, Procedure, SafetyMonitor,
+    SessionEvent, SessionSetup, SetupError,
+};
 use crate::rig::{DaqBlock, DaqLayout, DriveCommand, RigBackend, RigStatus};
 
-use super::events::{ControlState, EventKind, Phase, SessionEvent};
-use super::procedure::{BlockOutcome, Procedure, SessionSetup};
-use super::safety::{AbortReason, SafetyMonitor};
-use super::summary::{StepInfo, StepSummary};
+use super::recorder::{RecordError, SessionRecorder};
+use super::summary::SessionSummary;
 
-/// Where a session's records go. Implementations must not block (the MCAP recorder queues to
-/// a writer thread); an error aborts the session.
-pub trait SessionRecorder: Send {
-    /// The DAQ layout, once before the first block.
-    fn layout(&mut self, layout: &DaqLayout) -> Result<(), String>;
-    /// A raw DAQ block.
-    fn block(&mut self, block: &DaqBlock) -> Result<(), String>;
-    /// The control state after a block.
-    fn control(&mut self, state: &ControlState) -> Result<(), String>;
-    /// A session event.
-    fn event(&mut self, event: &SessionEvent) -> Result<(), String>;
-    /// Rig status (about once per second of rig time).
-    fn status(&mut self, time: f64, status: &RigStatus) -> Result<(), String>;
-    /// A finished step.
-    fn step(&mut self, time: f64, info: &StepInfo, summary: &StepSummary) -> Result<(), String>;
-}
+/// Rig status is recorded about this often (rig time), s: with the first block, then with the
+/// first block at least this long after the last record.
+pub const STATUS_PERIOD_S: f64 = 1.0;
 
-/// A recorder that keeps nothing.
-#[derive(Debug, Default, Clone, Copy)]
-pub struct NullRecorder;
-
-impl SessionRecorder for NullRecorder {
-    fn layout(&mut self, _: &DaqLayout) -> Result<(), String> {
-        Ok(())
-    }
-    fn block(&mut self, _: &DaqBlock) -> Result<(), String> {
-        Ok(())
-    }
-    fn control(&mut self, _: &ControlState) -> Result<(), String> {
-        Ok(())
-    }
-    fn event(&mut self, _: &SessionEvent) -> Result<(), String> {
-        Ok(())
-    }
-    fn status(&mut self, _: f64, _: &RigStatus) -> Result<(), String> {
-        Ok(())
-    }
-    fn step(&mut self, _: f64, _: &StepInfo, _: &StepSummary) -> Result<(), String> {
-        Ok(())
-    }
-}
-
-/// No recorder: `None` keeps nothing (e.g. the live view when `--foxglove` is not given).
-impl<R: SessionRecorder> SessionRecorder for Option<R> {
-    fn layout(&mut self, layout: &DaqLayout) -> Result<(), String> {
-        self.as_mut().map_or(Ok(()), |r| r.layout(layout))
-    }
-    fn block(&mut self, block: &DaqBlock) -> Result<(), String> {
-        self.as_mut().map_or(Ok(()), |r| r.block(block))
-    }
-    fn control(&mut self, state: &ControlState) -> Result<(), String> {
-        self.as_mut().map_or(Ok(()), |r| r.control(state))
-    }
-    fn event(&mut self, event: &SessionEvent) -> Result<(), String> {
-        self.as_mut().map_or(Ok(()), |r| r.event(event))
-    }
-    fn status(&mut self, time: f64, status: &RigStatus) -> Result<(), String> {
-        self.as_mut().map_or(Ok(()), |r| r.status(time, status))
-    }
-    fn step(&mut self, time: f64, info: &StepInfo, summary: &StepSummary) -> Result<(), String> {
-        self.as_mut()
-            .map_or(Ok(()), |r| r.step(time, info, summary))
-    }
-}
-
-/// Hands every record to two recorders, the first then the second (e.g. the MCAP log, then the
-/// live view). Both always get the record; the first error (the first recorder's when both
-/// fail) is returned.
-#[derive(Debug, Default, Clone, Copy)]
-pub struct Tee<A, B>(pub A, pub B);
-
-impl<A: SessionRecorder, B: SessionRecorder> SessionRecorder for Tee<A, B> {
-    fn layout(&mut self, layout: &DaqLayout) -> Result<(), String> {
-        let a = self.0.layout(layout);
-        a.and(self.1.layout(layout))
-    }
-    fn block(&mut self, block: &DaqBlock) -> Result<(), String> {
-        let a = self.0.block(block);
-        a.and(self.1.block(block))
-    }
-    fn control(&mut self, state: &ControlState) -> Result<(), String> {
-        let a = self.0.control(state);
-        a.and(self.1.control(state))
-    }
-    fn event(&mut self, event: &SessionEvent) -> Result<(), String> {
-        let a = self.0.event(event);
-        a.and(self.1.event(event))
-    }
-    fn status(&mut self, time: f64, status: &RigStatus) -> Result<(), String> {
-        let a = self.0.status(time, status);
-        a.and(self.1.status(time, status))
-    }
-    fn step(&mut self, time: f64, info: &StepInfo, summary: &StepSummary) -> Result<(), String> {
-        let a = self.0.step(time, info, summary);
-        a.and(self.1.step(time, info, summary))
-    }
-}
-
-/// One test of a session summary.
-#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct TestSummary {
-    /// Test name.
-    pub name: String,
-    /// Base level / l.
-    pub level: f64,
-    /// "up" or "down".
-    pub direction: String,
-    /// Clearance / l of the plan.
-    pub clearance: f64,
-    /// Finished steps.
-    pub steps: Vec<StepSummary>,
-}
-
-/// The summary of a session: reproducible from the log alone (`rigtwin replay`), so nothing
-/// here depends on the wall clock.
-#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct SessionSummary {
-    /// Plan name.
-    pub plan: String,
-    /// Whether the session was aborted.
-    pub aborted: bool,
-    /// Why, as text.
-    pub abort_reason: Option<String>,
-    /// DAQ blocks received (including the ramp-down).
-    pub blocks: u64,
-    /// Rig time covered by the blocks, s.
-    pub rig_seconds: f64,
-    /// The tests that started, with their finished steps.
-    pub tests: Vec<TestSummary>,
-}
-
-impl SessionSummary {
-    /// Adds an event's effect on the summary (shared with replay).
-    pub fn apply_event(&mut self, event: &SessionEvent) {
-        match &event.kind {
-            EventKind::SessionStart { plan, .. } => self.plan = plan.clone(),
-            EventKind::TestStart {
-                test,
-                level,
-                direction,
-                clearance,
-            } => self.tests.push(TestSummary {
-                name: test.clone(),
-                level: *level,
-                direction: direction.clone(),
-                clearance: *clearance,
-                steps: Vec::new(),
-            }),
-            EventKind::Abort { message, .. } => {
-                self.aborted = true;
-                self.abort_reason = Some(message.clone());
-            }
-            _ => {}
-        }
-    }
-
-    /// Adds a finished step to its test (the last test of that name).
-    pub fn push_step(&mut self, test: &str, summary: StepSummary) {
-        if let Some(t) = self.tests.iter_mut().rev().find(|t| t.name == test) {
-            t.steps.push(summary);
-        }
-    }
-
-    /// Every step's measured summary, in record-window order (tests in order, steps in order).
-    pub fn steps(&self) -> impl Iterator<Item = &StepSummary> {
-        self.tests.iter().flat_map(|t| t.steps.iter())
-    }
-
-    /// Sets the twin's comparison of every step, in record-window order; returns how many
-    /// steps have one.
-    pub fn attach_twin(
-        &mut self,
-        comparisons: impl IntoIterator<Item = Option<crate::twin::TwinComparison>>,
-    ) -> usize {
-        let slots = self.tests.iter_mut().flat_map(|t| t.steps.iter_mut());
-        let mut n = 0;
-        for (slot, c) in slots.zip(comparisons) {
-            n += usize::from(c.is_some());
-            slot.twin = c;
-        }
-        n
+/// A recorder's error as the abort it causes.
+fn log_abort(e: RecordError) -> AbortReason {
+    AbortReason::Log {
+        message: e.to_string(),
     }
 }
 
@@ -220,13 +51,13 @@ pub struct SessionProgress {
 pub enum SessionError {
     /// The plan or settings cannot run.
     #[error("session setup: {0}")]
-    Setup(String),
+    Setup(#[from] SetupError),
     /// The backend did not start.
     #[error(transparent)]
     Rig(#[from] crate::rig::RigError),
     /// The recorder failed before the start.
     #[error("session log: {0}")]
-    Log(String),
+    Log(#[from] RecordError),
 }
 
 struct Run<'a, R: SessionRecorder> {
@@ -241,21 +72,15 @@ struct Run<'a, R: SessionRecorder> {
 impl<R: SessionRecorder> Run<'_, R> {
     fn outcome(&mut self, out: &BlockOutcome) -> Result<(), AbortReason> {
         if let Some(c) = &out.control {
-            self.recorder
-                .control(c)
-                .map_err(|message| AbortReason::Log { message })?;
+            self.recorder.control(c).map_err(log_abort)?;
         }
         for e in &out.events {
             self.summary.apply_event(e);
-            self.recorder
-                .event(e)
-                .map_err(|message| AbortReason::Log { message })?;
+            self.recorder.event(e).map_err(log_abort)?;
         }
         for (info, s) in &out.steps {
-            let end = (info.record_first_sample + info.record_samples as u64) as f64 * self.dt;
-            self.recorder
-                .step(end, info, s)
-                .map_err(|message| AbortReason::Log { message })?;
+            let end = info.record_end_time(self.dt);
+            self.recorder.step(end, info, s).map_err(log_abort)?;
             self.summary.push_step(&info.test, s.clone());
         }
         Ok(())
@@ -267,17 +92,15 @@ impl<R: SessionRecorder> Run<'_, R> {
         layout: &DaqLayout,
         status: &RigStatus,
     ) -> Result<(), AbortReason> {
-        self.recorder
-            .block(block)
-            .map_err(|message| AbortReason::Log { message })?;
+        self.recorder.block(block).map_err(log_abort)?;
         self.summary.blocks += 1;
         self.last_block_end = block.time + block.len as f64 / layout.sample_rate;
         self.summary.rig_seconds = self.last_block_end;
-        if block.time - self.last_status >= 1.0 || block.seq == 0 {
+        if block.time - self.last_status >= STATUS_PERIOD_S || block.seq == 0 {
             self.last_status = block.time;
             self.recorder
                 .status(block.time, status)
-                .map_err(|message| AbortReason::Log { message })?;
+                .map_err(log_abort)?;
         }
         Ok(())
     }
@@ -294,21 +117,14 @@ pub async fn run_session<B: RigBackend, R: SessionRecorder>(
     progress: &mut (dyn FnMut(&SessionProgress) + Send),
 ) -> Result<SessionSummary, SessionError> {
     let layout = backend.layout().clone();
-    let mut procedure = Procedure::new(setup, &layout).map_err(SessionError::Setup)?;
+    let mut procedure = Procedure::new(setup, &layout)?;
     let mut safety = SafetyMonitor::new(&setup.safety, &layout, setup.control.contact_threshold_v);
     let timeout = Duration::from_secs_f64(setup.safety.daq_timeout_s);
-    recorder.layout(&layout).map_err(SessionError::Log)?;
+    recorder.layout(&layout)?;
     backend.start().await?;
     let mut run = Run {
         recorder,
-        summary: SessionSummary {
-            plan: String::new(),
-            aborted: false,
-            abort_reason: None,
-            blocks: 0,
-            rig_seconds: 0.0,
-            tests: Vec::new(),
-        },
+        summary: SessionSummary::default(),
         last_status: f64::NEG_INFINITY,
         last_block_end: 0.0,
         dt: layout.dt(),

@@ -1,62 +1,29 @@
 //! The live twin in a session (`rigtwin run --twin`): a [`SessionRecorder`] that hands every
 //! DAQ block to the [`TwinTask`] (never waiting: a full queue skips the block and says so),
-//! applies each test's clearance from the first block at or after its `test_start` sample
-//! (the rule of [`super::replay_twin`], so live and replay cut at the same place), collects
-//! the twin's output, and compares it with the measurement as each record window completes.
+//! applies each test's clearance by the [`ClearanceSchedule`] (the rule replay uses too, so live
+//! and replay cut at the same place), collects the twin's output, and compares it with the
+//! measurement as each record window completes.
 //!
-//! Logged (when given a log): `/twin/blocks` (the predicted channels of every block the twin
-//! processed, [`TwinSamples`]), `/twin/status` (lag, queue, skipped blocks, speed) about once a
-//! second of rig time, `/twin/steps` (the comparison of every step) as it completes. With a
-//! live view ([`TwinRecorder::with_live`]) the same status and comparisons, and the predicted
-//! channels decimated, go to the Foxglove app.
+//! Logged (when given a log): [`TOPIC_TWIN_BLOCKS`] (the predicted channels of every block the
+//! twin processed, [`TwinSamples`]), [`TOPIC_TWIN_STATUS`] (lag, queue, skipped blocks, speed)
+//! about once a second of rig time, [`TOPIC_TWIN_STEPS`] (the comparison of every step) as it
+//! completes. With a live view ([`TwinRecorder::with_live`]) the same status and comparisons,
+//! and the predicted channels decimated, go to the Foxglove app.
 
 use std::collections::VecDeque;
 
-use serde::{Deserialize, Serialize};
-
-use crate::control::{EventKind, SessionEvent, SessionRecorder, StepInfo, StepSummary};
-use crate::log::live::LiveRecorder;
-use crate::log::recorder::log_time_ns;
-use crate::log::{LogChannel, LogHandle};
+use crate::control::{ControlState, SessionEvent, StepInfo, StepSummary};
+use crate::log::{log_time_ns, LogChannel, LogError, LogHandle};
 use crate::rig::{DaqBlock, DaqLayout, RigStatus};
+use crate::twin::{
+    ClearanceSchedule, Pushed, TwinComparison, TwinEvent, TwinReceiver, TwinSamples, TwinStatus,
+    TwinTask, TwinWindows,
+};
 
-use super::output::{TwinSamples, TOPIC_TWIN_BLOCKS};
-use super::{Pushed, TwinComparison, TwinEvent, TwinReceiver, TwinStatus, TwinTask, TwinWindows};
-
-/// Topic of the twin's status.
-pub const TOPIC_TWIN_STATUS: &str = "/twin/status";
-/// Topic of the twin's per-step comparison.
-pub const TOPIC_TWIN_STEPS: &str = "/twin/steps";
-
-/// One step's comparison, as logged on [`TOPIC_TWIN_STEPS`].
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
-pub struct TwinStepMessage {
-    /// Test name.
-    pub test: String,
-    /// Step index.
-    pub step: usize,
-    /// Omega / omega_2.
-    pub omega_ratio: f64,
-    /// The comparison; `None` when the twin missed samples of the window (skipped blocks).
-    pub twin: Option<TwinComparison>,
-}
-
-impl TwinStepMessage {
-    /// The message of a step's comparison.
-    pub fn of(info: &StepInfo, twin: Option<&TwinComparison>) -> TwinStepMessage {
-        TwinStepMessage {
-            test: info.test.clone(),
-            step: info.step,
-            omega_ratio: info.omega_ratio,
-            twin: twin.cloned(),
-        }
-    }
-
-    /// Its log time: the end of the step's record window (samples `dt` s apart), s.
-    pub fn log_time(info: &StepInfo, dt: f64) -> f64 {
-        (info.record_first_sample + info.record_samples as u64) as f64 * dt
-    }
-}
+use super::live::LiveRecorder;
+use super::recorder::{RecordError, SessionRecorder};
+use super::runner::STATUS_PERIOD_S;
+use super::topics::{TwinStepMessage, TOPIC_TWIN_BLOCKS, TOPIC_TWIN_STATUS, TOPIC_TWIN_STEPS};
 
 struct Logs {
     log: LogHandle,
@@ -69,9 +36,8 @@ struct Logs {
 pub struct TwinRecorder {
     task: TwinTask,
     rx: TwinReceiver,
-    beam_length: f64,
     dt: f64,
-    clearances: VecDeque<(u64, f64)>,
+    clearances: ClearanceSchedule,
     windows: VecDeque<(StepInfo, StepSummary)>,
     out: TwinWindows,
     /// Comparisons in step order (`None`: the twin missed part of the window).
@@ -112,7 +78,7 @@ impl TwinRecorder {
         beam_length: f64,
         dt: f64,
         log: Option<LogHandle>,
-    ) -> Result<TwinRecorder, crate::log::LogError> {
+    ) -> Result<TwinRecorder, LogError> {
         let logs = match log {
             Some(log) => Some(Logs {
                 blocks: log.channel(TOPIC_TWIN_BLOCKS)?,
@@ -125,9 +91,8 @@ impl TwinRecorder {
         Ok(TwinRecorder {
             task,
             rx,
-            beam_length,
             dt,
-            clearances: VecDeque::new(),
+            clearances: ClearanceSchedule::new(beam_length),
             windows: VecDeque::new(),
             out: TwinWindows::default(),
             results: Vec::new(),
@@ -189,7 +154,7 @@ impl TwinRecorder {
                 }
                 None => None,
             };
-            let end = TwinStepMessage::log_time(&info, self.dt);
+            let end = info.record_end_time(self.dt);
             let message = TwinStepMessage::of(&info, c.as_ref());
             if let Some(l) = &self.logs {
                 let _ = l.log.log(&l.steps, log_time_ns(end), &message);
@@ -221,22 +186,18 @@ impl TwinRecorder {
 }
 
 impl SessionRecorder for TwinRecorder {
-    fn layout(&mut self, _: &DaqLayout) -> Result<(), String> {
+    fn layout(&mut self, _: &DaqLayout) -> Result<(), RecordError> {
         Ok(())
     }
 
-    fn block(&mut self, block: &DaqBlock) -> Result<(), String> {
+    fn block(&mut self, block: &DaqBlock) -> Result<(), RecordError> {
         if self.failed {
             return Ok(());
         }
-        while let Some(&(sample, c)) = self.clearances.front() {
-            if sample > block.first_sample {
-                break;
-            }
+        while let Some(c) = self.clearances.next_due(block.first_sample) {
             if let Err(e) = self.task.set_clearance(c) {
                 self.fail(e);
             }
-            self.clearances.pop_front();
         }
         match self.task.push(block) {
             Ok(Pushed::Queued) => {}
@@ -244,7 +205,7 @@ impl SessionRecorder for TwinRecorder {
             Err(e) => self.fail(e),
         }
         self.drain(false);
-        if block.time - self.last_status >= 1.0 {
+        if block.time - self.last_status >= STATUS_PERIOD_S {
             self.last_status = block.time;
             let status = self.task.status();
             if let Some(l) = &self.logs {
@@ -257,23 +218,20 @@ impl SessionRecorder for TwinRecorder {
         Ok(())
     }
 
-    fn control(&mut self, _: &crate::control::ControlState) -> Result<(), String> {
+    fn control(&mut self, _: &ControlState) -> Result<(), RecordError> {
         Ok(())
     }
 
-    fn event(&mut self, event: &SessionEvent) -> Result<(), String> {
-        if let EventKind::TestStart { clearance, .. } = &event.kind {
-            self.clearances
-                .push_back((event.sample, clearance * self.beam_length));
-        }
+    fn event(&mut self, event: &SessionEvent) -> Result<(), RecordError> {
+        self.clearances.on_event(event);
         Ok(())
     }
 
-    fn status(&mut self, _: f64, _: &RigStatus) -> Result<(), String> {
+    fn status(&mut self, _: f64, _: &RigStatus) -> Result<(), RecordError> {
         Ok(())
     }
 
-    fn step(&mut self, _: f64, info: &StepInfo, summary: &StepSummary) -> Result<(), String> {
+    fn step(&mut self, _: f64, info: &StepInfo, summary: &StepSummary) -> Result<(), RecordError> {
         self.windows.push_back((info.clone(), summary.clone()));
         self.drain(false);
         Ok(())

@@ -3,7 +3,7 @@
 //!
 //! - [`LiveView::start`] binds the server (its own one-thread tokio runtime) and starts the
 //!   publisher thread; it returns the [`LiveRecorder`] (a
-//!   [`SessionRecorder`](crate::control::SessionRecorder)) and the [`LiveView`] that stops both.
+//!   [`SessionRecorder`](super::SessionRecorder)) and the [`LiveView`] that stops both.
 //! - The recorder hands every record to the publisher thread over a bounded queue with
 //!   `try_send`: it never blocks and never fails the session; a full queue drops the record
 //!   (counted in [`LiveStats::dropped_records`]).
@@ -20,32 +20,29 @@
 //! MCAP log, and [`TOPIC_LIVE_TWIN`], its predicted channels decimated in the bins of
 //! [`TOPIC_LIVE_DAQ`] (its raw `/twin/blocks` are the log's only).
 //!
-//! [`TOPIC_LAYOUT`]: super::recorder::TOPIC_LAYOUT
-//! [`TOPIC_CONTROL`]: super::recorder::TOPIC_CONTROL
-//! [`TOPIC_EVENTS`]: super::recorder::TOPIC_EVENTS
-//! [`TOPIC_STATUS`]: super::recorder::TOPIC_STATUS
-//! [`TOPIC_STEPS`]: super::recorder::TOPIC_STEPS
-//! [`TOPIC_TWIN_STATUS`]: crate::twin::TOPIC_TWIN_STATUS
-//! [`TOPIC_TWIN_STEPS`]: crate::twin::TOPIC_TWIN_STEPS
+//! [`TOPIC_LAYOUT`]: super::topics::TOPIC_LAYOUT
+//! [`TOPIC_CONTROL`]: super::topics::TOPIC_CONTROL
+//! [`TOPIC_EVENTS`]: super::topics::TOPIC_EVENTS
+//! [`TOPIC_STATUS`]: super::topics::TOPIC_STATUS
+//! [`TOPIC_STEPS`]: super::topics::TOPIC_STEPS
+//! [`TOPIC_TWIN_STATUS`]: super::topics::TOPIC_TWIN_STATUS
+//! [`TOPIC_TWIN_STEPS`]: super::topics::TOPIC_TWIN_STEPS
 
 pub mod decimate;
 mod publisher;
+mod record;
 mod view;
 
 use std::net::{IpAddr, Ipv4Addr, SocketAddr};
 use std::time::Duration;
 
-pub use view::{LiveRecorder, LiveStats, LiveView};
+pub use record::LiveStats;
+pub use view::{LiveRecorder, LiveView};
 
-/// Decimated DAQ points (one message per time point, every channel).
-pub const TOPIC_LIVE_DAQ: &str = "/live/daq";
+pub use super::topics::{TOPIC_LIVE_DAQ, TOPIC_LIVE_TWIN};
 
 /// Schema name of [`TOPIC_LIVE_DAQ`] (its JSON Schema lists the session's channels).
 pub const LIVE_DAQ_SCHEMA: &str = "LiveDaqPoint";
-
-/// The live twin's prediction decimated like [`TOPIC_LIVE_DAQ`], in the same bins (sessions run
-/// with `--twin`): `/live/twin.upper_tip.max` beside `/live/daq.vibrometer.max`.
-pub const TOPIC_LIVE_TWIN: &str = "/live/twin";
 
 /// Schema name of [`TOPIC_LIVE_TWIN`].
 pub const LIVE_TWIN_SCHEMA: &str = "LiveTwinPoint";

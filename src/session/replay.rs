@@ -1,15 +1,21 @@
 //! Replay of a recorded session: every per-step metric recomputed from the raw DAQ blocks of
 //! the log with the live session's own code ([`crate::control::summarize`]), and the session
 //! summary rebuilt from the logged events. For a session that ran to its end (or aborted
-//! cleanly) the result equals the live summary bit for bit.
+//! cleanly) the result equals the live summary bit for bit. The twin re-run on a recording is
+//! the sibling module `twin_replay`'s.
 
 use std::path::Path;
 
-use crate::control::{summarize, EventKind, SessionEvent, SessionSummary, StepInfo};
+use crate::config::RigConfig;
+use crate::control::{summarize, EventKind, SessionEvent, StepInfo};
+use crate::log::{read_session, LogReadError, SessionRead};
 use crate::rig::{DaqBlock, DaqLayout};
+use crate::twin::TwinSpec;
 
-use super::recorder::{StepMessage, TOPIC_DAQ, TOPIC_EVENTS, TOPIC_LAYOUT, TOPIC_STEPS};
-use super::{read_session, LogReadError, SessionRead};
+use super::summary::SessionSummary;
+use super::topics::{
+    StepMessage, RIG_ATTACHMENT, TOPIC_DAQ, TOPIC_EVENTS, TOPIC_LAYOUT, TOPIC_STEPS,
+};
 
 /// Errors of a replay.
 #[derive(Debug, thiserror::Error)]
@@ -55,6 +61,23 @@ pub struct Recording {
     pub blocks: Vec<DaqBlock>,
     /// Events, in order.
     pub events: Vec<SessionEvent>,
+}
+
+impl Recording {
+    /// Rig time covered by the blocks, s (the end of the last block).
+    pub fn rig_seconds(&self) -> f64 {
+        self.blocks
+            .last()
+            .map_or(0.0, |b| b.time + b.len as f64 / self.layout.sample_rate)
+    }
+
+    /// The steps' record windows, in order (from the `record_end` events).
+    pub fn record_windows(&self) -> impl Iterator<Item = &StepInfo> {
+        self.events.iter().filter_map(|e| match &e.kind {
+            EventKind::RecordEnd { info } => Some(info),
+            _ => None,
+        })
+    }
 }
 
 fn content(path: &Path, message: impl Into<String>) -> ReplayError {
@@ -114,7 +137,7 @@ pub fn window_counts(rec: &Recording, info: &StepInfo) -> Option<Vec<i32>> {
     let mut filled = 0usize;
     for b in &rec.blocks {
         let (b0, b1) = (b.first_sample, b.first_sample + b.len as u64);
-        let (w0, w1) = (first, first + n as u64);
+        let (w0, w1) = (first, info.record_end_sample());
         let (s, e) = (b0.max(w0), b1.min(w1));
         if s >= e {
             continue;
@@ -133,15 +156,9 @@ pub fn replay(path: &Path) -> Result<Replay, ReplayError> {
     let session = read_session(path)?;
     let rec = recording(&session)?;
     let mut summary = SessionSummary {
-        plan: String::new(),
-        aborted: false,
-        abort_reason: None,
         blocks: rec.blocks.len() as u64,
-        rig_seconds: rec
-            .blocks
-            .last()
-            .map_or(0.0, |b| b.time + b.len as f64 / rec.layout.sample_rate),
-        tests: Vec::new(),
+        rig_seconds: rec.rig_seconds(),
+        ..SessionSummary::default()
     };
     for e in &rec.events {
         summary.apply_event(e);
@@ -154,7 +171,7 @@ pub fn replay(path: &Path) -> Result<Replay, ReplayError> {
                         info.step,
                         info.test,
                         info.record_first_sample,
-                        info.record_first_sample + info.record_samples as u64
+                        info.record_end_sample()
                     ),
                 )
             })?;
@@ -169,7 +186,7 @@ pub fn replay(path: &Path) -> Result<Replay, ReplayError> {
         .map(|(_, _, m)| m)
         .collect();
     let rig_toml = session
-        .attachment("rig.toml")
+        .attachment(RIG_ATTACHMENT)
         .map(|a| String::from_utf8_lossy(&a.data).into_owned());
     Ok(Replay {
         summary,
@@ -180,4 +197,107 @@ pub fn replay(path: &Path) -> Result<Replay, ReplayError> {
         rig_toml,
         recording: rec,
     })
+}
+
+impl Replay {
+    /// Whether the recomputed step summaries are the ones the live session logged, bit for bit.
+    pub fn matches_logged(&self) -> bool {
+        let recomputed: Vec<&crate::control::StepSummary> =
+            self.summary.steps().map(|s| &s.measured).collect();
+        self.logged_steps.len() == recomputed.len()
+            && self
+                .logged_steps
+                .iter()
+                .zip(recomputed)
+                .all(|(logged, s)| &logged.summary == s)
+    }
+}
+
+/// Which model a replayed twin runs (`rigtwin replay --twin`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TwinModelChoice<'a> {
+    /// The rig description the session ran with (the log's `rig.toml`).
+    Logged,
+    /// Another rig description (`--config`): its ROM and its `[twin]` table.
+    Config(&'a Path),
+    /// A ROM file (`--rom`), with the logged rig description's `[twin]` table (the defaults
+    /// when the log holds none).
+    Rom(&'a Path),
+}
+
+/// Where the replayed twin's ROM comes from.
+#[derive(Clone, Debug)]
+pub enum TwinRom {
+    /// A ROM file.
+    File(std::path::PathBuf),
+    /// The ROM of a rig description (built or taken from the cache by the caller).
+    Description(Box<RigConfig>),
+}
+
+/// Where the replayed twin's ROM comes from, and its `[twin]` settings.
+#[derive(Clone, Debug)]
+pub struct TwinModelSource {
+    /// The ROM.
+    pub rom: TwinRom,
+    /// The twin's settings.
+    pub spec: TwinSpec,
+    /// Where the model came from, for messages and the log copy's metadata.
+    pub source: String,
+}
+
+/// Errors of choosing the replayed twin's model.
+#[derive(Debug, thiserror::Error)]
+pub enum TwinModelError {
+    /// A rig description (named or in the log) is invalid.
+    #[error(transparent)]
+    Config(#[from] crate::config::ConfigError),
+    /// The log holds no rig description and none was named.
+    #[error(
+        "{log}: the log holds no rig description (rig.toml attachment); name the twin's model \
+         with --config or --rom"
+    )]
+    NoRigDescription {
+        /// The log file.
+        log: String,
+    },
+}
+
+/// What the replayed twin runs: the model `choice` names, for the log at `log` whose rig
+/// description (if any) is `rig_toml`.
+pub fn twin_model_source(
+    choice: TwinModelChoice<'_>,
+    log: &Path,
+    rig_toml: Option<&str>,
+) -> Result<TwinModelSource, TwinModelError> {
+    const LOGGED: &str = "rig.toml (attached to the log)";
+    let logged = || {
+        rig_toml
+            .map(|text| RigConfig::from_str(text, LOGGED))
+            .transpose()
+    };
+    match choice {
+        TwinModelChoice::Rom(path) => Ok(TwinModelSource {
+            spec: logged()?.map(|c| c.twin).unwrap_or_default(),
+            rom: TwinRom::File(path.to_path_buf()),
+            source: path.display().to_string(),
+        }),
+        TwinModelChoice::Config(path) => {
+            let cfg = RigConfig::from_path(path)?;
+            Ok(TwinModelSource {
+                spec: cfg.twin.clone(),
+                rom: TwinRom::Description(Box::new(cfg)),
+                source: path.display().to_string(),
+            })
+        }
+        TwinModelChoice::Logged => {
+            let cfg = logged()?.ok_or_else(|| TwinModelError::NoRigDescription {
+                log: log.display().to_string(),
+            })?;
+            Ok(TwinModelSource {
+                spec: cfg.twin.clone(),
+                rom: TwinRom::Description(Box::new(cfg)),
+                source: "the rig description in the log".to_string(),
+            })
+        }
+    }
 }

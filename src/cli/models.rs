@@ -1,0 +1,71 @@
+//! The models the commands run: rig descriptions (a file, or the embedded default) and their
+//! ROMs, built or taken from the cache with a progress display; the simulated rig's own truth
+//! ROM beside the twin's.
+
+use anyhow::Context;
+use std::path::{Path, PathBuf};
+
+use super::progress::BuildProgress;
+use crate::config::RigConfig;
+use crate::rom::build::BuildOptions;
+use crate::rom::Rom;
+
+/// The rig description at `path`, or the embedded default rig without one.
+pub(crate) fn load_config(path: Option<&Path>) -> anyhow::Result<RigConfig> {
+    Ok(match path {
+        Some(p) => RigConfig::from_path(p)?,
+        None => RigConfig::default_rig(),
+    })
+}
+
+/// The rig description at `path` and its text (stored in session logs), or the embedded
+/// default rig's.
+pub(crate) fn load_config_text(path: Option<&Path>) -> anyhow::Result<(RigConfig, String)> {
+    Ok(match path {
+        Some(p) => {
+            let text = std::fs::read_to_string(p)
+                .with_context(|| format!("reading the rig description {}", p.display()))?;
+            (RigConfig::from_str(&text, &p.display().to_string())?, text)
+        }
+        None => (
+            RigConfig::default_rig(),
+            crate::config::DEFAULT_RIG_TOML.to_string(),
+        ),
+    })
+}
+
+/// Returns the cached ROM of `cfg`, building it if the cache has none for the current rig
+/// description (the cache key is the ROM's build hash); and whether it was reused.
+pub(crate) fn cached_rom(
+    cfg: &RigConfig,
+    rebuild: bool,
+    quiet: bool,
+) -> anyhow::Result<(Rom, PathBuf, bool)> {
+    let progress = BuildProgress::new(quiet);
+    let (rom, path, outcome) = crate::rom::cache::load_or_build(
+        cfg,
+        &BuildOptions::default(),
+        &super::cache_dir(),
+        rebuild,
+        &mut |e| progress.event(&e),
+    )?;
+    progress.finish();
+    Ok((
+        rom,
+        path,
+        outcome == crate::rom::cache::CacheOutcome::Reused,
+    ))
+}
+
+/// The simulated rig's truth ROM: the rig description's structure with modes up to
+/// `[truth] cutoff_ratio` x f(1FU) (more than the twin's).
+pub(crate) fn truth_rom(cfg: &RigConfig, rebuild: bool, quiet: bool) -> anyhow::Result<Rom> {
+    let mut truth_cfg = cfg.clone();
+    truth_cfg.reduction = crate::config::ReductionSpec {
+        cutoff_ratio: Some(cfg.truth.cutoff_ratio),
+        cutoff_hz: None,
+        modes: None,
+    };
+    let (truth, _, _) = cached_rom(&truth_cfg, rebuild, quiet)?;
+    Ok(truth)
+}

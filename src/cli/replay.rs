@@ -1,0 +1,133 @@
+//! `rigtwin replay`: a recorded session's summary recomputed from its raw DAQ blocks, and with
+//! `--twin` the twin re-run on its base motion ([`crate::session::replay`],
+//! [`crate::session::twin_replay`]); this picks the twin's model and prints.
+
+use anyhow::Context;
+use clap::Args;
+use std::path::PathBuf;
+
+use crate::session::replay::{twin_model_source, TwinModelChoice, TwinRom};
+use crate::session::twin_replay::{replay_twin, TwinLogCopy, TwinSink};
+
+use super::models;
+use super::run::print_summary;
+
+/// `rigtwin replay`
+#[derive(Args, Debug)]
+pub struct ReplayArgs {
+    /// The session log (MCAP).
+    pub file: PathBuf,
+    /// Write the recomputed summary (JSON) here.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+    /// Re-run the twin on the recorded base motion and compare it with the measurement step
+    /// by step (`tests[].steps[].twin`). The model is the rig description the session ran
+    /// with (stored in the log) unless `--rom` or `--config` names another.
+    #[arg(long)]
+    pub twin: bool,
+    /// The twin's ROM file (with `--twin`; the `[twin]` settings are those of the rig
+    /// description in the log, their defaults if it holds none).
+    #[arg(long, requires = "twin", conflicts_with = "config")]
+    pub rom: Option<PathBuf>,
+    /// The twin's rig description (with `--twin`): its ROM is built or taken from the cache,
+    /// its `[twin]` table sets the twin.
+    #[arg(long, requires = "twin")]
+    pub config: Option<PathBuf>,
+    /// Rebuild the twin ROM even if cached (with `--twin`).
+    #[arg(long, requires = "twin")]
+    pub rebuild: bool,
+    /// With `--twin`: write a copy of the session log holding the re-run twin's output
+    /// (`/twin/blocks`, `/twin/steps`) in place of the recorded twin's, for `rigtwin report`.
+    #[arg(long, requires = "twin")]
+    pub out: Option<PathBuf>,
+}
+
+pub(crate) fn run(a: ReplayArgs) -> anyhow::Result<()> {
+    let r = crate::session::replay::replay(&a.file)?;
+    if !r.complete {
+        println!(
+            "note: the log was not closed ({}); replaying what it holds",
+            r.note.as_deref().unwrap_or("truncated")
+        );
+    }
+    let same = r.matches_logged();
+    println!(
+        "replay: {} blocks, {:.1} s of rig time, {} steps recomputed ({} the logged summaries)",
+        r.summary.blocks,
+        r.summary.rig_seconds,
+        r.logged_steps.len(),
+        if same {
+            "identical to"
+        } else {
+            "DIFFERENT from"
+        }
+    );
+    let mut summary = r.summary;
+    if a.twin {
+        let choice = match (&a.rom, &a.config) {
+            (Some(rom), _) => TwinModelChoice::Rom(rom),
+            (None, Some(config)) => TwinModelChoice::Config(config),
+            (None, None) => TwinModelChoice::Logged,
+        };
+        let model = twin_model_source(choice, &a.file, r.rig_toml.as_deref())?;
+        let spec = model.spec;
+        let (rom, source) = match &model.rom {
+            TwinRom::File(path) => (
+                crate::rom::file::read(path)
+                    .with_context(|| format!("--rom {}", path.display()))?,
+                model.source,
+            ),
+            TwinRom::Description(cfg) => {
+                let (rom, path, _) = models::cached_rom(cfg, a.rebuild, true)?;
+                let source = format!("{} (ROM {})", model.source, path.display());
+                (rom, source)
+            }
+        };
+        let mut copy = match &a.out {
+            Some(out) => {
+                let session = crate::log::read_session(&a.file)?;
+                Some(
+                    TwinLogCopy::create(out, &session, &source, r.recording.layout.dt())
+                        .with_context(|| format!("--out {}", out.display()))?,
+                )
+            }
+            None => None,
+        };
+        let sink: &mut dyn TwinSink = match &mut copy {
+            Some(c) => c,
+            None => &mut (),
+        };
+        let stats = replay_twin(
+            &r.recording,
+            &mut summary,
+            &rom,
+            &spec,
+            rom.meta.beam_length,
+            sink,
+        )
+        .with_context(|| format!("twin replay of {}", a.file.display()))?;
+        println!(
+            "twin: {source}: {} blocks, {} steps compared, {} contact-solver failures, {:.3} s \
+             per rig second",
+            stats.blocks, stats.steps_compared, stats.solver_failures, stats.wall_per_rig_second
+        );
+        if let (Some(c), Some(out)) = (copy, &a.out) {
+            let st = c
+                .close()
+                .with_context(|| format!("--out {}", out.display()))?;
+            println!(
+                "session log with the re-run twin: {} ({:.1} MB)",
+                out.display(),
+                st.bytes_written as f64 / 1e6
+            );
+        }
+    }
+    if let Some(j) = &a.json {
+        super::write_json(j, &summary)?;
+    }
+    print_summary(&summary);
+    if let Some(j) = &a.json {
+        println!("summary: {}", j.display());
+    }
+    Ok(())
+}

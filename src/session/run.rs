@@ -1,0 +1,250 @@
+//! The composition root of a live session (`rigtwin run`, `rigtwin demo`): a rig backend (any
+//! [`RigBackend`]: the caller builds the simulated rig or connects to the hardware), the
+//! stepped-sine procedure ([`super::runner::run_session`]), the recorders teed together — the
+//! MCAP session log, the live view (`--foxglove`) and the live twin (`--twin`) — and what the
+//! session leaves behind ([`RunOutcome`]). The session never knows which backend it runs on:
+//! backend-specific facts for the log come in as metadata from the caller.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::time::Instant;
+
+use crate::config::RigConfig;
+use crate::control::SessionSetup;
+use crate::log::{Attachment, LogError, LogOptions, MetadataRecord, SessionLog};
+use crate::plan::Plan;
+use crate::rig::{LinkCounters, RigBackend};
+use crate::rom::Rom;
+use crate::twin::{Twin, TwinError, TwinTask};
+
+use super::live::{LiveRecorder, LiveStats, LiveView};
+use super::mcap::McapRecorder;
+use super::recorder::Tee;
+use super::runner::{run_session, SessionError, SessionProgress};
+use super::summary::SessionSummary;
+use super::topics::{PLAN_ATTACHMENT, RIG_ATTACHMENT, ROM_METADATA, SESSION_METADATA};
+use super::twin::{TwinOutcome, TwinRecorder};
+
+/// Errors of a live session that prevent it from running or from closing its log (an abort
+/// during the session is not an error: it is in the summary).
+#[derive(Debug, thiserror::Error)]
+pub enum RunError {
+    /// The async runtime could not start.
+    #[error("starting the async runtime: {0}")]
+    Runtime(#[source] std::io::Error),
+    /// The session log could not be created.
+    #[error("creating the session log {path}: {source}")]
+    LogCreate {
+        /// The log file.
+        path: String,
+        /// What failed.
+        source: LogError,
+    },
+    /// The session log could not be finished.
+    #[error("closing the session log {path}: {source}")]
+    LogClose {
+        /// The log file.
+        path: String,
+        /// What failed.
+        source: LogError,
+    },
+    /// The live twin could not start.
+    #[error("the twin: {0}")]
+    Twin(#[from] TwinError),
+    /// The twin's log channels could not be registered.
+    #[error("the twin: {0}")]
+    TwinLog(#[source] LogError),
+    /// The session could not start.
+    #[error(transparent)]
+    Session(#[from] SessionError),
+}
+
+/// What a live session runs with, besides its backend.
+pub struct SessionRequest<'a> {
+    /// The rig description: `[control]`, `[safety]`, `[twin]`, the beam length.
+    pub cfg: &'a RigConfig,
+    /// Its text (attached to the log as `rig.toml`).
+    pub config_text: &'a str,
+    /// The plan.
+    pub plan: &'a Plan,
+    /// The session log (MCAP) to write.
+    pub out: &'a Path,
+    /// The model: the rig description's ROM (omega_2 of the plan's ratios; the live twin).
+    pub model: &'a Rom,
+    /// Where the model's ROM file is (for the log's metadata).
+    pub model_path: &'a Path,
+    /// Run the live twin beside the session.
+    pub twin: bool,
+    /// The live view, started by the caller (so that a port in use fails before anything
+    /// else starts).
+    pub live: Option<(LiveRecorder, LiveView)>,
+    /// What the backend adds to the log's metadata records: `session` (the backend's name
+    /// and settings) and `rom` (e.g. the simulated rig's own ROM).
+    pub backend_metadata: BackendMetadata,
+}
+
+/// Backend-specific entries of the session log's metadata records.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct BackendMetadata {
+    /// Entries of the `session` record (at least `backend`).
+    pub session: BTreeMap<String, String>,
+    /// Entries of the `rom` record.
+    pub rom: BTreeMap<String, String>,
+}
+
+/// What a finished session left behind.
+#[derive(Debug)]
+pub struct RunOutcome {
+    /// The session summary (with the live twin's comparisons).
+    pub summary: SessionSummary,
+    /// Wall-clock time of the session, s.
+    pub wall_seconds: f64,
+    /// Messages queued to the session log by the session's recorder.
+    pub messages: u64,
+    /// Pacing overruns of the backend.
+    pub overruns: u64,
+    /// What the live view did (with a live view).
+    pub live: Option<LiveStats>,
+    /// What the twin did (with the twin).
+    pub twin: Option<TwinOutcome>,
+    /// The hardware links' counters (a hardware backend).
+    pub link: Option<LinkCounters>,
+}
+
+/// The async runtime a session runs on (two worker threads: the session loop and the
+/// backend's tasks).
+pub fn runtime() -> Result<tokio::runtime::Runtime, RunError> {
+    tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .map_err(RunError::Runtime)
+}
+
+/// The session log's metadata records and attachments.
+fn log_records(r: &SessionRequest<'_>) -> (Vec<MetadataRecord>, Vec<Attachment>) {
+    let (plan, model) = (r.plan, r.model);
+    let mut session_meta = r.backend_metadata.session.clone();
+    session_meta.insert("plan".to_string(), plan.name.clone().unwrap_or_default());
+    session_meta.insert("plan_source".to_string(), plan.source.clone());
+    session_meta.insert(
+        "omega_ref_rad_s".to_string(),
+        format!("{:e}", model.omega_ref()),
+    );
+    session_meta.insert(
+        "beam_length_m".to_string(),
+        format!("{:e}", r.cfg.rig.beam_length),
+    );
+    session_meta.insert(
+        "started_unix_s".to_string(),
+        std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_secs())
+            .to_string(),
+    );
+    let mut rom_meta = r.backend_metadata.rom.clone();
+    rom_meta.insert("path".to_string(), r.model_path.display().to_string());
+    rom_meta.insert("config_hash".to_string(), model.meta.config_hash.clone());
+    rom_meta.insert("modes".to_string(), model.n_modes().to_string());
+    rom_meta.insert("pairs".to_string(), model.n_pairs().to_string());
+    let mut attachments = vec![Attachment {
+        name: RIG_ATTACHMENT.into(),
+        media_type: "application/toml".into(),
+        data: r.config_text.as_bytes().to_vec(),
+    }];
+    let plan_text = std::fs::read_to_string(&plan.source).unwrap_or_default();
+    if !plan_text.is_empty() {
+        attachments.push(Attachment {
+            name: PLAN_ATTACHMENT.into(),
+            media_type: "application/toml".into(),
+            data: plan_text.into_bytes(),
+        });
+    }
+    (
+        vec![
+            (SESSION_METADATA.into(), session_meta),
+            (ROM_METADATA.into(), rom_meta),
+        ],
+        attachments,
+    )
+}
+
+/// Runs the plan on `backend` (on `runtime`), logging to the request's file, with the live
+/// twin and the live view when asked; `progress` sees every block's control state. Returns when
+/// the session is done, aborted (the abort is in the summary) or stopped by Ctrl-C.
+pub fn run<B: RigBackend>(
+    runtime: &tokio::runtime::Runtime,
+    mut backend: B,
+    request: SessionRequest<'_>,
+    progress: &mut (dyn FnMut(&SessionProgress) + Send),
+) -> Result<RunOutcome, RunError> {
+    let (cfg, out) = (request.cfg, request.out);
+    let l = cfg.rig.beam_length;
+    let setup = SessionSetup {
+        plan: request.plan.clone(),
+        control: cfg.control.clone(),
+        safety: cfg.safety.clone(),
+        omega_ref: request.model.omega_ref(),
+        beam_length: l,
+    };
+    let (metadata, attachments) = log_records(&request);
+    let path = || out.display().to_string();
+    let create_error = |source| RunError::LogCreate {
+        path: path(),
+        source,
+    };
+    let (handle, join) = SessionLog::create(out, LogOptions::default(), metadata, attachments)
+        .map_err(create_error)?;
+    let (live_recorder, live_view) = request.live.unzip();
+    let twin_recorder = if request.twin {
+        let layout = backend.layout().clone();
+        let engine = Twin::new(request.model, &cfg.twin, &layout, cfg.contact.clearance)?;
+        let (task, rx) = TwinTask::spawn(engine, &cfg.twin)?;
+        let recorder = TwinRecorder::new(task, rx, l, layout.dt(), Some(handle.clone()))
+            .map_err(RunError::TwinLog)?;
+        Some(match &live_recorder {
+            Some(live) => recorder.with_live(live.clone()),
+            None => recorder,
+        })
+    } else {
+        None
+    };
+    let mut recorder = Tee(
+        Tee(
+            McapRecorder::new(handle).map_err(create_error)?,
+            live_recorder,
+        ),
+        twin_recorder,
+    );
+
+    let t0 = Instant::now();
+    let (mut summary, overruns, link) = runtime.block_on(async {
+        let shutdown = async {
+            let _ = tokio::signal::ctrl_c().await;
+        };
+        let s = run_session(&mut backend, &setup, &mut recorder, shutdown, progress).await?;
+        let status = backend.status();
+        Ok::<_, RunError>((s, status.overruns, status.link))
+    })?;
+    let twin = recorder.1.take().map(TwinRecorder::finish);
+    if let Some(t) = &twin {
+        summary.attach_twin(t.comparisons.iter().cloned());
+    }
+    let messages = recorder.0 .0.messages();
+    drop(recorder);
+    join.close().map_err(|source| RunError::LogClose {
+        path: path(),
+        source,
+    })?;
+    let wall_seconds = t0.elapsed().as_secs_f64();
+    let live = live_view.map(LiveView::close);
+    Ok(RunOutcome {
+        summary,
+        wall_seconds,
+        messages,
+        overruns,
+        live,
+        twin,
+        link,
+    })
+}

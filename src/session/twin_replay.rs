@@ -1,0 +1,294 @@
+//! The twin re-run on a recorded session (`rigtwin replay --twin`): [`replay_twin`] runs the
+//! twin over the recording's base motion with the plan's clearances ([`ClearanceSchedule`], the
+//! live twin's rule) and writes each step's comparison into the replayed summary
+//! (deterministic: the same recording and model give the same bits, and the live twin's
+//! comparisons where it made them). Its output can also go to a copy of the session log
+//! ([`TwinLogCopy`], `--out NEW.mcap`): every message, metadata record and attachment of the
+//! original except the recorded twin's topics (`/twin/...`), then the re-run twin's
+//! `/twin/blocks` and `/twin/steps`, and a `twin_replay` metadata record naming the model;
+//! `rigtwin report NEW.mcap` draws the re-run twin beside the measurement.
+
+use std::collections::VecDeque;
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+use crate::control::{StepInfo, StepSummary};
+use crate::log::{
+    log_time_ns, Attachment, LogChannel, LogError, LogHandle, LogJoin, LogOptions, LogStats,
+    MetadataRecord, SessionLog, SessionRead, RIGTWIN_METADATA,
+};
+use crate::rom::Rom;
+use crate::signal::SignalError;
+use crate::twin::{
+    ClearanceSchedule, Completed, Twin, TwinBlock, TwinComparison, TwinError, TwinSamples,
+    TwinSpec, TwinWindows,
+};
+
+use super::replay::Recording;
+use super::summary::SessionSummary;
+use super::topics::{TwinStepMessage, TOPIC_TWIN_BLOCKS, TOPIC_TWIN_STEPS, TWIN_REPLAY_METADATA};
+
+/// Errors of a twin replay.
+#[derive(Debug, thiserror::Error)]
+pub enum TwinReplayError {
+    /// The twin failed (bad model, non-finite input, ...).
+    #[error(transparent)]
+    Twin(#[from] TwinError),
+    /// The twin's metrics over a record window failed.
+    #[error("twin comparison: metrics of step {step} of test {test}: {source}")]
+    Metrics {
+        /// Test name.
+        test: String,
+        /// Step index.
+        step: usize,
+        /// What failed.
+        source: SignalError,
+    },
+    /// Writing the copy of the session log failed.
+    #[error("twin log: {0}")]
+    Log(#[from] LogError),
+    /// A message could not be serialised.
+    #[error("twin log: {0}")]
+    Serialize(#[from] serde_json::Error),
+    /// The copy would replace the log it is made from.
+    #[error(
+        "twin log: {path}: the copy would overwrite the session it is made from; name another file"
+    )]
+    Overwrite {
+        /// The file asked for.
+        path: String,
+    },
+    /// The source log has a channel without a schema (not a rigtwin session log).
+    #[error(
+        "twin log: {path}: channel {topic} has no schema; only rigtwin session logs can be copied"
+    )]
+    NoSchema {
+        /// The source log.
+        path: String,
+        /// The channel's topic.
+        topic: String,
+    },
+}
+
+/// What a twin replay did.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct TwinReplayStats {
+    /// Blocks the twin ran through.
+    pub blocks: u64,
+    /// Steps compared.
+    pub steps_compared: usize,
+    /// Contact-solver failures over the session.
+    pub solver_failures: u64,
+    /// Twin seconds of computation per second of rig time, -.
+    pub wall_per_rig_second: f64,
+}
+
+/// Where a twin replay's output goes besides the summary (e.g. a copy of the session log,
+/// [`TwinLogCopy`]). `()` keeps nothing.
+pub trait TwinSink {
+    /// The twin's prediction for one block, in block order.
+    fn block(&mut self, block: &TwinBlock) -> Result<(), TwinReplayError>;
+    /// A step's comparison as its record window completes (`None`: the twin missed part of
+    /// the window).
+    fn step(
+        &mut self,
+        info: &StepInfo,
+        twin: Option<&TwinComparison>,
+    ) -> Result<(), TwinReplayError>;
+}
+
+impl TwinSink for () {
+    fn block(&mut self, _: &TwinBlock) -> Result<(), TwinReplayError> {
+        Ok(())
+    }
+    fn step(&mut self, _: &StepInfo, _: Option<&TwinComparison>) -> Result<(), TwinReplayError> {
+        Ok(())
+    }
+}
+
+/// Runs the twin (ROM `rom`, settings `spec`, beam length `beam_length` m for the plan's
+/// clearances) over the recording `rec` and writes each step's comparison into `summary`
+/// (`tests[].steps[].twin`, in the order of the recording's record windows; `summary` is the
+/// replayed summary of the same recording). Every output block and comparison also goes to
+/// `sink`.
+pub fn replay_twin(
+    rec: &Recording,
+    summary: &mut SessionSummary,
+    rom: &Rom,
+    spec: &TwinSpec,
+    beam_length: f64,
+    sink: &mut dyn TwinSink,
+) -> Result<TwinReplayStats, TwinReplayError> {
+    let wall = std::time::Instant::now();
+    let mut clearances = ClearanceSchedule::of_events(beam_length, &rec.events);
+    let mut twin = Twin::new(rom, spec, &rec.layout, clearances.first().unwrap_or(0.0))?;
+    let dt = rec.layout.dt();
+    // The measured step summaries are in record-window order.
+    let mut pending: VecDeque<(StepInfo, StepSummary)> = rec
+        .record_windows()
+        .cloned()
+        .zip(summary.steps().map(|s| s.measured.clone()))
+        .collect();
+    let mut results: Vec<Option<TwinComparison>> = Vec::new();
+    let mut out = TwinWindows::default();
+    let mut stats = TwinReplayStats::default();
+    let take = |done: Vec<Completed>,
+                results: &mut Vec<Option<TwinComparison>>,
+                sink: &mut dyn TwinSink|
+     -> Result<(), TwinReplayError> {
+        for (info, c) in done {
+            let c = match c {
+                Some(Ok(c)) => Some(c),
+                Some(Err(source)) => {
+                    return Err(TwinReplayError::Metrics {
+                        test: info.test,
+                        step: info.step,
+                        source,
+                    })
+                }
+                None => None,
+            };
+            sink.step(&info, c.as_ref())?;
+            results.push(c);
+        }
+        Ok(())
+    };
+    for b in &rec.blocks {
+        while let Some(c) = clearances.next_due(b.first_sample) {
+            twin.set_clearance(c)?;
+        }
+        let tb = twin.push_block(b)?;
+        stats.blocks += 1;
+        stats.solver_failures += tb
+            .solver_failures
+            .iter()
+            .map(|&f| u64::from(f))
+            .sum::<u64>();
+        sink.block(&tb)?;
+        out.push(&tb);
+        take(out.complete(&mut pending, dt, false), &mut results, sink)?;
+    }
+    take(out.complete(&mut pending, dt, true), &mut results, sink)?;
+    stats.steps_compared = summary.attach_twin(results);
+    stats.wall_per_rig_second =
+        wall.elapsed().as_secs_f64() / rec.rig_seconds().max(f64::MIN_POSITIVE);
+    Ok(stats)
+}
+
+/// Topics of the recorded twin, left out of the copy.
+fn is_twin_topic(topic: &str) -> bool {
+    topic.starts_with("/twin/")
+}
+
+/// The copy being written (see the module documentation).
+pub struct TwinLogCopy {
+    handle: LogHandle,
+    join: LogJoin,
+    blocks: LogChannel<TwinSamples>,
+    steps: LogChannel<TwinStepMessage>,
+    /// DAQ sample interval, s (log time of a step's comparison).
+    dt: f64,
+}
+
+impl std::fmt::Debug for TwinLogCopy {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("TwinLogCopy")
+            .field("path", &self.handle.path())
+            .finish()
+    }
+}
+
+impl TwinLogCopy {
+    /// Creates `path` and copies `session` into it (all but its twin topics); the twin's output
+    /// follows through [`TwinSink`]. `model` says which model the twin runs (for the metadata),
+    /// `dt` is the DAQ sample interval, s.
+    pub fn create(
+        path: &Path,
+        session: &SessionRead,
+        model: &str,
+        dt: f64,
+    ) -> Result<TwinLogCopy, TwinReplayError> {
+        if let (Ok(a), Ok(b)) = (path.canonicalize(), session.path.canonicalize()) {
+            if a == b {
+                return Err(TwinReplayError::Overwrite {
+                    path: path.display().to_string(),
+                });
+            }
+        }
+        let mut metadata: Vec<MetadataRecord> = session
+            .metadata
+            .iter()
+            .filter(|(name, _)| name != RIGTWIN_METADATA && name != TWIN_REPLAY_METADATA)
+            .cloned()
+            .collect();
+        metadata.push((
+            TWIN_REPLAY_METADATA.into(),
+            [
+                ("model".to_string(), model.to_string()),
+                ("source_log".to_string(), session.path.display().to_string()),
+            ]
+            .into_iter()
+            .collect(),
+        ));
+        let attachments: Vec<Attachment> = session.attachments.clone();
+        let (handle, join) =
+            SessionLog::create(path, LogOptions::default(), metadata, attachments)?;
+        let mut channels = std::collections::BTreeMap::new();
+        for c in session.channels.iter().filter(|c| !is_twin_topic(&c.topic)) {
+            let Some(schema) = &c.schema else {
+                return Err(TwinReplayError::NoSchema {
+                    path: session.path.display().to_string(),
+                    topic: c.topic.clone(),
+                });
+            };
+            let raw = handle.raw_channel(&c.topic, &schema.name, schema.data.clone())?;
+            channels.insert(c.id, raw);
+        }
+        for m in &session.messages {
+            if let Some(raw) = channels.get(&m.channel_id) {
+                handle.log_json_waiting(raw, m.log_time, m.data.clone())?;
+            }
+        }
+        Ok(TwinLogCopy {
+            blocks: handle.channel(TOPIC_TWIN_BLOCKS)?,
+            steps: handle.channel(TOPIC_TWIN_STEPS)?,
+            handle,
+            join,
+            dt,
+        })
+    }
+
+    /// Finishes the file.
+    pub fn close(self) -> Result<LogStats, TwinReplayError> {
+        drop(self.handle);
+        Ok(self.join.close()?)
+    }
+
+    fn put<T: serde::Serialize>(
+        &self,
+        channel: &LogChannel<T>,
+        time: f64,
+        value: &T,
+    ) -> Result<(), TwinReplayError> {
+        let json = serde_json::to_vec(value)?;
+        self.handle
+            .log_json_waiting(channel.raw(), log_time_ns(time), json)?;
+        Ok(())
+    }
+}
+
+impl TwinSink for TwinLogCopy {
+    fn block(&mut self, block: &TwinBlock) -> Result<(), TwinReplayError> {
+        self.put(&self.blocks, block.time, &TwinSamples::from(block))
+    }
+
+    fn step(
+        &mut self,
+        info: &StepInfo,
+        twin: Option<&TwinComparison>,
+    ) -> Result<(), TwinReplayError> {
+        let time = info.record_end_time(self.dt);
+        self.put(&self.steps, time, &TwinStepMessage::of(info, twin))
+    }
+}

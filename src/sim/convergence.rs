@@ -16,14 +16,16 @@
 //! by 0.8 % at 1000; from rest it is second order down to about 1e-10 at 1,024,000 steps per
 //! period, where round-off takes over.
 
+use crate::plan::per_l_to_metres;
 use crate::rom::Rom;
 use crate::signal::{relative_rms_error, SignalError};
 
+use super::driven::{BEAM_SENSORS, UPPER_TIP};
 use super::error::SimError;
 use super::excitation::Excitation;
 use super::integrator::{Integrator, IntegratorParameters, State, TimeStep};
 use super::output::StepOutput;
-use super::stepped::{beam_length, output_index, UPPER_TIP};
+use super::stepped::{beam_length, output_index};
 
 /// The operating point and window of a convergence study.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -134,7 +136,7 @@ pub enum ConvergenceError {
 }
 
 fn tip_index(rom: &Rom) -> Result<usize, ConvergenceError> {
-    output_index(rom, UPPER_TIP).map_err(|e| ConvergenceError::Rom(e.to_string()))
+    output_index(rom, BEAM_SENSORS[UPPER_TIP]).map_err(|e| ConvergenceError::Rom(e.to_string()))
 }
 
 fn excitation(rom: &Rom, setup: &ConvergenceSetup) -> Result<(Excitation, f64), ConvergenceError> {
@@ -142,7 +144,7 @@ fn excitation(rom: &Rom, setup: &ConvergenceSetup) -> Result<(Excitation, f64), 
     let omega = setup.omega_ratio * rom.omega_ref();
     Ok((
         Excitation::Sine {
-            amplitude_m: setup.level * l,
+            amplitude_m: per_l_to_metres(setup.level, l),
             omega,
             phase: 0.0,
         },
@@ -171,7 +173,7 @@ fn initial_conditions(
         omega,
     };
     let mut integ = Integrator::new(rom, params)?;
-    integ.set_clearance(setup.clearance * rom.meta.beam_length)?;
+    integ.set_clearance(per_l_to_metres(setup.clearance, rom.meta.beam_length))?;
     let mut st = integ.state_at_rest();
     integ.run(
         &mut st,
@@ -249,7 +251,7 @@ fn run_one(
         omega,
     };
     let mut integ = Integrator::new(rom, params)?;
-    integ.set_clearance(setup.clearance * rom.meta.beam_length)?;
+    integ.set_clearance(per_l_to_metres(setup.clearance, rom.meta.beam_length))?;
     // The run's half-step velocity v^{-1/2} from the velocity at t_0.
     let at_t0 = State::from_modal(ic.0.to_vec(), ic.1.to_vec(), rom.n_pairs(), ic.2);
     let v_half = consistent_velocity(rom, &at_t0, integ.dt(), exc.accel_at(ic.2), -0.5);

@@ -1,7 +1,8 @@
 //! Time integration of the ROM: the leapfrog integrator with an implicit contact boundary
 //! ([`integrator`]), base excitation ([`excitation`]), energy terms ([`energy`]), per-step
-//! outputs and sinks ([`output`]), the virtual stepped sine ([`stepped`]), the convergence
-//! studies ([`convergence`]) and the error type ([`error`]).
+//! outputs and sinks ([`output`]), the driven ROM (base acceleration in, named sensor outputs
+//! out: [`driven`]), the virtual stepped sine ([`stepped`]), the convergence studies
+//! ([`convergence`]) and the error type ([`error`]).
 //!
 //! Numerics only: no I/O, no clock, no threads inside a run; the hot loop does not allocate.
 //! A run is deterministic: the same ROM, parameters, state and excitation give bit-identical
@@ -12,6 +13,7 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod convergence;
+pub mod driven;
 pub mod energy;
 pub mod error;
 pub mod excitation;
@@ -19,6 +21,7 @@ pub mod integrator;
 pub mod output;
 pub mod stepped;
 
+pub use driven::{DrivenError, DrivenRom, MissingOutput, SensorSink, SensorStep};
 pub use energy::{Energy, EnergyAccounts};
 pub use error::SimError;
 pub use excitation::{continuous_phase, Excitation};

@@ -3,7 +3,7 @@
 //! from step to step as on the rig; per step a settle window and a record window, and the step
 //! metrics of [`crate::signal`] over the record window.
 //!
-//! Per test ([`run_test`]): one [`Integrator`] at the test's clearance; per frequency step the
+//! Per test ([`run_test`]): one [`DrivenRom`] (read at the tips) at the test's clearance; per frequency step the
 //! time step is `2 pi / (Omega steps_per_period)` and the base displacement is
 //! `q sin(Omega t + phi)` with the phase chosen so that the displacement is continuous at the
 //! frequency change ([`continuous_phase`]). Independent tests run on worker threads
@@ -15,21 +15,26 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Mutex;
 
 use crate::contact::{ContactProblem, ContactSolution};
-use crate::plan::{Plan, TestSpec};
+use crate::plan::{per_l_to_metres, Plan, TestSpec};
 use crate::rom::Rom;
 use crate::signal::{step_metrics, MetricsParams, SignalError, StepMetrics, StepRecord};
 
+use super::driven::{
+    DrivenError, DrivenRom, MissingOutput, SensorSink, SensorStep, BEAM_SENSORS, LOWER_TIP,
+    UPPER_TIP,
+};
 use super::error::SimError;
 use super::excitation::{continuous_phase, Excitation};
 use super::integrator::{
-    stability_limits, Integrator, IntegratorParameters, RunStop, SolverCounters, State, TimeStep,
+    stability_limits, IntegratorParameters, RunStop, SolverCounters, TimeStep,
 };
-use super::output::{StepOutput, StepSink};
 
-/// Sensor (ROM output) names the metrics are computed from: the vertical tip velocities.
-pub const UPPER_TIP: &str = "upper_tip";
-/// See [`UPPER_TIP`].
-pub const LOWER_TIP: &str = "lower_tip";
+/// Sensor (ROM output) names the metrics are computed from, upper then lower: the vertical
+/// tip velocities.
+const TIPS: [&str; 2] = [BEAM_SENSORS[UPPER_TIP], BEAM_SENSORS[LOWER_TIP]];
+
+/// The ROM driven by the test's base sine, read at the [`TIPS`].
+type Tips = DrivenRom<2>;
 
 /// Options of a virtual stepped sine beyond the plan.
 #[derive(Clone, Debug, PartialEq)]
@@ -218,27 +223,27 @@ pub enum SteppedSineError {
     },
 }
 
-/// Index of the ROM output (sensor) named `name`.
-pub(crate) fn output_index(rom: &Rom, name: &str) -> Result<usize, SteppedSineError> {
-    rom.outputs
-        .iter()
-        .position(|o| o.name == name)
-        .ok_or_else(|| {
-            SteppedSineError::Rom(format!(
-                "no sensor output named \"{name}\" (outputs: {}); the rig description must \
-             define sensors \"{UPPER_TIP}\" and \"{LOWER_TIP}\"",
-                rom.outputs
-                    .iter()
-                    .map(|o| o.name.as_str())
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            ))
-        })
+/// The stepped sine's error for a ROM without a sensor output it reads.
+fn missing_output(missing: MissingOutput) -> SteppedSineError {
+    SteppedSineError::Rom(format!(
+        "no sensor output named \"{}\" (outputs: {}); the rig description must define \
+         sensors \"{}\" and \"{}\"",
+        missing.name,
+        missing.available.join(", "),
+        TIPS[0],
+        TIPS[1]
+    ))
 }
 
-/// Indices of the upper and lower tip outputs of a ROM.
-fn tip_outputs(rom: &Rom) -> Result<(usize, usize), SteppedSineError> {
-    Ok((output_index(rom, UPPER_TIP)?, output_index(rom, LOWER_TIP)?))
+/// Index of the ROM output (sensor) named `name`.
+pub(crate) fn output_index(rom: &Rom, name: &str) -> Result<usize, SteppedSineError> {
+    super::driven::output_index(rom, name).map_err(missing_output)
+}
+
+/// Checks that the ROM has the tip outputs.
+fn check_tips(rom: &Rom) -> Result<(), SteppedSineError> {
+    super::driven::output_indices(rom, TIPS).map_err(missing_output)?;
+    Ok(())
 }
 
 /// The ROM's beam length l, m (the unit of plan levels and clearances).
@@ -261,7 +266,7 @@ pub fn check_plan(
     plan: &Plan,
     opts: &SteppedSineOptions,
 ) -> Result<(), SteppedSineError> {
-    tip_outputs(rom)?;
+    check_tips(rom)?;
     beam_length(rom)?;
     opts.integrator
         .validate()
@@ -305,10 +310,9 @@ pub fn check_plan(
     Ok(())
 }
 
-/// Collects the channels of the record window (and optionally the full trace).
+/// Collects the channels of the record window (and optionally the full trace) from the
+/// [`TIPS`] (index 0 upper, 1 lower).
 struct Recorder<'a> {
-    iu: usize,
-    il: usize,
     vu: Vec<f64>,
     vl: Vec<f64>,
     closed: Vec<bool>,
@@ -316,18 +320,18 @@ struct Recorder<'a> {
     trace: Option<(&'a mut StepTrace, &'a Excitation)>,
 }
 
-impl StepSink for Recorder<'_> {
-    fn record(&mut self, out: &StepOutput<'_>) {
-        self.vu.push(out.velocity[self.iu]);
-        self.vl.push(out.velocity[self.il]);
+impl SensorSink<2> for Recorder<'_> {
+    fn record(&mut self, out: &SensorStep<2>) {
+        self.vu.push(out.velocity[0]);
+        self.vl.push(out.velocity[1]);
         self.closed.push(out.contact.any_closed);
         self.normal.push(out.contact.normal_force);
         if let Some((tr, exc)) = &mut self.trace {
             tr.time.push(out.time);
-            tr.displacement_upper.push(out.displacement[self.iu]);
-            tr.displacement_lower.push(out.displacement[self.il]);
-            tr.velocity_upper.push(out.velocity[self.iu]);
-            tr.velocity_lower.push(out.velocity[self.il]);
+            tr.displacement_upper.push(out.displacement[0]);
+            tr.displacement_lower.push(out.displacement[1]);
+            tr.velocity_upper.push(out.velocity[0]);
+            tr.velocity_lower.push(out.velocity[1]);
             tr.base_displacement
                 .push(exc.displacement_at(out.time).unwrap_or(f64::NAN));
             tr.any_closed.push(out.contact.any_closed);
@@ -340,10 +344,8 @@ impl StepSink for Recorder<'_> {
 /// Runs `periods` excitation periods in chunks of at most `chunk` periods, reporting after
 /// each chunk through `on_chunk(periods in the chunk)`. Stops early when the state becomes
 /// non-finite. Returns the time steps done and the stop, if any.
-#[allow(clippy::too_many_arguments)] // the run's context, each used once
-fn run_periods<S: StepSink>(
-    integ: &mut Integrator,
-    state: &mut State,
+fn run_periods<S: SensorSink<2>>(
+    rom: &mut Tips,
     exc: &Excitation,
     periods: u64,
     steps_per_period: u64,
@@ -354,7 +356,7 @@ fn run_periods<S: StepSink>(
     let (mut left, mut steps) = (periods, 0);
     while left > 0 {
         let p = left.min(chunk);
-        let rep = integ.run(state, exc, p * steps_per_period, sink)?;
+        let rep = rom.run(exc, p * steps_per_period, sink)?;
         steps += rep.steps;
         left -= p;
         on_chunk(p);
@@ -384,15 +386,15 @@ pub fn run_test(
     opts: &SteppedSineOptions,
     progress: &mut dyn FnMut(&TestProgress<'_>),
 ) -> Result<TestResult, SteppedSineError> {
-    let (iu, il) = tip_outputs(rom)?;
+    check_tips(rom)?;
     let l = beam_length(rom)?;
     let sim_err = |source| SteppedSineError::Sim {
         name: spec.name.clone(),
         source,
     };
     let w2 = rom.omega_ref();
-    let q = spec.level * l;
-    let clearance = spec.clearance * l;
+    let q = per_l_to_metres(spec.level, l);
+    let clearance = spec.clearance_m(l);
     let ratios = spec.omega_ratios();
     let spp = f64::from(spec.steps_per_period);
     let chunk = u64::from(opts.progress_periods.max(1));
@@ -403,9 +405,11 @@ pub fn run_test(
         steps: spp,
         omega: ratios[0] * w2,
     };
-    let mut integ = Integrator::new(rom, params).map_err(sim_err)?;
-    integ.set_clearance(clearance).map_err(sim_err)?;
-    let mut state: State = integ.state_at_rest();
+    let mut driven = Tips::new(rom, TIPS, params).map_err(|e| match e {
+        DrivenError::Output(missing) => missing_output(missing),
+        DrivenError::Sim(source) => sim_err(source),
+    })?;
+    driven.set_clearance(clearance).map_err(sim_err)?;
 
     let mut result = TestResult {
         spec: spec.clone(),
@@ -438,24 +442,23 @@ pub fn run_test(
         let omega = ratio * w2;
         if s > 0 {
             // The integrator was built at the first step's dt.
-            integ
+            driven
                 .set_time_step(TimeStep::StepsPerPeriod { steps: spp, omega })
                 .map_err(sim_err)?;
         }
-        phase = continuous_phase(omega_prev, phase, omega, state.time());
+        phase = continuous_phase(omega_prev, phase, omega, driven.state().time());
         omega_prev = omega;
         let exc = Excitation::Sine {
             amplitude_m: q,
             omega,
             phase,
         };
-        let before = state.counters();
+        let before = driven.state().counters();
         let spp_steps = u64::from(spec.steps_per_period);
 
         // Settle.
         let (steps, mut stop) = run_periods(
-            &mut integ,
-            &mut state,
+            &mut driven,
             &exc,
             u64::from(spec.settle_periods),
             spp_steps,
@@ -475,11 +478,11 @@ pub fn run_test(
             omega_ratio: ratio,
             omega,
             base_level_m: q,
-            dt: integ.dt(),
+            dt: driven.dt(),
             ..Default::default()
         };
-        let capture_from = (traced && opts.capture.is_some() && stop.is_none())
-            .then(|| (integ.clone(), state.clone()));
+        let capture_from =
+            (traced && opts.capture.is_some() && stop.is_none()).then(|| driven.clone());
         let cap = n_rec as usize;
         if traced {
             for v in [
@@ -497,8 +500,6 @@ pub fn run_test(
             trace.any_closed.reserve_exact(cap);
         }
         let mut rec = Recorder {
-            iu,
-            il,
             vu: Vec::with_capacity(cap),
             vl: Vec::with_capacity(cap),
             closed: Vec::with_capacity(cap),
@@ -507,8 +508,7 @@ pub fn run_test(
         };
         if stop.is_none() {
             let (steps, rec_stop) = run_periods(
-                &mut integ,
-                &mut state,
+                &mut driven,
                 &exc,
                 u64::from(spec.record_periods),
                 spp_steps,
@@ -523,7 +523,7 @@ pub fn run_test(
             result.time_steps += steps;
             stop = rec_stop;
         }
-        let step_counters = state.counters().since(&before);
+        let step_counters = driven.state().counters().since(&before);
         let failures = step_counters.max_iterations + step_counters.diverged;
         result.solver_failures += failures;
         if let Some(RunStop::NonFinite { step, time }) = stop {
@@ -543,7 +543,7 @@ pub fn run_test(
         } = rec;
         let metrics = step_metrics(
             &StepRecord {
-                dt: integ.dt(),
+                dt: driven.dt(),
                 omega,
                 base_level: q,
                 tip_velocity_upper: &vu,
@@ -563,7 +563,7 @@ pub fn run_test(
             index: s,
             omega_ratio: ratio,
             frequency_hz: omega / (2.0 * std::f64::consts::PI),
-            dt: integ.dt(),
+            dt: driven.dt(),
             metrics,
             solver_failures: failures,
             solver: step_counters,
@@ -571,10 +571,9 @@ pub fn run_test(
         if traced {
             result.trace = Some(trace);
         }
-        if let (Some((mut ci, mut cs)), Some(copt)) = (capture_from, opts.capture) {
-            result.captured =
-                capture_problems(&mut ci, &mut cs, &exc, &copt, spec, ratio, spp_steps)
-                    .map_err(sim_err)?;
+        if let (Some(mut copy), Some(copt)) = (capture_from, opts.capture) {
+            result.captured = capture_problems(&mut copy, &exc, &copt, spec, ratio, spp_steps)
+                .map_err(sim_err)?;
         }
     }
     progress(&report(
@@ -588,8 +587,7 @@ pub fn run_test(
 
 /// Re-runs steps one at a time and keeps the contact problems of qualifying solves.
 fn capture_problems(
-    integ: &mut Integrator,
-    state: &mut State,
+    rom: &mut Tips,
     exc: &Excitation,
     opt: &CaptureOptions,
     spec: &TestSpec,
@@ -604,7 +602,7 @@ fn capture_problems(
             break;
         }
         let mut last_active = 0usize;
-        let rep = integ.run(state, exc, 1, &mut |o: &StepOutput<'_>| {
+        let rep = rom.run(exc, 1, &mut |o: &SensorStep<2>| {
             last_active = o.solve.map_or(0, |s| s.active_pairs);
         })?;
         if rep.stop.is_some() {
@@ -615,9 +613,13 @@ fn capture_problems(
                 let label = format!(
                     "{} Omega/omega_2={ratio} step {} active {last_active}",
                     spec.name,
-                    state.step() - 1
+                    rom.state().step() - 1
                 );
-                out.push(integ.contact_solver().last_active_problem(&label));
+                out.push(
+                    rom.integrator()
+                        .contact_solver()
+                        .last_active_problem(&label),
+                );
             }
             qualifying += 1;
         }

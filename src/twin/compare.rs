@@ -39,7 +39,7 @@ pub struct TwinComparison {
 
 /// Index of the lower and upper tip in the twin's sensors ([`super::TWIN_SENSORS`]).
 const LOWER_TIP: usize = 0;
-const UPPER_TIP: usize = crate::rig::sim::truth::UPPER_TIP;
+const UPPER_TIP: usize = crate::sim::driven::UPPER_TIP;
 
 /// The twin's output samples from `first` on, to cut record windows from.
 #[derive(Debug, Default)]

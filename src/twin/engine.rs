@@ -24,9 +24,8 @@
 
 use crate::rig::daq::{DaqBlock, DaqLayout};
 use crate::rom::Rom;
-use crate::sim::{
-    Integrator, IntegratorParameters, StabilityLimits, State, StepOutput, StepSink, TimeStep,
-};
+use crate::sim::driven::{DrivenError, DrivenRom, SensorStep};
+use crate::sim::{StabilityLimits, TimeStep};
 
 use super::error::TwinError;
 use super::input::{InputMap, TwinInput};
@@ -50,36 +49,22 @@ pub struct TwinCounters {
     pub restarts: u64,
 }
 
-/// Collects what the outputs of one sample need from the integrator's steps.
+/// The contact of one sample: what its twin steps' contact adds up to.
 #[derive(Clone, Copy, Debug, Default)]
-struct SampleSink {
-    /// Indices of [`TWIN_SENSORS`] among the ROM outputs.
-    index: [usize; 4],
-    /// Relative sensor velocities of the last step (at its half step), m/s.
-    velocity: [f64; 4],
+struct SampleContact {
     closed: bool,
     normal: f64,
     tangential: f64,
 }
 
-impl SampleSink {
-    fn start_sample(&mut self) {
-        self.closed = false;
-        self.normal = 0.0;
-        self.tangential = 0.0;
-    }
-}
-
-impl StepSink for SampleSink {
+impl SampleContact {
+    /// Adds one twin step.
     #[inline]
-    fn record(&mut self, out: &StepOutput<'_>) {
-        for (v, &i) in self.velocity.iter_mut().zip(&self.index) {
-            *v = out.velocity[i];
-        }
-        if out.contact.any_closed {
+    fn add(&mut self, step: &SensorStep<4>) {
+        if step.contact.any_closed {
             self.closed = true;
-            self.normal += out.contact.normal_force;
-            self.tangential += out.contact.tangential_force;
+            self.normal += step.contact.normal_force;
+            self.tangential += step.contact.tangential_force;
         }
     }
 }
@@ -87,14 +72,14 @@ impl StepSink for SampleSink {
 /// The live twin's synchronous core. See the module docs for the time base.
 #[derive(Clone, Debug)]
 pub struct Twin {
-    integrator: Integrator,
-    state: State,
+    /// The twin ROM driven by the measured base acceleration, read at [`TWIN_SENSORS`] (its
+    /// last step's relative velocities stand at the half step before the next sample).
+    rom: DrivenRom<4>,
     map: InputMap,
     after_gap: AfterGap,
     steps_per_sample: u32,
     /// `k / N` for `k = 1..=N`.
     weights: Vec<f64>,
-    sink: SampleSink,
     /// Base acceleration of the last sample processed (none at the start and after a reset).
     last_accel: Option<f64>,
     /// The sample the next block should start with, and the last block's sequence number.
@@ -119,28 +104,17 @@ impl Twin {
         if !clearance_m.is_finite() {
             return Err(TwinError::Clearance(clearance_m));
         }
-        let mut index = [0; 4];
-        for (slot, name) in index.iter_mut().zip(TWIN_SENSORS) {
-            *slot = rom
-                .outputs
-                .iter()
-                .position(|o| o.name == name)
-                .ok_or_else(|| {
-                    TwinError::Rom(format!(
-                        "no output {name:?} (outputs: {:?}); the twin predicts the beam sensors \
-                         {TWIN_SENSORS:?}",
-                        rom.outputs.iter().map(|o| &o.name).collect::<Vec<_>>()
-                    ))
-                })?;
-        }
         // A provisional step far inside any stability limit lets the integrator check the ROM
         // and compute its limits; the twin step follows from them.
-        let params = IntegratorParameters {
-            time_step: TimeStep::StepsPerReferencePeriod { steps: 1.0e6 },
-            ..IntegratorParameters::default()
-        };
-        let mut integrator = Integrator::new(rom, params)?;
-        let limits = *integrator.limits();
+        let mut rom = DrivenRom::provisional(rom, TWIN_SENSORS).map_err(|e| match e {
+            DrivenError::Output(missing) => TwinError::Rom(format!(
+                "no output {:?} (outputs: {:?}); the twin predicts the beam sensors \
+                 {TWIN_SENSORS:?}",
+                missing.name, missing.available
+            )),
+            DrivenError::Sim(e) => e.into(),
+        })?;
+        let limits = *rom.limits();
         let fs = map.sample_rate();
         let n = spec.steps_per_sample_for(fs, limits.omega_ref);
         let dt = 1.0 / (fs * f64::from(n));
@@ -164,21 +138,15 @@ impl Twin {
                 (1.0 / (fs * limits.dt_max_open())).floor() + 1.0
             )));
         }
-        integrator.set_time_step(TimeStep::Dt { dt })?;
-        integrator.set_clearance(clearance_m)?;
-        let state = integrator.state_at_rest();
+        rom.set_time_step(TimeStep::Dt { dt })?;
+        rom.set_clearance(clearance_m)?;
         let weights = (1..=n).map(|k| f64::from(k) / f64::from(n)).collect();
         Ok(Twin {
-            integrator,
-            state,
+            rom,
             map,
             after_gap: spec.after_gap,
             steps_per_sample: n,
             weights,
-            sink: SampleSink {
-                index,
-                ..SampleSink::default()
-            },
             last_accel: None,
             next_sample: None,
             last_seq: 0,
@@ -188,7 +156,7 @@ impl Twin {
 
     /// The twin step, s.
     pub fn dt(&self) -> f64 {
-        self.integrator.dt()
+        self.rom.dt()
     }
 
     /// Twin steps per DAQ sample.
@@ -203,7 +171,7 @@ impl Twin {
 
     /// The ROM's stability limits.
     pub fn limits(&self) -> &StabilityLimits {
-        self.integrator.limits()
+        self.rom.limits()
     }
 
     /// How blocks are turned into the twin's input (for extracting it elsewhere, e.g. on the
@@ -220,12 +188,12 @@ impl Twin {
     /// The contact solver's cumulative counters (solves, sweeps, failures) since the twin
     /// was created or last restarted at rest.
     pub fn solver_counters(&self) -> crate::sim::SolverCounters {
-        self.state.counters()
+        self.rom.state().counters()
     }
 
     /// The clearance in use, m.
     pub fn clearance(&self) -> f64 {
-        self.integrator.clearance()
+        self.rom.clearance()
     }
 
     /// Changes the clearance (e.g. per test of a plan), m, from the next sample on; the state
@@ -234,7 +202,7 @@ impl Twin {
         if !clearance_m.is_finite() {
             return Err(TwinError::Clearance(clearance_m));
         }
-        self.integrator.set_clearance(clearance_m)?;
+        self.rom.set_clearance(clearance_m)?;
         Ok(())
     }
 
@@ -251,8 +219,7 @@ impl Twin {
     /// Back to rest, forgetting the stream position (the next block is taken as the first);
     /// the counters are kept.
     pub fn reset(&mut self) {
-        self.state = self.integrator.state_at_rest();
-        self.sink.velocity = [0.0; 4];
+        self.rom.reset();
         self.last_accel = None;
         self.next_sample = None;
     }
@@ -301,8 +268,7 @@ impl Twin {
             self.counters.gaps += 1;
             self.last_accel = None;
             if g.restarted {
-                self.state = self.integrator.state_at_rest();
-                self.sink.velocity = [0.0; 4];
+                self.rom.reset();
             }
         }
 
@@ -323,33 +289,34 @@ impl Twin {
         let inv_n = 1.0 / n as f64;
         for (i, &a_i) in input.base_acceleration.iter().enumerate() {
             let a_prev = self.last_accel.unwrap_or(a_i);
-            self.sink.start_sample();
-            let mut before = self.sink.velocity;
+            let mut contact = SampleContact::default();
+            let mut before = self.rom.last().velocity;
             let mut failures = 0u32;
             for (k, &w) in self.weights.iter().enumerate() {
                 if k + 1 == n {
-                    before = self.sink.velocity;
+                    before = self.rom.last().velocity;
                 }
                 let a = (1.0 - w) * a_prev + w * a_i;
-                let report = self.integrator.step(&mut self.state, a, &mut self.sink)?;
+                let report = self.rom.step(a)?;
+                contact.add(self.rom.last());
                 let c = report.counters;
                 failures += (c.max_iterations + c.diverged) as u32;
                 if report.stop.is_some() {
                     // NOTE: non-finite state: data, not an error. Restart at rest and go on.
-                    self.state = self.integrator.state_at_rest();
-                    self.sink.velocity = [0.0; 4];
+                    self.rom.reset();
                     before = [0.0; 4];
-                    self.sink.start_sample();
+                    contact = SampleContact::default();
                     self.counters.restarts += 1;
                     out.restarts.push(input.first_sample + i as u64);
                 }
             }
-            for (s, (&b, &v)) in before.iter().zip(&self.sink.velocity).enumerate() {
+            let after = &self.rom.last().velocity;
+            for (s, (&b, &v)) in before.iter().zip(after).enumerate() {
                 out.velocity[s * len + i] = 0.5 * (b + v);
             }
-            out.contact[i] = self.sink.closed;
-            out.normal_force[i] = self.sink.normal * inv_n;
-            out.tangential_force[i] = self.sink.tangential * inv_n;
+            out.contact[i] = contact.closed;
+            out.normal_force[i] = contact.normal * inv_n;
+            out.tangential_force[i] = contact.tangential * inv_n;
             out.solver_failures[i] = failures;
             self.counters.solver_failures += u64::from(failures);
             self.last_accel = Some(a_i);

@@ -6,8 +6,8 @@
 use serde::{Deserialize, Serialize};
 
 /// The ROM outputs the twin predicts, in the order of [`TwinBlock::velocity`] (the beam
-/// sensors of the rig, [`crate::rig::sim::truth::BEAM_SENSORS`]).
-pub const TWIN_SENSORS: [&str; 4] = crate::rig::sim::truth::BEAM_SENSORS;
+/// sensors of the rig, [`crate::sim::driven::BEAM_SENSORS`]).
+pub const TWIN_SENSORS: [&str; 4] = crate::sim::driven::BEAM_SENSORS;
 
 /// A jump in the twin's input: samples that never reached it.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
@@ -72,7 +72,7 @@ impl TwinBlock {
 
     /// The upper-tip relative velocity (the vibrometer's spot), m/s.
     pub fn upper_tip(&self) -> &[f64] {
-        self.sensor(crate::rig::sim::truth::UPPER_TIP)
+        self.sensor(crate::sim::driven::UPPER_TIP)
     }
 }
 

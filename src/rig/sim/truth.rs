@@ -26,9 +26,8 @@
 // With every variant off the step does exactly what it did without them.
 
 use crate::rom::Rom;
-use crate::sim::{
-    Integrator, IntegratorParameters, StabilityLimits, State, StepOutput, StepSink, TimeStep,
-};
+use crate::sim::driven::{DrivenError, DrivenRom};
+use crate::sim::{StabilityLimits, State, TimeStep};
 
 use super::shaker::Shaker;
 use super::variants::iwan::ClampJoint;
@@ -37,11 +36,9 @@ use super::variants::wear::Wear;
 use super::variants::TruthVariants;
 use super::{ShakerSpec, SimRigError};
 
-/// The ROM outputs the beam sensors read, in channel order.
-pub const BEAM_SENSORS: [&str; 4] = ["lower_tip", "lower_mid", "upper_tip", "upper_mid"];
-
-/// Index of the upper tip in [`BEAM_SENSORS`] (the vibrometer's spot).
-pub const UPPER_TIP: usize = 2;
+/// The ROM outputs the beam sensors read, in channel order, and the upper tip's index among
+/// them (the vibrometer's spot): the driven ROM's, [`crate::sim::driven`].
+pub use crate::sim::driven::{BEAM_SENSORS, UPPER_TIP};
 
 /// What one truth step produced: the physical quantities the sensors read.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -67,34 +64,11 @@ pub struct StepValues {
     pub any_closed: bool,
 }
 
-/// Copies what the sensors (and the wear variant) need from the integrator's step output.
-#[derive(Clone, Copy, Debug, Default)]
-struct Capture {
-    index: [usize; 4],
-    velocity: [f64; 4],
-    any_closed: bool,
-    /// Cumulative contact work on the modes and boundary energy after the step, J.
-    contact_work: f64,
-    boundary: f64,
-}
-
-impl StepSink for Capture {
-    #[inline]
-    fn record(&mut self, out: &StepOutput<'_>) {
-        for (v, &i) in self.velocity.iter_mut().zip(&self.index) {
-            *v = out.velocity[i];
-        }
-        self.any_closed = out.contact.any_closed;
-        self.contact_work = out.energy.accounts.contact_work;
-        self.boundary = out.energy.boundary;
-    }
-}
-
 /// The truth: ROM + shaker, stepped together.
 #[derive(Clone, Debug)]
 pub struct Truth {
-    integrator: Integrator,
-    state: State,
+    /// The ROM driven by the base acceleration, read at [`BEAM_SENSORS`].
+    rom: DrivenRom<4>,
     shaker: Shaker,
     dt: f64,
     /// Per mode: `alpha_i beta_i`, `D_i = 2 zeta_i omega_i`, `omega_i^2`.
@@ -106,7 +80,6 @@ pub struct Truth {
     p: Vec<f64>,
     /// `1 / (M - sum_i alpha_i beta_i^2 + c dt / 2)`, 1/kg.
     inv_mass: f64,
-    capture: Capture,
     last: StepValues,
     steps: u64,
     failure: Option<String>,
@@ -163,27 +136,16 @@ impl Truth {
         variants: &TruthVariants,
         choose_dt: impl FnOnce(&StabilityLimits) -> Result<f64, SimRigError>,
     ) -> Result<Truth, SimRigError> {
-        let mut index = [0; 4];
-        for (slot, name) in index.iter_mut().zip(BEAM_SENSORS) {
-            *slot = rom
-                .outputs
-                .iter()
-                .position(|o| o.name == name)
-                .ok_or_else(|| {
-                    SimRigError::Rom(format!(
-                        "the truth ROM has no output {name:?} (outputs: {:?}); the beam \
-                     accelerometers and the vibrometer read the outputs {BEAM_SENSORS:?}",
-                        rom.outputs.iter().map(|o| &o.name).collect::<Vec<_>>()
-                    ))
-                })?;
-        }
         // A provisional step far inside any stability limit lets the integrator check the ROM
         // and compute its limits; the real step follows from them.
-        let params = IntegratorParameters {
-            time_step: TimeStep::StepsPerReferencePeriod { steps: 1.0e6 },
-            ..IntegratorParameters::default()
-        };
-        let mut integrator = Integrator::new(rom, params)?;
+        let mut driven = DrivenRom::provisional(rom, BEAM_SENSORS).map_err(|e| match e {
+            DrivenError::Output(missing) => SimRigError::Rom(format!(
+                "the truth ROM has no output {:?} (outputs: {:?}); the beam accelerometers \
+                 and the vibrometer read the outputs {BEAM_SENSORS:?}",
+                missing.name, missing.available
+            )),
+            DrivenError::Sim(e) => e.into(),
+        })?;
         let modal_mass: f64 = rom.beta.iter().map(|b| b * b).sum();
         if !(shaker.moving_mass > modal_mass) {
             return Err(SimRigError::Spec(format!(
@@ -193,13 +155,13 @@ impl Truth {
                 shaker.moving_mass
             )));
         }
-        let limits = coupled_limits(integrator.limits(), shaker, modal_mass);
+        let limits = coupled_limits(driven.limits(), shaker, modal_mass);
         let dt = choose_dt(&limits)?;
-        integrator.set_time_step(TimeStep::Dt { dt })?;
-        integrator.set_clearance(clearance_m)?;
+        driven.set_time_step(TimeStep::Dt { dt })?;
+        driven.set_clearance(clearance_m)?;
         if let Some(t) = &variants.tilt {
             let offsets = tilt::gap_offsets(&rom.pair_position, &rom.pair_area, t);
-            integrator.set_gap_offsets(Some(&offsets))?;
+            driven.set_gap_offsets(Some(&offsets))?;
         }
         let joint = variants
             .clamp_friction
@@ -210,7 +172,6 @@ impl Truth {
             .wear
             .as_ref()
             .map(|w| Wear::new(w.coefficient, w.max_growth));
-        let state = integrator.state_at_rest();
 
         let m = rom.n_modes();
         let damping: Vec<f64> = (0..m)
@@ -233,8 +194,7 @@ impl Truth {
         let shaker_model = Shaker::new(shaker, dt);
         let inv_mass = 1.0 / (free_mass + 0.5 * shaker_model.damping() * dt);
         Ok(Truth {
-            integrator,
-            state,
+            rom: driven,
             shaker: shaker_model,
             dt,
             alpha_beta,
@@ -242,10 +202,6 @@ impl Truth {
             omega2: rom.omega.iter().map(|w| w * w).collect(),
             p,
             inv_mass,
-            capture: Capture {
-                index,
-                ..Capture::default()
-            },
             last: StepValues::default(),
             steps: 0,
             failure: None,
@@ -277,13 +233,14 @@ impl Truth {
 
         // Clamp joint (variant): its modal load at eta^j.
         let load: &[(usize, f64)] = match &mut self.joint {
-            Some(j) => j.update(self.state.eta()),
+            Some(j) => j.update(self.rom.state().eta()),
             None => &[],
         };
 
         // Base acceleration from the base equation (see the module docs).
-        let eta = self.state.eta();
-        let v = self.state.eta_dot();
+        let state = self.rom.state();
+        let eta = state.eta();
+        let v = state.eta_dot();
         let mut modal = 0.0;
         for i in 0..eta.len() {
             let f = -self.damping[i] * v[i] - self.omega2[i] * eta[i];
@@ -292,8 +249,8 @@ impl Truth {
         for &(i, f) in load {
             modal += self.alpha_beta[i] * f;
         }
-        let lambda = self.state.lambda();
-        for &k in self.state.closed_pairs() {
+        let lambda = state.lambda();
+        for &k in state.closed_pairs() {
             let rows = 3 * k..3 * k + 3;
             for (p, l) in self.p[rows.clone()].iter().zip(&lambda[rows]) {
                 modal += p * l;
@@ -308,11 +265,8 @@ impl Truth {
             return self.fail(time, "the base acceleration");
         }
 
-        let before = self.capture.velocity;
-        match self
-            .integrator
-            .step_loaded(&mut self.state, a_b, load, &mut self.capture)
-        {
+        let before = self.rom.last().velocity;
+        match self.rom.step_loaded(a_b, load) {
             Ok(report) => {
                 self.solver_failures += report.counters.max_iterations + report.counters.diverged;
                 if report.stop.is_some() {
@@ -333,12 +287,13 @@ impl Truth {
         if !self.shaker.is_finite() {
             return self.fail(time, "the shaker state");
         }
+        let after = *self.rom.last();
         if let Some(w) = &mut self.wear {
-            if let Some(growth) = w.update(self.capture.contact_work, self.capture.boundary) {
+            // Cumulative contact work on the modes and boundary energy after the step, J.
+            let (work, boundary) = (after.energy.accounts.contact_work, after.energy.boundary);
+            if let Some(growth) = w.update(work, boundary) {
                 // Finite: the nominal clearance is finite and the growth is capped or finite.
-                let _ = self
-                    .integrator
-                    .set_clearance(self.nominal_clearance + growth);
+                let _ = self.rom.set_clearance(self.nominal_clearance + growth);
             }
         }
         self.last = StepValues {
@@ -346,11 +301,11 @@ impl Truth {
             base_acceleration: a_b,
             base_displacement: x_b,
             base_velocity: [v_prev, self.shaker.velocity_half()],
-            relative_velocity: [before, self.capture.velocity],
+            relative_velocity: [before, after.velocity],
             amplifier_output: u,
             clipped,
             current,
-            any_closed: self.capture.any_closed,
+            any_closed: after.contact.any_closed,
         };
         self.last
     }
@@ -389,7 +344,7 @@ impl Truth {
 
     /// The clearance in use, m (the nominal one plus the wear growth).
     pub fn clearance(&self) -> f64 {
-        self.integrator.clearance()
+        self.rom.clearance()
     }
 
     /// Changes the nominal clearance (finite, m); wear grown so far stays on top of it.
@@ -400,7 +355,7 @@ impl Truth {
         } else {
             clearance_m
         };
-        self.integrator.set_clearance(effective)?;
+        self.rom.set_clearance(effective)?;
         self.nominal_clearance = clearance_m;
         Ok(())
     }
@@ -419,12 +374,12 @@ impl Truth {
 
     /// The integrator (gap offsets, clearance, limits), for tests and diagnostics.
     pub fn integrator(&self) -> &crate::sim::Integrator {
-        &self.integrator
+        self.rom.integrator()
     }
 
     /// The integrator state, for tests and diagnostics.
     pub fn state(&self) -> &State {
-        &self.state
+        self.rom.state()
     }
 
     /// The shaker (state and amplifier limit).
@@ -445,6 +400,6 @@ impl Truth {
 
     /// Pairs closed in the last step.
     pub fn closed_pairs(&self) -> usize {
-        self.state.closed_pairs().len()
+        self.rom.state().closed_pairs().len()
     }
 }

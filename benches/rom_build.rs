@@ -101,7 +101,7 @@ fn main() {
     let mut rows = Vec::new();
     for run in 0..a.repeat {
         let t = Instant::now();
-        let rom = build_native(&cfg, &opts, &mut |_| {}).expect("ROM builds");
+        let rom = build_native(cfg.model(), &opts, &mut |_| {}).expect("ROM builds");
         let total = t.elapsed().as_secs_f64();
         let tm = &rom.meta.timings;
         let f = rom.frequencies_hz();

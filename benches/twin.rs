@@ -109,7 +109,7 @@ fn main() {
         .map(PathBuf::from)
         .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/rom-cache"));
     let (rom, _, _) = rigtwin::rom::cache::load_or_build(
-        &cfg,
+        cfg.model(),
         &BuildOptions::default(),
         &dir,
         false,

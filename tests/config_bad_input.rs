@@ -8,6 +8,7 @@
 use std::path::{Path, PathBuf};
 
 use rigtwin::config::{ConfigError, RigConfig};
+use rigtwin::rig::sim::SimRigSpec;
 
 const FILE: &str = "bad-rig.toml";
 
@@ -364,7 +365,7 @@ fn truth_variants_parse_and_stay_out_of_the_hash() {
          angle = 2e-3\n",
     ))
     .unwrap();
-    let v = &cfg.sim_rig_spec().truth.variants;
+    let v = &SimRigSpec::from_config(&cfg).truth.variants;
     assert!(v.any());
     assert_eq!(v.clamp_friction.as_ref().unwrap().sliders, 64);
     assert_eq!(v.wear.as_ref().unwrap().max_growth, Some(5e-5));
@@ -451,7 +452,7 @@ fn documented_truth_variants_examples_are_valid() {
         .collect::<Vec<_>>()
         .join("\n");
     let cfg = parse(&format!("{}\n{example}\n", &text[..start])).unwrap();
-    let v = cfg.sim_rig_spec().truth.variants;
+    let v = SimRigSpec::from_config(&cfg).truth.variants;
     assert!(v.clamp_friction.is_some() && v.wear.is_some() && v.tilt.is_some());
     assert_eq!(v.sensor_gains.len(), 1);
     // The example in rig-config/README.md.
@@ -464,9 +465,7 @@ fn documented_truth_variants_examples_are_valid() {
         .nth(1)
         .and_then(|b| b.split("```").next())
         .expect("a toml block in rig-config/README.md");
-    let from_readme = parse(&with_variants(block))
-        .unwrap()
-        .sim_rig_spec()
+    let from_readme = SimRigSpec::from_config(&parse(&with_variants(block)).unwrap())
         .truth
         .variants;
     assert_eq!(from_readme, v);

@@ -16,7 +16,7 @@ fn native() -> &'static Rom {
     static ROM: OnceLock<Rom> = OnceLock::new();
     ROM.get_or_init(|| {
         build_native(
-            &RigConfig::default_rig(),
+            RigConfig::default_rig().model(),
             &BuildOptions::default(),
             &mut |_| {},
         )
@@ -104,7 +104,7 @@ fn calculix_agrees_with_the_native_model_of_the_default_rig() {
         return;
     }
     let cfg = RigConfig::default_rig();
-    let mesh = rigtwin::fe::rig::mesh_rig(&cfg).unwrap();
+    let mesh = rigtwin::fe::rig::mesh_rig(cfg.model()).unwrap();
     let dir = tempfile::tempdir().unwrap();
     let files = calculix::export(&mesh, dir.path(), "rig", 10).unwrap();
     // ccx's own eigen solve (its C3D8I with dynamic bubble DOFs) on the same mesh.
@@ -124,8 +124,13 @@ fn calculix_agrees_with_the_native_model_of_the_default_rig() {
     }
     // A ROM from ccx's matrices (MATRIXSTORAGE) against the native ROM.
     let run = calculix::run_ccx(dir.path(), &files.matrix_job).unwrap();
-    let from_ccx =
-        build_calculix(&run.job_path, &cfg, &BuildOptions::default(), &mut |_| {}).unwrap();
+    let from_ccx = build_calculix(
+        &run.job_path,
+        cfg.model(),
+        &BuildOptions::default(),
+        &mut |_| {},
+    )
+    .unwrap();
     let f_rom = from_ccx.frequencies_hz();
     assert_eq!(from_ccx.n_pairs(), native().n_pairs());
     let n = f_rom.len().min(f_native.len());

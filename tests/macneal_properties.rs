@@ -741,7 +741,7 @@ fn reference_rig_builds() {
         std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("rig-config/two-beam.toml");
     let cfg = rigtwin::config::RigConfig::from_path(&path).unwrap();
     let t0 = std::time::Instant::now();
-    let mesh = rigtwin::fe::rig::mesh_rig(&cfg).unwrap();
+    let mesh = rigtwin::fe::rig::mesh_rig(cfg.model()).unwrap();
     let model = rigtwin::fe::assembly::assemble(&mesh, cfg.contact.clearance).unwrap();
     let t_asm = t0.elapsed().as_secs_f64();
     let ratio: f64 = std::env::var("RATIO").map_or(180.0, |b| b.parse().unwrap());
@@ -807,7 +807,7 @@ fn coarse_reference_rig_reduces() {
     cfg.mesh.beams.clamp_element = 0.01;
     cfg.mesh.beams.clamp_exit_element = 0.004;
     cfg.validate().unwrap();
-    let mesh = rigtwin::fe::rig::mesh_rig(&cfg).unwrap();
+    let mesh = rigtwin::fe::rig::mesh_rig(cfg.model()).unwrap();
     let model = rigtwin::fe::assembly::assemble(&mesh, cfg.contact.clearance).unwrap();
     let rom = reduce(
         &model,

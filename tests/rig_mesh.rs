@@ -46,7 +46,7 @@ fn distinct(values: impl Iterator<Item = f64>) -> usize {
 #[test]
 fn counts_are_those_of_structured_grids() {
     let cfg = reference();
-    let mesh = mesh_rig(&cfg).unwrap();
+    let mesh = mesh_rig(cfg.model()).unwrap();
     let mut node_sum = 0;
     for (b, block) in mesh.blocks.iter().enumerate() {
         let nodes = block_nodes(&mesh, b);
@@ -85,7 +85,7 @@ fn counts_are_those_of_structured_grids() {
 
 #[test]
 fn element_volumes_are_positive() {
-    let mesh = mesh_rig(&reference()).unwrap();
+    let mesh = mesh_rig(reference().model()).unwrap();
     for (i, e) in mesh.elements.iter().enumerate() {
         let v = hex_volume(&e.nodes.map(|n| mesh.nodes[n]));
         assert!(
@@ -99,7 +99,7 @@ fn element_volumes_are_positive() {
 #[test]
 fn total_mass_matches_the_parts() {
     let cfg = reference();
-    let mesh = mesh_rig(&cfg).unwrap();
+    let mesh = mesh_rig(cfg.model()).unwrap();
     let p = &cfg.parts;
     let rho = |name: &str| cfg.materials[name].density;
     let (l, lc) = (cfg.rig.beam_length, p.clamp.length);
@@ -138,7 +138,7 @@ fn total_mass_matches_the_parts() {
 
 #[test]
 fn probes_weigh_about_20_g() {
-    let mesh = mesh_rig(&reference()).unwrap();
+    let mesh = mesh_rig(reference().model()).unwrap();
     let mass_of = |name: &str| {
         let b = block_index(&mesh, name);
         let rho = mesh.materials[mesh.blocks[b].material].density;
@@ -163,7 +163,7 @@ fn probes_weigh_about_20_g() {
 #[test]
 fn contact_patch_has_192_pairs_across_the_clearance() {
     let cfg = reference();
-    let mesh = mesh_rig(&cfg).unwrap();
+    let mesh = mesh_rig(cfg.model()).unwrap();
     assert_eq!(mesh.contact_pairs.len(), 192);
     let pr = &cfg.parts.protrusion;
     let area: f64 = mesh.contact_pairs.iter().map(|c| c.area).sum();
@@ -215,7 +215,7 @@ fn contact_patch_has_192_pairs_across_the_clearance() {
 
 #[test]
 fn no_duplicated_nodes_inside_a_part() {
-    let mesh = mesh_rig(&reference()).unwrap();
+    let mesh = mesh_rig(reference().model()).unwrap();
     for (b, block) in mesh.blocks.iter().enumerate() {
         let nodes = block_nodes(&mesh, b);
         let keys: BTreeSet<[i64; 3]> = nodes
@@ -229,7 +229,7 @@ fn no_duplicated_nodes_inside_a_part() {
 #[test]
 fn springs_join_coincident_nodes_and_carry_the_layer_areas() {
     let cfg = reference();
-    let mesh = mesh_rig(&cfg).unwrap();
+    let mesh = mesh_rig(cfg.model()).unwrap();
     let mut area_per_layer: BTreeMap<usize, f64> = BTreeMap::new();
     let specs = cfg.layers.named();
     for s in &mesh.springs {
@@ -291,7 +291,7 @@ fn springs_join_coincident_nodes_and_carry_the_layer_areas() {
 #[test]
 fn fixed_nodes_node_sets_and_sensors() {
     let cfg = reference();
-    let mesh = mesh_rig(&cfg).unwrap();
+    let mesh = mesh_rig(cfg.model()).unwrap();
     let z_bottom = -cfg.parts.clamp.base_height;
     let base = block_nodes(&mesh, block_index(&mesh, "base_block"));
     let bottom: Vec<usize> = base
@@ -359,7 +359,7 @@ fn patch_size_is_configurable() {
     let text = text.replace("nodes = [12, 16]", "nodes = [4, 5]");
     let cfg = RigConfig::from_str(&text, "patched.toml").unwrap();
     assert_eq!(cfg.contact.nodes, [4, 5]);
-    let mesh = mesh_rig(&cfg).unwrap();
+    let mesh = mesh_rig(cfg.model()).unwrap();
     assert_eq!(mesh.contact_pairs.len(), 20);
     let pr = &cfg.parts.protrusion;
     let area: f64 = mesh.contact_pairs.iter().map(|c| c.area).sum();
@@ -378,7 +378,7 @@ fn offset_protrusion_stays_conforming() {
     let text = std::fs::read_to_string(reference_path()).unwrap();
     let text = text.replace("offset = [0.0, 0.0]", "offset = [0.002, -0.0025]");
     let cfg = RigConfig::from_str(&text, "offset.toml").unwrap();
-    let mesh = mesh_rig(&cfg).unwrap();
+    let mesh = mesh_rig(cfg.model()).unwrap();
     let cx: f64 = mesh
         .contact_pairs
         .iter()
@@ -396,12 +396,12 @@ fn offset_protrusion_stays_conforming() {
 fn description_edited_in_code_is_validated_not_panicking() {
     let mut cfg = reference();
     cfg.contact.nodes = [1, 16];
-    let err = mesh_rig(&cfg).unwrap_err();
+    let err = mesh_rig(cfg.model()).unwrap_err();
     assert_eq!(err.key(), Some("contact.nodes"), "{err}");
     let mut cfg = reference();
     cfg.parts.protrusion.length = 0.1;
     assert_eq!(
-        mesh_rig(&cfg).unwrap_err().key(),
+        mesh_rig(cfg.model()).unwrap_err().key(),
         Some("parts.protrusion.length")
     );
 }
@@ -570,7 +570,7 @@ fn reference_rig_frequencies() {
         Ok(p) => RigConfig::from_path(std::path::Path::new(&p)).unwrap(),
         Err(_) => reference(),
     };
-    let mesh = mesh_rig(&cfg).unwrap();
+    let mesh = mesh_rig(cfg.model()).unwrap();
     let model = rigtwin::fe::assembly::assemble(&mesh, cfg.contact.clearance).unwrap();
     let n_modes = 12;
     let (lambda, modes) = lowest_modes(&model.k, &model.m, n_modes, 30);
@@ -666,7 +666,7 @@ fn reference_rig_frequencies() {
 #[test]
 fn reference_mesh_assembles() {
     let cfg = reference();
-    let mesh = mesh_rig(&cfg).unwrap();
+    let mesh = mesh_rig(cfg.model()).unwrap();
     let model = rigtwin::fe::assembly::assemble(&mesh, cfg.contact.clearance).unwrap();
     assert_eq!(model.n_dof(), 3 * (mesh.n_nodes() - mesh.fixed_nodes.len()));
     assert_eq!(model.pairs.len(), 192);

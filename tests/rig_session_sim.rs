@@ -178,11 +178,11 @@ fn a_session_records_its_truth_variants() {
     let logged = &s.metadata("session").unwrap()["truth_variants"];
     println!("truth_variants: {logged}");
     let logged: rigtwin::rig::sim::TruthVariants = serde_json::from_str(logged).unwrap();
-    let expected = rigtwin::config::RigConfig::from_str(&cfg_text, "rig.toml")
-        .unwrap()
-        .sim_rig_spec()
-        .truth
-        .variants;
+    let expected = rigtwin::rig::sim::SimRigSpec::from_config(
+        &rigtwin::config::RigConfig::from_str(&cfg_text, "rig.toml").unwrap(),
+    )
+    .truth
+    .variants;
     assert!(expected.any());
     assert_eq!(logged, expected);
     let attached = &s.attachment("rig.toml").unwrap().data;

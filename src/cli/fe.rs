@@ -31,7 +31,7 @@ pub(crate) fn run(cmd: FeCommand) -> anyhow::Result<()> {
     match cmd {
         FeCommand::ExportCalculix(a) => {
             let cfg = super::models::load_config(a.config.as_deref())?;
-            let mesh = crate::fe::rig::mesh_rig(&cfg)?;
+            let mesh = crate::fe::rig::mesh_rig(cfg.model())?;
             let files = crate::fe::calculix::export(&mesh, &a.out, &a.job, a.modes)?;
             println!(
                 "{} nodes, {} elements -> {}",

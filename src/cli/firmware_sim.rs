@@ -12,7 +12,7 @@ use std::time::Duration;
 
 use crate::config::RigConfig;
 use crate::rig::hw::firmware_sim::{FirmwareOptions, FirmwareSim, Inject, Pace};
-use crate::rig::sim::SimRig;
+use crate::rig::sim::{SimRig, SimRigSpec};
 
 /// How the device paces its DAQ blocks.
 #[derive(Clone, Copy, Debug, ValueEnum, PartialEq, Eq)]
@@ -75,7 +75,7 @@ pub(crate) fn run(a: FirmwareSimArgs) -> anyhow::Result<()> {
         modes: None,
     };
     let (truth, _, _) = super::models::cached_rom(&truth_cfg, a.rebuild, a.quiet)?;
-    let spec = cfg.sim_rig_spec();
+    let spec = SimRigSpec::from_config(&cfg);
     let clearance_m = a
         .clearance
         .map_or(cfg.contact.clearance, |c| c * cfg.rig.beam_length);

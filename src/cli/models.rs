@@ -43,7 +43,7 @@ pub(crate) fn cached_rom(
 ) -> anyhow::Result<(Rom, PathBuf, bool)> {
     let progress = BuildProgress::new(quiet);
     let (rom, path, outcome) = crate::rom::cache::load_or_build(
-        cfg,
+        cfg.model(),
         &BuildOptions::default(),
         &super::cache_dir(),
         rebuild,

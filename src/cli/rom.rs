@@ -86,8 +86,8 @@ pub(crate) fn run(cmd: RomCommand) -> anyhow::Result<()> {
             let progress = BuildProgress::new(a.quiet);
             let mut on_event = |e: crate::rom::build::BuildEvent| progress.event(&e);
             let rom = match &a.calculix {
-                Some(job) => build_calculix(job, &cfg, &opts, &mut on_event)?,
-                None => build_native(&cfg, &opts, &mut on_event)?,
+                Some(job) => build_calculix(job, cfg.model(), &opts, &mut on_event)?,
+                None => build_native(cfg.model(), &opts, &mut on_event)?,
             };
             progress.finish();
             crate::rom::file::write(&rom, &a.out)?;

@@ -1,6 +1,8 @@
 //! Errors of the rig description: reading, TOML syntax, schema (unknown keys, wrong types)
-//! and semantic validation. Every message names the file, where in it (line:column or the
-//! dotted key path) and what was expected.
+//! and semantic validation ([`ConfigError`]), and the out-of-range value of a rig-service
+//! table ([`SpecError`], returned by the specs' own `validate`). Every message names the file
+//! (where there is one), where in it (line:column or the dotted key path) and what was
+//! expected.
 
 /// An error in a rig description.
 #[derive(Debug, thiserror::Error)]
@@ -61,6 +63,53 @@ pub enum ConfigError {
         /// What would be accepted.
         expected: String,
     },
+}
+
+/// A value of a rig-service table (`[control]`, `[safety]`, `[shaker]`, `[daq]`, `[truth]`,
+/// `[twin]`) out of the range documented on its field: `<key> = <value>: expected <what>`.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("{key} = {value}: expected {expected}")]
+pub struct SpecError {
+    /// Dotted key path, e.g. `control.kp` or `truth.variants.sensor_gains[0].channel`.
+    pub key: String,
+    /// The offending value as displayed.
+    pub value: String,
+    /// What would be accepted.
+    pub expected: String,
+}
+
+impl SpecError {
+    /// The error for `key = value`, which should have been `expected`.
+    pub fn new(
+        key: impl Into<String>,
+        value: impl std::fmt::Display,
+        expected: impl Into<String>,
+    ) -> Self {
+        SpecError {
+            key: key.into(),
+            value: value.to_string(),
+            expected: expected.into(),
+        }
+    }
+}
+
+/// `Ok` when `value` is finite and `ok` holds, else the error `key = value: expected ...`.
+pub(super) fn check(key: &str, value: f64, ok: bool, expected: &str) -> Result<(), SpecError> {
+    if value.is_finite() && ok {
+        Ok(())
+    } else {
+        Err(SpecError::new(key, value, expected))
+    }
+}
+
+/// `key = value: expected > 0` unless `value` is finite and positive.
+pub(super) fn positive(key: &str, value: f64) -> Result<(), SpecError> {
+    check(key, value, value > 0.0, "> 0")
+}
+
+/// `key = value: expected >= 0` unless `value` is finite and not negative.
+pub(super) fn non_negative(key: &str, value: f64) -> Result<(), SpecError> {
+    check(key, value, value >= 0.0, ">= 0")
 }
 
 impl ConfigError {

@@ -1,33 +1,56 @@
 //! The rig description (`rig-config/*.toml`): geometry, materials, interface layers,
-//! sensors, contact patch, modal damping, mesh resolution and reduction settings, parsed
-//! with serde ([`schema`], [`damping`]), validated (`validate`) and hashed for ROM
-//! provenance. Errors ([`ConfigError`]) name the file, the line:column or key path, the bad
-//! value and what was expected.
+//! sensors, contact patch, modal damping, mesh resolution and reduction settings (the model,
+//! [`RigModel`]: [`schema`], [`damping`]), and the rig service's tables ([`control`],
+//! [`twin`], and the simulated rig's [`shaker`], [`daq`], [`truth`] with its [`variants`]),
+//! parsed with serde, validated (`validate`) and hashed for ROM provenance. Errors
+//! ([`ConfigError`]) name the file, the line:column or key path, the bad value and what was
+//! expected; a service spec checked on its own returns a [`SpecError`].
+//!
+//! A leaf: imports nothing of the crate. The code that builds from a description takes the
+//! part it needs (the mesher and the ROM builder a [`RigModel`], the simulated rig its
+//! shaker, DAQ and truth specs).
 
+pub mod control;
 pub mod damping;
+pub mod daq;
 pub mod error;
+pub mod model;
 pub mod schema;
+pub mod shaker;
+pub mod truth;
+pub mod twin;
 mod validate;
+pub mod variants;
 
 use std::path::Path;
 
 use serde::{Deserialize, Serialize};
-use sha2::{Digest, Sha256};
 
+pub use control::{ControlSpec, SafetySpec};
 pub use damping::{DampingSpec, ModalDamping};
-pub use error::ConfigError;
+pub use daq::{ChannelNoise, ChannelRanges, ContactCircuitSpec, DaqSpec, FIXED_CHANNEL_NAMES};
+pub use error::{ConfigError, SpecError};
+pub use model::RigModel;
 pub use schema::{
-    BeamMesh, BeamSpec, BlockMesh, ClampSpec, ContactSpec, LayerSpec, Layers, LowerProbeSpec,
-    MaterialSpec, Materials, MeshSpec, Mount, Parts, ProbeMesh, ProbeSeat, ProtrusionSpec,
-    ReductionSpec, RigSection, SensorSpec, TaperedBeamSpec, UpperProbeSpec,
+    BeamMesh, BeamSpec, BlockMesh, ClampSpec, ContactSpec, ElementKind, LayerSpec, Layers,
+    LowerProbeSpec, MaterialSpec, Materials, MeshSpec, Mount, Parts, ProbeMesh, ProbeSeat,
+    ProtrusionSpec, ReductionSpec, RigSection, SensorSpec, TaperedBeamSpec, UpperProbeSpec,
 };
+pub use shaker::ShakerSpec;
+pub use truth::TruthSpec;
+pub use twin::{AfterGap, TwinSpec};
+pub use variants::{Beam, ClampFrictionSpec, SensorGainSpec, TiltSpec, TruthVariants, WearSpec};
 
 /// Text of the embedded default rig description.
 pub const DEFAULT_RIG_TOML: &str = include_str!("../../rig-config/two-beam.toml");
 /// Source name used for the embedded default rig in messages.
 pub const DEFAULT_RIG_SOURCE: &str = "rig-config/two-beam.toml (embedded)";
 
-/// A parsed and validated rig description.
+/// A parsed and validated rig description: the model sections (viewed together as
+/// [`RigConfig::model`]) and the rig service's tables.
+///
+// NOTE: the model fields must stay in the order and with the names of `RigModel`'s (the
+// canonical hash is the JSON of either); the service tables are `skip_serializing`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct RigConfig {
@@ -61,22 +84,22 @@ pub struct RigConfig {
     /// `[control]`: the amplitude controller and settle detection of the rig service. Not
     /// part of the model: not hashed (changing a gain does not rebuild the ROM).
     #[serde(default, skip_serializing)]
-    pub control: crate::control::ControlSpec,
+    pub control: ControlSpec,
     /// `[safety]`: limits of the rig service. Not hashed.
     #[serde(default, skip_serializing)]
-    pub safety: crate::control::SafetySpec,
+    pub safety: SafetySpec,
     /// `[shaker]`: the simulated rig's shaker and amplifier. Not hashed.
     #[serde(default, skip_serializing)]
-    pub shaker: crate::rig::sim::ShakerSpec,
+    pub shaker: ShakerSpec,
     /// `[daq]`: the simulated rig's DAQ (sample rate, ranges, noise). Not hashed.
     #[serde(default, skip_serializing)]
-    pub daq: crate::rig::sim::DaqSpec,
+    pub daq: DaqSpec,
     /// `[truth]`: the simulated rig's truth model (its own ROM and time step). Not hashed.
     #[serde(default, skip_serializing)]
-    pub truth: crate::rig::sim::TruthSpec,
+    pub truth: TruthSpec,
     /// `[twin]`: the live twin's step, input queue and gap handling. Not hashed.
     #[serde(default, skip_serializing)]
-    pub twin: crate::twin::TwinSpec,
+    pub twin: TwinSpec,
 }
 
 impl RigConfig {
@@ -137,22 +160,37 @@ impl RigConfig {
         Ok(cfg)
     }
 
-    /// SHA-256 (lower-case hex) of the canonical serialisation (JSON of the parsed
-    /// description): comments, whitespace, key order and number spelling do not change it;
-    /// explicit defaults hash like omitted ones.
-    pub fn canonical_hash(&self) -> String {
-        // NOTE: serde_json writes struct fields in declaration order and BTreeMap keys
-        // sorted, and f64 with the shortest round-trip representation: a canonical form.
-        let json = serde_json::to_string(self).unwrap_or_default();
-        let digest = Sha256::digest(json.as_bytes());
-        digest.iter().map(|b| format!("{b:02x}")).collect()
+    /// The model sections: what the FE model and its reduction are built from, and what the
+    /// canonical hash covers.
+    pub fn model(&self) -> RigModel<'_> {
+        RigModel {
+            source: &self.source,
+            rig: &self.rig,
+            materials: &self.materials,
+            parts: &self.parts,
+            probe_seat: &self.probe_seat,
+            layers: &self.layers,
+            sensors: &self.sensors,
+            contact: &self.contact,
+            damping: &self.damping,
+            mesh: &self.mesh,
+            reduction: &self.reduction,
+        }
     }
 
-    /// Checks the description (positive dimensions, known materials, a patch that fits,
-    /// node counts, clearance, friction, damping, mesh sizes, sensors, reduction). Parsing
-    /// runs it; call it after building or editing a description in code.
+    /// SHA-256 (lower-case hex) of the canonical serialisation of the model sections
+    /// ([`RigModel::canonical_hash`]): comments, whitespace, key order, number spelling and
+    /// the service tables do not change it; explicit defaults hash like omitted ones.
+    pub fn canonical_hash(&self) -> String {
+        self.model().canonical_hash()
+    }
+
+    /// Checks the description: the model sections ([`RigModel::validate`]), then the service
+    /// tables (`[control]`, `[safety]`, `[twin]`, `[shaker]`, `[daq]`, `[truth]`). Parsing runs
+    /// it; call it after building or editing a description in code.
     pub fn validate(&self) -> Result<(), ConfigError> {
-        validate::validate(self)
+        self.model().validate()?;
+        validate::service(self)
     }
 
     /// The embedded default rig (`rig-config/two-beam.toml`, compiled into the binary).
@@ -161,41 +199,19 @@ impl RigConfig {
             .expect("the embedded default rig description is valid (checked by tests)")
     }
 
-    /// The simulated rig's settings (`[shaker]`, `[daq]`, `[truth]`).
-    pub fn sim_rig_spec(&self) -> crate::rig::sim::SimRigSpec {
-        crate::rig::sim::SimRigSpec {
-            shaker: self.shaker.clone(),
-            daq: self.daq.clone(),
-            truth: self.truth.clone(),
-        }
-    }
-
     /// Material by name (validated to exist for every part).
     pub fn material(&self, name: &str) -> Option<&MaterialSpec> {
         self.materials.get(name)
     }
 
-    /// Vertical gap between the beams (= spacer block height): lower probe + upper probe +
-    /// protrusion heights + clearance, m.
+    /// Vertical gap between the beams: [`RigModel::beam_gap`], m.
     pub fn beam_gap(&self) -> f64 {
-        self.parts.lower_probe.height
-            + self.parts.upper_probe.height
-            + self.parts.protrusion.height
-            + self.contact.clearance
+        self.model().beam_gap()
     }
 
-    /// Width of the upper beam at x (clamp root width for x <= 0, linear taper to the tip
-    /// width at the start of the probe seat, tip width beyond), m.
+    /// Width of the upper beam at x: [`RigModel::upper_width_at`], m.
     pub fn upper_width_at(&self, x: f64) -> f64 {
-        let b = &self.parts.upper_beam;
-        let x_seat = self.probe_seat.x_center - 0.5 * self.probe_seat.length;
-        if x <= 0.0 {
-            b.width_root
-        } else if x >= x_seat {
-            b.width_tip
-        } else {
-            b.width_root + (b.width_tip - b.width_root) * (x / x_seat)
-        }
+        self.model().upper_width_at(x)
     }
 }
 
@@ -217,5 +233,42 @@ fn schema_key_path(table: &toml::Table) -> String {
                     .map(str::to_string)
             })
             .unwrap_or_else(|| String::from(DOCUMENT)),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The canonical hash of the embedded default rig as computed before the model sections
+    /// were viewed as [`RigModel`] (main at d653aa3). ROM cache keys and the config hashes in
+    /// session logs depend on it: change the expected value only with a deliberate change of
+    /// `rig-config/two-beam.toml`.
+    #[test]
+    fn default_rig_canonical_hash_is_pinned() {
+        let cfg = RigConfig::default_rig();
+        assert_eq!(
+            cfg.canonical_hash(),
+            "509d7350a050439305888cef6ffe9f2a85defd0b54213572cb98f9ef0943cfce"
+        );
+        assert_eq!(cfg.model().canonical_hash(), cfg.canonical_hash());
+        // The truth ROM's description (the same rig with `cutoff_ratio = 400`).
+        let mut truth = cfg.clone();
+        truth.reduction.cutoff_ratio = Some(400.0);
+        assert_eq!(
+            truth.canonical_hash(),
+            "6b0c7588468545b90954e9bf097f6b5926b62b69379cf7338acc9d6343cda36c"
+        );
+    }
+
+    #[test]
+    fn service_tables_do_not_change_the_hash() {
+        let base = RigConfig::default_rig();
+        let text = format!(
+            "{DEFAULT_RIG_TOML}\n[control]\nkp = 0.1\n[safety]\nmax_drive_v = 3.0\n\
+             [shaker]\nmoving_mass = 40.0\n[daq]\nblock_size = 128\n[truth]\ncutoff_ratio = 300.0\n"
+        );
+        let cfg = RigConfig::from_str(&text, "service.toml").unwrap();
+        assert_eq!(cfg.canonical_hash(), base.canonical_hash());
     }
 }

@@ -7,9 +7,6 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
-use crate::fe::ElementKind;
-use crate::rom::ModeSelection;
-
 /// `[rig]`: identity and the one length both beams share.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -30,6 +27,18 @@ pub struct MaterialSpec {
     pub poisson_ratio: f64,
     /// Mass density, kg/m^3 (effective: may include unmodelled fixtures). Required.
     pub density: f64,
+}
+
+/// Hex element formulation of a part (`element = "hex8"` or `"hex8i"`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ElementKind {
+    /// Trilinear 8-node hex, full 2x2x2 Gauss integration (CalculiX C3D8). Used where the
+    /// displacement field on a face must be exactly bilinear (contact faces).
+    Hex8,
+    /// 8-node hex with incompatible (bubble) modes, condensed at element level (CalculiX
+    /// C3D8I): free of shear locking in thin-beam bending.
+    Hex8I,
 }
 
 /// `[parts]`: the solids of the rig.
@@ -363,7 +372,8 @@ impl Default for ProbeMesh {
 }
 
 /// `[reduction]`: how many free-interface modes the ROM keeps. Exactly one of the keys;
-/// default `cutoff_ratio = 180`.
+/// default `cutoff_ratio = 180` (the ROM builder turns it into its mode selection:
+/// `ModeSelection::from(&ReductionSpec)` in `rom::build`).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, Default)]
 #[serde(deny_unknown_fields)]
 pub struct ReductionSpec {
@@ -376,19 +386,6 @@ pub struct ReductionSpec {
     /// Keep this many lowest modes.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub modes: Option<usize>,
-}
-
-impl ReductionSpec {
-    /// The mode selection (after validation exactly one key is set; none means the default
-    /// 180 x f(1FU)).
-    pub fn selection(&self) -> ModeSelection {
-        match (self.cutoff_ratio, self.cutoff_hz, self.modes) {
-            (Some(ratio), _, _) => ModeSelection::CutoffRatio { ratio },
-            (None, Some(hz), _) => ModeSelection::CutoffHz { hz },
-            (None, None, Some(count)) => ModeSelection::Count { count },
-            (None, None, None) => ModeSelection::default(),
-        }
-    }
 }
 
 /// Materials by name.

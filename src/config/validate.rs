@@ -1,11 +1,12 @@
 //! Semantic checks of a parsed rig description: positive dimensions, known materials, a
 //! contact patch that fits the probes and the beams, node counts, clearance, friction,
-//! damping ratios, mesh sizes, sensors and the reduction. The first failing check is
-//! reported with its key path, the bad value and what was expected.
+//! damping ratios, mesh sizes, sensors and the reduction ([`model`]), then the rig-service
+//! tables ([`service`]). The first failing check is reported with its key path, the bad value
+//! and what was expected.
 
 use super::damping::is_valid_label;
 use super::schema::Mount;
-use super::{ConfigError, RigConfig};
+use super::{ConfigError, RigConfig, RigModel};
 
 /// Collects the file name for the error constructors.
 struct Check<'a> {
@@ -38,7 +39,7 @@ impl Check<'_> {
         }
     }
 
-    fn material(&self, cfg: &RigConfig, key: &str, name: &str) -> Result<(), ConfigError> {
+    fn material(&self, cfg: &RigModel, key: &str, name: &str) -> Result<(), ConfigError> {
         if cfg.materials.contains_key(name) {
             Ok(())
         } else {
@@ -55,9 +56,9 @@ impl Check<'_> {
     }
 }
 
-/// Validates a parsed description.
-pub(super) fn validate(cfg: &RigConfig) -> Result<(), ConfigError> {
-    let c = Check { file: &cfg.source };
+/// Validates the model part of a description.
+pub(super) fn model(cfg: &RigModel) -> Result<(), ConfigError> {
+    let c = Check { file: cfg.source };
     if cfg.rig.name.trim().is_empty() {
         return Err(c.fail("rig.name", "\"\"", "a non-empty rig name"));
     }
@@ -70,24 +71,35 @@ pub(super) fn validate(cfg: &RigConfig) -> Result<(), ConfigError> {
     damping(&c, cfg)?;
     mesh(&c, cfg)?;
     sensors(&c, cfg)?;
-    reduction(&c, cfg)?;
+    reduction(&c, cfg)
+}
+
+/// Validates the rig-service tables of a description: `[control]`, `[safety]`, `[twin]`,
+/// then the simulated rig's `[shaker]`, `[daq]` and `[truth]`.
+pub(super) fn service(cfg: &RigConfig) -> Result<(), ConfigError> {
     let service = |message: String| ConfigError::Service {
         file: cfg.source.clone(),
         message,
     };
-    cfg.control.validate().map_err(service)?;
-    cfg.safety.validate().map_err(service)?;
-    cfg.twin.validate().map_err(|e| service(e.to_string()))?;
-    cfg.sim_rig_spec()
+    cfg.control.validate().map_err(|e| service(e.to_string()))?;
+    cfg.safety.validate().map_err(|e| service(e.to_string()))?;
+    // NOTE: the prefixes are those the twin's and the simulated rig's errors put on a bad
+    // value (`TwinError::Spec`, `SimRigError::Spec`); the messages carried them before the
+    // specs moved here.
+    cfg.twin
         .validate()
-        .map_err(|e| service(e.to_string()))
+        .map_err(|e| service(format!("twin spec: {e}")))?;
+    let sim = |e: super::SpecError| service(format!("simulated rig spec: {e}"));
+    cfg.shaker.validate().map_err(sim)?;
+    cfg.daq.validate().map_err(sim)?;
+    cfg.truth.validate(&cfg.daq).map_err(sim)
 }
 
-fn materials(c: &Check, cfg: &RigConfig) -> Result<(), ConfigError> {
+fn materials(c: &Check, cfg: &RigModel) -> Result<(), ConfigError> {
     if cfg.materials.is_empty() {
         return Err(c.fail("materials", "{}", "at least one [materials.<name>] table"));
     }
-    for (name, m) in &cfg.materials {
+    for (name, m) in cfg.materials {
         let key = |f: &str| format!("materials.{name}.{f}");
         c.positive(&key("youngs_modulus"), m.youngs_modulus, "Pa")?;
         c.positive(&key("density"), m.density, "kg/m^3")?;
@@ -102,7 +114,7 @@ fn materials(c: &Check, cfg: &RigConfig) -> Result<(), ConfigError> {
     Ok(())
 }
 
-fn parts(c: &Check, cfg: &RigConfig) -> Result<(), ConfigError> {
+fn parts(c: &Check, cfg: &RigModel) -> Result<(), ConfigError> {
     let p = &cfg.parts;
     c.material(cfg, "parts.clamp.material", &p.clamp.material)?;
     c.material(cfg, "parts.lower_beam.material", &p.lower_beam.material)?;
@@ -139,7 +151,7 @@ fn parts(c: &Check, cfg: &RigConfig) -> Result<(), ConfigError> {
     Ok(())
 }
 
-fn seat_and_patch(c: &Check, cfg: &RigConfig) -> Result<(), ConfigError> {
+fn seat_and_patch(c: &Check, cfg: &RigModel) -> Result<(), ConfigError> {
     let s = &cfg.probe_seat;
     let l = cfg.rig.beam_length;
     c.finite("probe_seat.x_center", s.x_center, "m")?;
@@ -232,7 +244,7 @@ fn seat_and_patch(c: &Check, cfg: &RigConfig) -> Result<(), ConfigError> {
     Ok(())
 }
 
-fn layers(c: &Check, cfg: &RigConfig) -> Result<(), ConfigError> {
+fn layers(c: &Check, cfg: &RigModel) -> Result<(), ConfigError> {
     for (name, l) in cfg.layers.named() {
         c.positive(&format!("layers.{name}.normal"), l.normal, "N/m^3")?;
         c.positive(&format!("layers.{name}.tangential"), l.tangential, "N/m^3")?;
@@ -240,7 +252,7 @@ fn layers(c: &Check, cfg: &RigConfig) -> Result<(), ConfigError> {
     Ok(())
 }
 
-fn contact(c: &Check, cfg: &RigConfig) -> Result<(), ConfigError> {
+fn contact(c: &Check, cfg: &RigModel) -> Result<(), ConfigError> {
     let k = &cfg.contact;
     if k.nodes.iter().any(|&n| n < 2) {
         return Err(c.fail(
@@ -267,7 +279,7 @@ fn contact(c: &Check, cfg: &RigConfig) -> Result<(), ConfigError> {
     Ok(())
 }
 
-fn damping(c: &Check, cfg: &RigConfig) -> Result<(), ConfigError> {
+fn damping(c: &Check, cfg: &RigModel) -> Result<(), ConfigError> {
     let d = &cfg.damping;
     if d.ratios.is_empty() {
         return Err(c.fail(
@@ -302,7 +314,7 @@ fn damping(c: &Check, cfg: &RigConfig) -> Result<(), ConfigError> {
     Ok(())
 }
 
-fn mesh(c: &Check, cfg: &RigConfig) -> Result<(), ConfigError> {
+fn mesh(c: &Check, cfg: &RigModel) -> Result<(), ConfigError> {
     let m = &cfg.mesh;
     if !(m.growth.is_finite() && m.growth >= 1.0) {
         return Err(c.fail("mesh.growth", m.growth, "a growth ratio >= 1"));
@@ -340,7 +352,7 @@ fn mesh(c: &Check, cfg: &RigConfig) -> Result<(), ConfigError> {
     Ok(())
 }
 
-fn sensors(c: &Check, cfg: &RigConfig) -> Result<(), ConfigError> {
+fn sensors(c: &Check, cfg: &RigModel) -> Result<(), ConfigError> {
     let l = cfg.rig.beam_length;
     let clamp = &cfg.parts.clamp;
     for (i, s) in cfg.sensors.iter().enumerate() {
@@ -408,7 +420,7 @@ fn sensors(c: &Check, cfg: &RigConfig) -> Result<(), ConfigError> {
     Ok(())
 }
 
-fn reduction(c: &Check, cfg: &RigConfig) -> Result<(), ConfigError> {
+fn reduction(c: &Check, cfg: &RigModel) -> Result<(), ConfigError> {
     let r = &cfg.reduction;
     let set = [
         r.cutoff_ratio.is_some(),

@@ -101,9 +101,9 @@ pub enum SetupError {
     /// The plan is invalid.
     #[error(transparent)]
     Plan(#[from] crate::plan::PlanError),
-    /// A `[control]` or `[safety]` value is out of range (the message names the key).
-    #[error("{0}")]
-    Settings(String),
+    /// A `[control]` or `[safety]` value is out of range.
+    #[error(transparent)]
+    Settings(#[from] crate::config::SpecError),
     /// The plan has no test.
     #[error("plan {plan}: no tests")]
     NoTests {
@@ -122,8 +122,8 @@ impl Procedure {
     /// Procedure for `setup` on a stream with `layout`. Errors name what is missing.
     pub fn new(setup: &SessionSetup, layout: &DaqLayout) -> Result<Procedure, SetupError> {
         setup.plan.validate()?;
-        setup.control.validate().map_err(SetupError::Settings)?;
-        setup.safety.validate().map_err(SetupError::Settings)?;
+        setup.control.validate()?;
+        setup.safety.validate()?;
         if setup.plan.tests.is_empty() {
             return Err(SetupError::NoTests {
                 plan: setup.plan.source.clone(),

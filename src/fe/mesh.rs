@@ -7,18 +7,10 @@
 
 use std::collections::BTreeMap;
 
-/// Hex element formulation of a block.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum ElementKind {
-    /// Trilinear 8-node hex, full 2x2x2 Gauss integration (CalculiX C3D8). Used where the
-    /// displacement field on a face must be exactly bilinear (contact faces).
-    Hex8,
-    /// 8-node hex with incompatible (bubble) modes, condensed at element level (CalculiX
-    /// C3D8I): free of shear locking in thin-beam bending.
-    Hex8I,
-}
+/// Hex element formulation of a block (named in the rig description, hence defined there).
+pub use crate::config::ElementKind;
 
+// NOTE: an inherent impl on the description's enum: the CalculiX name is FE knowledge.
 impl ElementKind {
     /// The CalculiX element type name.
     pub fn calculix_name(self) -> &'static str {

@@ -1,12 +1,26 @@
-//! The ROM build pipeline: rig description -> mesh -> assembly (or CalculiX matrices) ->
-//! MacNeal reduction -> damping from the rig's table -> provenance. Reports progress as
-//! [`BuildEvent`]s; the CLI renders them.
+//! The ROM build pipeline: the model sections of a rig description ([`RigModel`]) -> mesh ->
+//! assembly (or CalculiX matrices) -> MacNeal reduction -> damping from the rig's table ->
+//! provenance. Reports progress as [`BuildEvent`]s; the CLI renders them. The description's
+//! `[reduction]` becomes a [`ModeSelection`] here (`ModeSelection::from(&ReductionSpec)`).
 
 use std::path::Path;
 use std::time::Instant;
 
 use super::{ModeSelection, Rom};
-use crate::config::RigConfig;
+use crate::config::{ReductionSpec, RigModel};
+
+impl From<&ReductionSpec> for ModeSelection {
+    /// The mode selection of a validated `[reduction]` (exactly one key set; none means the
+    /// default 180 x f(1FU)).
+    fn from(spec: &ReductionSpec) -> ModeSelection {
+        match (spec.cutoff_ratio, spec.cutoff_hz, spec.modes) {
+            (Some(ratio), _, _) => ModeSelection::CutoffRatio { ratio },
+            (None, Some(hz), _) => ModeSelection::CutoffHz { hz },
+            (None, None, Some(count)) => ModeSelection::Count { count },
+            (None, None, None) => ModeSelection::default(),
+        }
+    }
+}
 
 /// Progress of a build.
 #[derive(Clone, Debug)]
@@ -67,8 +81,17 @@ pub struct BuildOptions {
     pub selection: Option<ModeSelection>,
 }
 
+impl BuildOptions {
+    /// The mode selection of a build of `cfg`: the override, else the description's
+    /// `[reduction]`.
+    pub fn selection_for(&self, cfg: RigModel<'_>) -> ModeSelection {
+        self.selection
+            .unwrap_or_else(|| ModeSelection::from(cfg.reduction))
+    }
+}
+
 /// Hash identifying a ROM: the rig description's canonical hash and the mode selection.
-pub fn build_hash(cfg: &RigConfig, selection: &ModeSelection, source: &str) -> String {
+pub fn build_hash(cfg: RigModel<'_>, selection: &ModeSelection, source: &str) -> String {
     use sha2::{Digest, Sha256};
     let text = format!(
         "{}|{}|{}|format{}",
@@ -83,14 +106,15 @@ pub fn build_hash(cfg: &RigConfig, selection: &ModeSelection, source: &str) -> S
         .collect()
 }
 
-/// Builds the ROM of a rig description from its native FE model.
+/// Builds the ROM of a rig description (its model sections: `cfg.model()` of a
+/// [`crate::config::RigConfig`]) from its native FE model.
 pub fn build_native(
-    cfg: &RigConfig,
+    cfg: RigModel<'_>,
     opts: &BuildOptions,
     on_event: &mut dyn FnMut(BuildEvent),
 ) -> Result<Rom, BuildError> {
     let t0 = Instant::now();
-    let selection = opts.selection.unwrap_or_else(|| cfg.reduction.selection());
+    let selection = opts.selection_for(cfg);
     on_event(BuildEvent::Stage {
         name: "mesh",
         detail: "structured hex mesh of the rig".into(),
@@ -122,15 +146,15 @@ pub fn build_native(
 }
 
 /// Builds the ROM from CalculiX matrices (`JOB.inp`, `JOB.sti`, `JOB.mas`, `JOB.dof`); the rig
-/// description supplies damping, friction and the default mode selection.
+/// description's model sections supply damping, friction and the default mode selection.
 pub fn build_calculix(
     job: &Path,
-    cfg: &RigConfig,
+    cfg: RigModel<'_>,
     opts: &BuildOptions,
     on_event: &mut dyn FnMut(BuildEvent),
 ) -> Result<Rom, BuildError> {
     let t0 = Instant::now();
-    let selection = opts.selection.unwrap_or_else(|| cfg.reduction.selection());
+    let selection = opts.selection_for(cfg);
     on_event(BuildEvent::Stage {
         name: "read",
         detail: format!("CalculiX job {}", job.display()),
@@ -178,7 +202,7 @@ pub fn build_calculix(
 }
 
 fn finish(
-    cfg: &RigConfig,
+    cfg: RigModel<'_>,
     model: crate::fe::FeModel,
     selection: ModeSelection,
     source: String,

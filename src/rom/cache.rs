@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use super::build::{build_hash, build_native, BuildError, BuildEvent, BuildOptions};
 use super::file::RomFileError;
 use super::Rom;
-use crate::config::RigConfig;
+use crate::config::RigModel;
 
 /// Errors of [`load_or_build`].
 #[derive(Debug, thiserror::Error)]
@@ -28,27 +28,27 @@ pub enum CacheOutcome {
     Built,
 }
 
-/// The cache file of the native ROM of `cfg` with the options' mode selection in `dir`:
-/// `<rig name>-<first 16 hex digits of the build hash>.rom`.
-pub fn cache_path(dir: &Path, cfg: &RigConfig, opts: &BuildOptions) -> PathBuf {
-    let selection = opts.selection.unwrap_or_else(|| cfg.reduction.selection());
-    let hash = build_hash(cfg, &selection, "native");
+/// The cache file of the native ROM of `cfg` (the model sections of a rig description) with
+/// the options' mode selection in `dir`: `<rig name>-<first 16 hex digits of the build
+/// hash>.rom`.
+pub fn cache_path(dir: &Path, cfg: RigModel<'_>, opts: &BuildOptions) -> PathBuf {
+    let hash = build_hash(cfg, &opts.selection_for(cfg), "native");
     dir.join(format!("{}-{}.rom", cfg.rig.name, &hash[..16]))
 }
 
-/// Returns the native ROM of `cfg` from the cache folder `dir`, building and caching it when
+/// Returns the native ROM of `cfg` (the model sections of a rig description: `cfg.model()` of
+/// a [`crate::config::RigConfig`]) from the cache folder `dir`, building and caching it when
 /// the folder has none with the right build hash, or when `rebuild` is set. An unreadable or
 /// stale cache file is rebuilt (with a warning), never used. Writing is atomic, so concurrent
 /// builders of the same ROM leave one complete file.
 pub fn load_or_build(
-    cfg: &RigConfig,
+    cfg: RigModel<'_>,
     opts: &BuildOptions,
     dir: &Path,
     rebuild: bool,
     on_event: &mut dyn FnMut(BuildEvent),
 ) -> Result<(Rom, PathBuf, CacheOutcome), CacheError> {
-    let selection = opts.selection.unwrap_or_else(|| cfg.reduction.selection());
-    let hash = build_hash(cfg, &selection, "native");
+    let hash = build_hash(cfg, &opts.selection_for(cfg), "native");
     let path = cache_path(dir, cfg, opts);
     if !rebuild && path.exists() {
         match super::file::read(&path) {

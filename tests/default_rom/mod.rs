@@ -15,7 +15,7 @@ pub fn default_rom() -> &'static Rom {
     ROM.get_or_init(|| {
         let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("rom-cache");
         let (rom, _, _) = rigtwin::rom::cache::load_or_build(
-            &RigConfig::default_rig(),
+            RigConfig::default_rig().model(),
             &BuildOptions::default(),
             &dir,
             false,

@@ -1,7 +1,7 @@
 //! Grid lines of the rig's parts: graded spacing between breakpoints ([`sized`]), subsets
 //! of a finer line set that keep touching faces conforming, unions, tributary lengths.
 
-use crate::config::{ConfigError, Mount, RigConfig};
+use crate::config::{ConfigError, Mount, RigModel};
 use crate::fe::grid::{graded, join};
 
 use super::Geometry;
@@ -31,7 +31,7 @@ pub(super) struct Lines {
 }
 
 impl Lines {
-    pub(super) fn new(cfg: &RigConfig, g: &Geometry) -> Self {
+    pub(super) fn new(cfg: &RigModel, g: &Geometry) -> Self {
         let m = &cfg.mesh;
         let bm = &m.beams;
         let gr = m.growth;

@@ -1,4 +1,5 @@
-//! The rig mesher: turns a validated [`RigConfig`] into the parent [`Mesh`]. Every part is a
+//! The rig mesher: turns the model sections of a rig description ([`RigModel`]) into the
+//! parent [`Mesh`]. Every part is a
 //! structured hex grid ([`BoxGrid`]) with graded lines and its own element block; parts
 //! joined by an elastic interface layer get their own coincident nodes and zero-length
 //! [`Spring`](crate::fe::mesh::Spring)s; the protrusion is fused to the upper probe (shared nodes).
@@ -26,7 +27,7 @@
 mod lines;
 mod parts;
 
-use crate::config::{ConfigError, Mount, RigConfig};
+use crate::config::{ConfigError, Mount, RigModel};
 use crate::fe::grid::BoxGrid;
 use crate::fe::mesh::{ContactPair, Mesh, PointMass, SensorPoint};
 
@@ -34,20 +35,21 @@ pub use lines::sized;
 use lines::{index_of, tributary, Lines};
 use parts::{invalid, BlockIds, Builder, FaceRegion};
 
-/// Builds the parent mesh of the rig (validating the description first).
+/// Builds the parent mesh of the rig from the model sections of its description (validating
+/// them first): `mesh_rig(cfg.model())` for a [`crate::config::RigConfig`].
 ///
 /// Node sets: `LOWER` (lower beam + lower probe), `UPPER` (upper beam + upper probe +
 /// protrusion), `CLAMP` (blocks), `FIXED` (base block bottom face), `CONTACT_LOWER` and
 /// `CONTACT_UPPER` (the pairs' nodes), `SENSOR_<name>` per model-output sensor, `PLATFORM_<name>` per platform accelerometer. Contact pair (i, j) of the
 /// patch (i along x, j along y) is at index `i + nodes_x * j`, frame n = +z, t1 = +x, t2 = +y.
-pub fn mesh_rig(cfg: &RigConfig) -> Result<Mesh, ConfigError> {
+pub fn mesh_rig(cfg: RigModel<'_>) -> Result<Mesh, ConfigError> {
     // A description built in code has not been through the parser's validation.
     cfg.validate()?;
-    let g = Geometry::new(cfg);
-    let lines = Lines::new(cfg, &g);
+    let g = Geometry::new(&cfg);
+    let lines = Lines::new(&cfg, &g);
     let mut b = Builder::new(cfg);
 
-    let ids = BlockIds::new(&mut b, cfg);
+    let ids = BlockIds::new(&mut b, &cfg);
     // Solid parts.
     let base = b.add_part(
         ids.base,
@@ -211,7 +213,7 @@ pub fn mesh_rig(cfg: &RigConfig) -> Result<Mesh, ConfigError> {
         };
         let node = part
             .nearest_on_face(&b, k, s.x, s.y)
-            .ok_or_else(|| invalid(cfg, &key, "no node on the mounting face"))?;
+            .ok_or_else(|| invalid(&cfg, &key, "no node on the mounting face"))?;
         // Platform accelerometers sit on the clamped base: they measure the prescribed base
         // motion, not a model output, so their set is PLATFORM_<name> (SENSOR_<name> sets are
         // model outputs, also in the CalculiX exchange).
@@ -278,7 +280,7 @@ pub(super) struct Geometry {
 }
 
 impl Geometry {
-    fn new(cfg: &RigConfig) -> Self {
+    fn new(cfg: &RigModel) -> Self {
         let s = &cfg.probe_seat;
         let pr = &cfg.parts.protrusion;
         let seat_x = (s.x_center - 0.5 * s.length, s.x_center + 0.5 * s.length);

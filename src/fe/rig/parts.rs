@@ -4,15 +4,15 @@
 
 use std::collections::BTreeMap;
 
-use crate::config::{ConfigError, LayerSpec, RigConfig};
+use crate::config::{ConfigError, LayerSpec, RigModel};
 use crate::fe::grid::BoxGrid;
 use crate::fe::mesh::{ElementBlock, ElementKind, HexElement, Material, Mesh, Spring};
 
 use super::lines::find_line;
 
-pub(super) fn invalid(cfg: &RigConfig, key: &str, expected: &str) -> ConfigError {
+pub(super) fn invalid(cfg: &RigModel, key: &str, expected: &str) -> ConfigError {
     ConfigError::Invalid {
-        file: cfg.source.clone(),
+        file: cfg.source.to_string(),
         key: key.to_string(),
         value: String::from("(mesher)"),
         expected: expected.to_string(),
@@ -66,14 +66,14 @@ impl Part {
                     Ok(n)
                 } else {
                     Err(invalid(
-                        b.cfg,
+                        &b.cfg,
                         key,
                         "conforming grid lines (internal meshing inconsistency)",
                     ))
                 }
             }
             _ => Err(ConfigError::Invalid {
-                file: b.cfg.source.clone(),
+                file: b.cfg.source.to_string(),
                 key: key.to_string(),
                 value: format!("node at ({x}, {y})"),
                 expected: String::from(
@@ -117,7 +117,7 @@ pub(super) struct BlockIds {
 }
 
 impl BlockIds {
-    pub(super) fn new(b: &mut Builder, cfg: &RigConfig) -> Self {
+    pub(super) fn new(b: &mut Builder, cfg: &RigModel) -> Self {
         let p = &cfg.parts;
         BlockIds {
             base: b.block("base_block", &p.clamp.material, p.clamp.element),
@@ -142,16 +142,16 @@ impl BlockIds {
 
 /// Accumulates the mesh.
 pub(super) struct Builder<'a> {
-    pub(super) cfg: &'a RigConfig,
+    pub(super) cfg: RigModel<'a>,
     pub(super) mesh: Mesh,
     pub(super) material_index: BTreeMap<String, usize>,
 }
 
 impl<'a> Builder<'a> {
-    pub(super) fn new(cfg: &'a RigConfig) -> Self {
+    pub(super) fn new(cfg: RigModel<'a>) -> Self {
         let mut mesh = Mesh::default();
         let mut material_index = BTreeMap::new();
-        for (name, m) in &cfg.materials {
+        for (name, m) in cfg.materials {
             material_index.insert(name.clone(), mesh.materials.len());
             mesh.materials.push(Material {
                 name: name.clone(),

@@ -9,21 +9,23 @@
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
+use crate::config::FIXED_CHANNEL_NAMES;
 use crate::rig::daq::{ChannelKind, ChannelSpec, DaqLayout};
 
 use super::filter::Butterworth4;
 use super::spec::DaqSpec;
 
-/// The channels after the platform accelerometers, in layout order.
+/// The channels after the platform accelerometers, in layout order: the rig description's
+/// [`FIXED_CHANNEL_NAMES`] with their kinds.
 pub const FIXED_CHANNELS: [(&str, ChannelKind); 8] = [
-    ("lower_tip", ChannelKind::BeamAcceleration),
-    ("lower_mid", ChannelKind::BeamAcceleration),
-    ("upper_tip", ChannelKind::BeamAcceleration),
-    ("upper_mid", ChannelKind::BeamAcceleration),
-    ("vibrometer", ChannelKind::Vibrometer),
-    ("contact_voltage", ChannelKind::ContactVoltage),
-    ("drive_voltage", ChannelKind::DriveVoltage),
-    ("drive_current", ChannelKind::DriveCurrent),
+    (FIXED_CHANNEL_NAMES[0], ChannelKind::BeamAcceleration),
+    (FIXED_CHANNEL_NAMES[1], ChannelKind::BeamAcceleration),
+    (FIXED_CHANNEL_NAMES[2], ChannelKind::BeamAcceleration),
+    (FIXED_CHANNEL_NAMES[3], ChannelKind::BeamAcceleration),
+    (FIXED_CHANNEL_NAMES[4], ChannelKind::Vibrometer),
+    (FIXED_CHANNEL_NAMES[5], ChannelKind::ContactVoltage),
+    (FIXED_CHANNEL_NAMES[6], ChannelKind::DriveVoltage),
+    (FIXED_CHANNEL_NAMES[7], ChannelKind::DriveCurrent),
 ];
 
 /// The layout of a (valid) DAQ spec: the platform accelerometers, then [`FIXED_CHANNELS`].

@@ -1,0 +1,225 @@
+//! The twin's settings: the `[twin]` table of a rig description. Every field has a default,
+//! so the table may be omitted. Not part of the model: not hashed (changing the twin's step
+//! or queue does not rebuild the ROM).
+//!
+//! The ROM- and DAQ-dependent checks (the twin step against the ROM's stability limit, the
+//! platform accelerometers in the layout) are done by `twin::Twin::new`, whose errors name
+//! the key as well.
+
+use serde::{Deserialize, Serialize};
+
+use super::error::SpecError;
+
+/// What the twin does with its state when its input jumps (blocks skipped because it fell
+/// behind, or blocks lost by the DAQ).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum AfterGap {
+    /// Keep the modal state and continue from the first sample after the gap (default). The
+    /// excitation jumps in phase at the gap, so the twin shows a transient there, but its
+    /// response level carries over: the 1FU mode (0.2 % damping) would need several seconds
+    /// to build up again from rest.
+    #[default]
+    KeepState,
+    /// Restart at rest at the first sample after the gap: the transient is the build-up from
+    /// rest, the same as at the start of a session.
+    RestartAtRest,
+}
+
+/// `[twin]`: time step, input queue and gap handling of the live twin.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TwinSpec {
+    /// Twin steps per DAQ sample (>= 1), overriding the automatic choice; the twin step is
+    /// `dt = 1 / (sample_rate * steps_per_sample)` and must stay below the open stability
+    /// limit of the twin ROM (`2 / max(Omega)`; the end-of-step contact coupling needs no
+    /// closed bound). Default: none (automatic, see `steps_per_reference_period`).
+    pub steps_per_sample: Option<u32>,
+    /// Automatic choice: the number of twin steps per DAQ sample is the integer nearest to
+    /// `steps_per_reference_period * f(1FU) / sample_rate` (at least 1), i.e. about this many
+    /// steps per 1FU period (> 0). Default 1000 (the reference's resolution): 5 steps per
+    /// sample at 10240 Hz for the default rig (f(1FU) = 51.3 Hz, 999 steps per period).
+    pub steps_per_reference_period: f64,
+    /// Capacity of the input queue of the twin task, in DAQ blocks (>= 1). When it is full
+    /// the task skips blocks (counted and reported) until the twin has drained it. Default
+    /// 160: 4 s of data with the default DAQ (256 samples per block at 10240 Hz).
+    pub queue_blocks: usize,
+    /// What the twin does with its state after a gap in its input. Default `keep_state`.
+    pub after_gap: AfterGap,
+    /// For tests only: the twin task spends at least `throttle` wall seconds per second of
+    /// data (it sleeps after each block), so a test can make it fall behind; 0 = off (>= 0).
+    /// Default 0.
+    pub throttle: f64,
+}
+
+impl Default for TwinSpec {
+    fn default() -> Self {
+        TwinSpec {
+            steps_per_sample: None,
+            steps_per_reference_period: 1000.0,
+            queue_blocks: 160,
+            after_gap: AfterGap::KeepState,
+            throttle: 0.0,
+        }
+    }
+}
+
+impl TwinSpec {
+    /// Checks the ranges documented on the fields; the error names the key.
+    pub fn validate(&self) -> Result<(), SpecError> {
+        if self.steps_per_sample == Some(0) {
+            return Err(SpecError::new(
+                "twin.steps_per_sample",
+                0,
+                "at least 1 twin step per DAQ sample",
+            ));
+        }
+        let s = self.steps_per_reference_period;
+        if !(s.is_finite() && s > 0.0) {
+            return Err(SpecError::new(
+                "twin.steps_per_reference_period",
+                s,
+                "a finite number of steps per 1FU period > 0",
+            ));
+        }
+        if self.queue_blocks == 0 {
+            return Err(SpecError::new(
+                "twin.queue_blocks",
+                0,
+                "a queue of at least 1 block",
+            ));
+        }
+        let t = self.throttle;
+        if !(t.is_finite() && t >= 0.0) {
+            return Err(SpecError::new(
+                "twin.throttle",
+                t,
+                "a finite number of wall seconds per second of data >= 0 (0 = off)",
+            ));
+        }
+        Ok(())
+    }
+
+    /// Twin steps per DAQ sample for a DAQ rate `sample_rate` (Hz) and a ROM whose 1FU mode
+    /// is at `omega_ref` (rad/s): the override if given, else the integer nearest to
+    /// `steps_per_reference_period * omega_ref / (2 pi sample_rate)`, at least 1. The spec
+    /// must be valid.
+    pub fn steps_per_sample_for(&self, sample_rate: f64, omega_ref: f64) -> u32 {
+        if let Some(n) = self.steps_per_sample {
+            return n;
+        }
+        let n = (self.steps_per_reference_period * omega_ref
+            / (2.0 * std::f64::consts::PI * sample_rate))
+            .round();
+        if n.is_finite() && n >= 1.0 {
+            n.min(f64::from(u32::MAX)) as u32
+        } else {
+            1
+        }
+    }
+
+    /// Which key chose the number of steps per sample (for error messages).
+    pub(crate) fn step_key(&self) -> &'static str {
+        if self.steps_per_sample.is_some() {
+            "twin.steps_per_sample"
+        } else {
+            "twin.steps_per_reference_period"
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::{RigConfig, DEFAULT_RIG_TOML};
+
+    #[test]
+    fn defaults_are_valid_and_round_trip_through_toml() {
+        let spec = TwinSpec::default();
+        spec.validate().unwrap();
+        let text = toml::to_string(&spec).unwrap();
+        let back: TwinSpec = toml::from_str(&text).unwrap();
+        assert_eq!(back, spec);
+        let empty: TwinSpec = toml::from_str("").unwrap();
+        assert_eq!(empty, spec);
+    }
+
+    #[test]
+    fn automatic_step_gives_about_1000_steps_per_1fu_period() {
+        let spec = TwinSpec::default();
+        let w1 = 2.0 * std::f64::consts::PI * 51.27;
+        // 1000 x 51.27 / 10240 = 5.007 -> 5 steps per sample, 998.7 per period.
+        assert_eq!(spec.steps_per_sample_for(10240.0, w1), 5);
+        assert_eq!(spec.steps_per_sample_for(1.0e6, w1), 1);
+        let fixed = TwinSpec {
+            steps_per_sample: Some(3),
+            ..TwinSpec::default()
+        };
+        assert_eq!(fixed.steps_per_sample_for(10240.0, w1), 3);
+    }
+
+    #[test]
+    fn bad_values_name_the_key() {
+        for (spec, key) in [
+            (
+                TwinSpec {
+                    steps_per_sample: Some(0),
+                    ..TwinSpec::default()
+                },
+                "twin.steps_per_sample = 0",
+            ),
+            (
+                TwinSpec {
+                    steps_per_reference_period: -1.0,
+                    ..TwinSpec::default()
+                },
+                "twin.steps_per_reference_period = -1",
+            ),
+            (
+                TwinSpec {
+                    queue_blocks: 0,
+                    ..TwinSpec::default()
+                },
+                "twin.queue_blocks = 0",
+            ),
+            (
+                TwinSpec {
+                    throttle: f64::NAN,
+                    ..TwinSpec::default()
+                },
+                "twin.throttle = NaN",
+            ),
+        ] {
+            let msg = spec.validate().unwrap_err().to_string();
+            assert!(msg.contains(key), "{msg}");
+        }
+    }
+
+    #[test]
+    fn rig_config_parses_the_twin_table_and_does_not_hash_it() {
+        let base = RigConfig::from_str(DEFAULT_RIG_TOML, "default").unwrap();
+        assert_eq!(base.twin, TwinSpec::default());
+        let text = format!(
+            "{DEFAULT_RIG_TOML}\n[twin]\nsteps_per_sample = 7\nqueue_blocks = 8\n\
+             after_gap = \"restart_at_rest\"\n"
+        );
+        let cfg = RigConfig::from_str(&text, "twin.toml").unwrap();
+        assert_eq!(cfg.twin.steps_per_sample, Some(7));
+        assert_eq!(cfg.twin.queue_blocks, 8);
+        assert_eq!(cfg.twin.after_gap, AfterGap::RestartAtRest);
+        assert_eq!(cfg.canonical_hash(), base.canonical_hash());
+
+        let unknown = format!("{DEFAULT_RIG_TOML}\n[twin]\nqueue_block = 8\n");
+        let err = RigConfig::from_str(&unknown, "twin.toml").unwrap_err();
+        assert_eq!(err.key(), Some("twin.queue_block"), "{err}");
+
+        let bad = format!("{DEFAULT_RIG_TOML}\n[twin]\nqueue_blocks = 0\n");
+        let msg = RigConfig::from_str(&bad, "twin.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            msg.contains("twin.toml") && msg.contains("twin.queue_blocks"),
+            "{msg}"
+        );
+    }
+}

@@ -8,7 +8,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::PathBuf;
 
 use rigtwin::config::{Mount, RigConfig};
-use rigtwin::fe::mesh::hex_volume;
+use rigtwin::fe::hex8::hex_volume;
 use rigtwin::fe::rig::mesh_rig;
 use rigtwin::fe::Mesh;
 

@@ -8,10 +8,11 @@ use clap::{Args, ValueEnum};
 use std::io::Write;
 use std::net::SocketAddr;
 use std::path::PathBuf;
-use std::time::Duration;
 
 use crate::config::RigConfig;
-use crate::rig::hw::firmware_sim::{FirmwareOptions, FirmwareSim, Inject, Pace};
+use crate::rig::device::{
+    FirmwareOptions, FirmwareSim, Inject, Pace, HEARTBEAT_PERIOD, HEARTBEAT_TIMEOUT,
+};
 use crate::rig::sim::{SimRig, SimRigSpec};
 
 /// How the device paces its DAQ blocks.
@@ -86,8 +87,8 @@ pub(crate) fn run(a: FirmwareSimArgs) -> anyhow::Result<()> {
             PaceArg::Realtime => Pace::Realtime,
             PaceArg::Virtual => Pace::Virtual,
         },
-        heartbeat_period: Duration::from_millis(100),
-        heartbeat_timeout: Duration::from_millis(500),
+        heartbeat_period: HEARTBEAT_PERIOD,
+        heartbeat_timeout: HEARTBEAT_TIMEOUT,
         ramp_down_s: cfg.safety.ramp_down_s,
         once: a.once,
         inject,
@@ -104,8 +105,7 @@ pub(crate) fn run(a: FirmwareSimArgs) -> anyhow::Result<()> {
             spec.shaker.amplifier_gain,
             spec.shaker.amplifier_limit_v,
         )
-        .await
-        .map_err(anyhow::Error::msg)?;
+        .await?;
         let line = serde_json::json!({ "firmware_sim": fw.endpoints() });
         println!("{line}");
         std::io::stdout().flush()?;
@@ -113,7 +113,7 @@ pub(crate) fn run(a: FirmwareSimArgs) -> anyhow::Result<()> {
             println!("{}", serde_json::json!({ "session_end": r }));
             let _ = std::io::stdout().flush();
         })
-        .await
-        .map_err(anyhow::Error::msg)
+        .await?;
+        Ok(())
     })
 }

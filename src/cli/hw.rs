@@ -4,7 +4,7 @@
 use clap::Args;
 use std::path::PathBuf;
 
-use crate::rig::hw::can::transport::CanAddress;
+use crate::rig::hw::can::transport::{CanAddress, CanAddressError};
 
 /// `--can`, `--ldv`, `--amp`, `--can-log` of `rigtwin run`.
 #[derive(Args, Debug, Default)]
@@ -27,6 +27,6 @@ pub struct HwArgs {
     pub can_log: Option<PathBuf>,
 }
 
-fn parse_can(s: &str) -> Result<CanAddress, String> {
+fn parse_can(s: &str) -> Result<CanAddress, CanAddressError> {
     s.parse()
 }

@@ -13,8 +13,7 @@ use std::path::{Path, PathBuf};
 use crate::config::RigConfig;
 use crate::plan::Plan;
 use crate::rig::hw::{HwBackend, HwOptions};
-use crate::rig::sim::{InjectedFault, SimRig, SimRigSpec};
-use crate::rig::sim_backend::SimBackend;
+use crate::rig::sim::{InjectedFault, SimBackend, SimRig, SimRigSpec};
 use crate::rom::Rom;
 use crate::session::live::{LiveOptions, LiveRecorder, LiveView};
 use crate::session::topics::TOPIC_LIVE_DAQ;
@@ -203,7 +202,7 @@ pub(crate) fn run_session_on(
         }
         Some(h) => {
             // The rig description's channel map: every block header is checked against it.
-            let layout = crate::rig::sim::daq::layout(&SimRigSpec::from_config(cfg).daq);
+            let layout = crate::rig::channels::layout(&cfg.daq);
             let backend = runtime
                 .block_on(HwBackend::connect(layout, h.clone()))
                 .context("connecting to the rig (--backend hw)")?;
@@ -228,8 +227,8 @@ fn sim_backend(
     truth: &Rom,
     session: &SessionArgs<'_>,
 ) -> anyhow::Result<SimBackend> {
-    let rig =
-        SimRig::new(truth, &SimRigSpec::from_config(cfg), cfg.contact.clearance).context("simulated rig")?;
+    let rig = SimRig::new(truth, &SimRigSpec::from_config(cfg), cfg.contact.clearance)
+        .context("simulated rig")?;
     let mut backend = SimBackend::new(rig, cfg.rig.beam_length, session.realtime);
     for f in session.inject {
         backend.inject(f.clone());

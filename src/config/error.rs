@@ -66,7 +66,8 @@ pub enum ConfigError {
 }
 
 /// A value of a rig-service table (`[control]`, `[safety]`, `[shaker]`, `[daq]`, `[truth]`,
-/// `[twin]`) out of the range documented on its field: `<key> = <value>: expected <what>`.
+/// `[twin]`) or of a service's options (the session log's, the live view's) out of the range
+/// documented on its field: `<key> = <value>: expected <what>`.
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
 #[error("{key} = {value}: expected {expected}")]
 pub struct SpecError {

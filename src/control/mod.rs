@@ -4,7 +4,7 @@
 //! ([`procedure`]), the per-step summary from raw counts shared with replay ([`summary`]) and
 //! the logged records ([`events`]). `[control]` and `[safety]` of the rig description:
 //! [`spec`]. The async session that drives a rig backend through the procedure is
-//! `crate::session`'s.
+//! the session's (`src/session/`).
 
 pub mod amplitude;
 pub mod events;

@@ -1,7 +1,7 @@
 //! The stepped-sine procedure as a synchronous state machine over DAQ blocks: for every test of
 //! the plan and every frequency step, retune the amplitude controller, settle, record the
 //! window, summarise; the drive commands and log records it produces are carried out by the
-//! async session ([`super::session`]). Being synchronous and clock-free it is tested without a
+//! async session (`src/session/`). Being synchronous and clock-free it is tested without a
 //! runtime, and replay never needs it.
 //!
 //! Timing: a drive command produced after a block applies from a later block (the backend's
@@ -13,6 +13,7 @@
 use std::f64::consts::TAU;
 
 use crate::plan::{Plan, TestSpec};
+use crate::rig::channels::{base_acceleration, platform_accelerometers};
 use crate::rig::{ChannelKind, DaqBlock, DaqLayout, DriveCommand, DriveState};
 
 use super::amplitude::{AmplitudeController, ControlUpdate};
@@ -69,7 +70,7 @@ enum Stage {
 pub struct Procedure {
     setup: SessionSetup,
     layout: DaqLayout,
-    platform: Vec<usize>,
+    platform: Vec<(usize, f64)>,
     vibrometer: Option<usize>,
     test: usize,
     step: usize,
@@ -129,7 +130,7 @@ impl Procedure {
                 plan: setup.plan.source.clone(),
             });
         }
-        let platform = layout.indices_of(ChannelKind::PlatformAcceleration);
+        let platform = platform_accelerometers(layout);
         if platform.is_empty() {
             return Err(SetupError::NoPlatform);
         }
@@ -298,19 +299,13 @@ impl Procedure {
             self.record_attempt = 1;
             self.stage = Stage::Settle;
         }
-        let inv = 1.0 / self.platform.len() as f64;
         let mut drive_changed = false;
         for i in 0..block.len {
             if matches!(self.stage, Stage::Pending | Stage::Done) {
                 break; // the rest of the block belongs to the previous frequency
             }
             let sample = block.first_sample + i as u64;
-            let a_base: f64 = self
-                .platform
-                .iter()
-                .map(|&k| self.layout.channels[k].value(block.counts[k * block.len + i]))
-                .sum::<f64>()
-                * inv;
+            let a_base = base_acceleration(&self.platform, &block.counts, block.len, i);
             if let Some(k) = self.vibrometer {
                 let v = self.layout.channels[k].value(block.counts[k * block.len + i]);
                 self.settle.as_mut().expect("settling").push_response(v);

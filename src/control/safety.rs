@@ -208,9 +208,9 @@ impl SafetyMonitor {
             });
         }
         self.next_seq += 1;
-        block
-            .check(layout)
-            .map_err(|message| AbortReason::BadBlock { message })?;
+        block.check(layout).map_err(|e| AbortReason::BadBlock {
+            message: e.to_string(),
+        })?;
         let n = block.len;
         for &k in &self.accel {
             let scale = layout.channels[k].scale;

@@ -10,6 +10,7 @@
 //! voltage below the threshold. The metrics are those of `rigtwin simulate`
 //! ([`crate::signal::step_metrics`]), normalised by Omega times the target amplitude.
 
+use crate::rig::channels::{base_acceleration, platform_accelerometers};
 use crate::rig::{ChannelKind, DaqLayout};
 use crate::signal::{
     demodulate, integrate_periodic, PeriodGrid, SignalError, StepMetrics, StepRecord,
@@ -179,18 +180,13 @@ pub fn window_signals(
             .map(|&c| ch.value(c))
             .collect()
     };
-    let platform = layout.indices_of(ChannelKind::PlatformAcceleration);
+    let platform = platform_accelerometers(layout);
     if platform.is_empty() {
         return Err(SummaryError::MissingChannel("platform acceleration"));
     }
-    let mut a_base = vec![0.0; n];
-    for &k in &platform {
-        for (a, v) in a_base.iter_mut().zip(values(k)) {
-            *a += v;
-        }
-    }
-    let inv = 1.0 / platform.len() as f64;
-    a_base.iter_mut().for_each(|a| *a *= inv);
+    let a_base: Vec<f64> = (0..n)
+        .map(|i| base_acceleration(&platform, counts, n, i))
+        .collect();
 
     let dt = layout.dt();
     let grid = PeriodGrid::new(n, dt, info.omega).map_err(sig)?;

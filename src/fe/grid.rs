@@ -118,7 +118,7 @@ mod tests {
         let g = BoxGrid::new(&[0.0, 1.0, 2.0], &[0.0, 1.0], &[0.0, 0.5], |p| p);
         assert_eq!(g.nodes.len(), 12);
         assert_eq!(g.cells.len(), 2);
-        let v = crate::fe::mesh::hex_volume(&g.cells[1].map(|n| g.nodes[n]));
+        let v = crate::fe::hex8::hex_volume(&g.cells[1].map(|n| g.nodes[n]));
         assert!((v - 0.5).abs() < 1e-14, "positive volume in CalculiX order");
     }
 }

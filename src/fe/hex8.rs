@@ -10,7 +10,7 @@
 // Index loops over small fixed-size matrices read like the formulas they implement.
 #![allow(clippy::needless_range_loop)]
 
-use crate::fe::mesh::{det3, ElementKind};
+use crate::config::ElementKind;
 
 /// Natural coordinates of the 8 corner nodes in CalculiX/Abaqus order.
 pub const CORNERS: [[f64; 3]; 8] = [
@@ -496,6 +496,37 @@ pub fn consistent_mass(x: &[[f64; 3]; 8], density: f64) -> Result<ElementMatrix,
     Ok(m)
 }
 
+/// Volume of a trilinear hex from its 8 corner coordinates (2x2x2 Gauss, exact for
+/// trilinear geometry).
+pub fn hex_volume(x: &[[f64; 3]; 8]) -> f64 {
+    let g = 1.0 / 3f64.sqrt();
+    let mut v = 0.0;
+    for &xi in &[-g, g] {
+        for &eta in &[-g, g] {
+            for &zeta in &[-g, g] {
+                let d = shape_derivatives(xi, eta, zeta);
+                let mut j = [[0.0; 3]; 3];
+                for (a, xa) in x.iter().enumerate() {
+                    for r in 0..3 {
+                        for c in 0..3 {
+                            j[r][c] += d[a][r] * xa[c];
+                        }
+                    }
+                }
+                v += det3(&j);
+            }
+        }
+    }
+    v
+}
+
+/// Determinant of a 3x3 matrix.
+pub fn det3(j: &[[f64; 3]; 3]) -> f64 {
+    j[0][0] * (j[1][1] * j[2][2] - j[1][2] * j[2][1])
+        - j[0][1] * (j[1][0] * j[2][2] - j[1][2] * j[2][0])
+        + j[0][2] * (j[1][0] * j[2][1] - j[1][1] * j[2][0])
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -623,7 +654,7 @@ mod tests {
     #[test]
     fn mass_sums_to_rho_v_per_direction_and_is_positive_definite() {
         for x in [brick(0.02, 0.005, 0.003), distorted()] {
-            let rho_v = 7850.0 * crate::fe::mesh::hex_volume(&x);
+            let rho_v = 7850.0 * hex_volume(&x);
             for kind in [ElementKind::Hex8, ElementKind::Hex8I] {
                 let m = element_matrices(kind, &x, &STEEL).unwrap().mass;
                 // r_d^T M r_e = rho V delta_de for the unit translations r_d.

@@ -9,6 +9,7 @@ use std::collections::BTreeMap;
 
 /// Hex element formulation of a block (named in the rig description, hence defined there).
 pub use crate::config::ElementKind;
+use crate::fe::hex8::hex_volume;
 
 // NOTE: an inherent impl on the description's enum: the CalculiX name is FE knowledge.
 impl ElementKind {
@@ -154,35 +155,4 @@ impl Mesh {
             .sum();
         solid + self.point_masses.iter().map(|p| p.mass).sum::<f64>()
     }
-}
-
-/// Volume of a trilinear hex from its 8 corner coordinates (2x2x2 Gauss, exact for
-/// trilinear geometry).
-pub fn hex_volume(x: &[[f64; 3]; 8]) -> f64 {
-    let g = 1.0 / 3f64.sqrt();
-    let mut v = 0.0;
-    for &xi in &[-g, g] {
-        for &eta in &[-g, g] {
-            for &zeta in &[-g, g] {
-                let d = crate::fe::hex8::shape_derivatives(xi, eta, zeta);
-                let mut j = [[0.0; 3]; 3];
-                for (a, xa) in x.iter().enumerate() {
-                    for r in 0..3 {
-                        for c in 0..3 {
-                            j[r][c] += d[a][r] * xa[c];
-                        }
-                    }
-                }
-                v += det3(&j);
-            }
-        }
-    }
-    v
-}
-
-/// Determinant of a 3x3 matrix.
-pub fn det3(j: &[[f64; 3]; 3]) -> f64 {
-    j[0][0] * (j[1][1] * j[2][2] - j[1][2] * j[2][1])
-        - j[0][1] * (j[1][0] * j[2][2] - j[1][2] * j[2][0])
-        + j[0][2] * (j[1][0] * j[2][1] - j[1][1] * j[2][0])
 }

@@ -1,7 +1,7 @@
 //! The assembled FE parent model on its free DOFs: sparse symmetric stiffness and mass,
 //! the DOF table, the base-excitation direction vector and the index data the reduction
-//! needs (contact pairs, sensors, node groups). Built natively by [`crate::fe::assembly`] or
-//! imported from CalculiX by [`crate::fe::calculix`].
+//! needs (contact pairs, sensors, node groups). Built natively (`fe/assembly.rs`) or
+//! imported from CalculiX (`fe/calculix/`).
 
 use faer::sparse::SparseColMat;
 

@@ -21,8 +21,8 @@ pub enum LogError {
     Options {
         /// The log file.
         path: PathBuf,
-        /// What is wrong.
-        reason: String,
+        /// The option, its value and what was expected.
+        reason: Box<crate::config::SpecError>,
     },
     /// The MCAP writer refused a record (e.g. too many channels) or failed to write it.
     #[error("session log {path}: {what}: {source}")]

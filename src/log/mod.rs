@@ -12,7 +12,7 @@
 //! - `scan` (private): the record walk that recovers truncated files.
 //!
 //! What goes into a session's log (its topics, the recorder, replay) is the session's
-//! (`crate::session`); this module knows MCAP, not sessions.
+//! (`src/session/`); this module knows MCAP, not sessions.
 //!
 //! Every file carries a metadata record named [`RIGTWIN_METADATA`] with the crate version and
 //! [`FORMAT_VERSION`]; [`SessionRead::require_rigtwin`] checks it.

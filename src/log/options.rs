@@ -1,6 +1,7 @@
 //! Parameters of the session log writer: chunk compression, chunk size, flush interval and
 //! queue capacity.
 
+use crate::config::SpecError;
 use std::time::Duration;
 
 /// Compression of the MCAP chunks.
@@ -49,20 +50,24 @@ impl LogOptions {
     /// Shortest accepted flush interval: shorter ones would keep the writer thread busy.
     pub const MIN_FLUSH_INTERVAL: Duration = Duration::from_millis(1);
 
-    /// Checks the values; the first problem, described.
-    pub fn check(&self) -> Result<(), String> {
+    /// Checks the values; the first problem (option, value, what was expected).
+    pub fn check(&self) -> Result<(), SpecError> {
         if self.chunk_size_bytes == 0 {
-            return Err("chunk_size_bytes is 0, expected a positive size in bytes".into());
+            return Err(SpecError::new(
+                "chunk_size_bytes",
+                0,
+                "a positive size in bytes",
+            ));
         }
         if self.flush_interval < Self::MIN_FLUSH_INTERVAL {
-            return Err(format!(
-                "flush_interval is {:?}, expected at least {:?}",
-                self.flush_interval,
-                Self::MIN_FLUSH_INTERVAL
+            return Err(SpecError::new(
+                "flush_interval",
+                format!("{:?}", self.flush_interval),
+                format!("at least {:?}", Self::MIN_FLUSH_INTERVAL),
             ));
         }
         if self.queue_capacity == 0 {
-            return Err("queue_capacity is 0, expected at least 1 message".into());
+            return Err(SpecError::new("queue_capacity", 0, "at least 1 message"));
         }
         Ok(())
     }

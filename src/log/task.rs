@@ -5,12 +5,12 @@
 use std::collections::{BTreeMap, HashMap};
 use std::fs::File;
 use std::io::BufWriter;
-use std::sync::atomic::Ordering;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::mpsc::{Receiver, RecvTimeoutError};
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
 use std::time::{Duration, Instant};
 
-use super::writer::{Shared, WriterOutcome};
 use super::{LogError, MESSAGE_ENCODING, SCHEMA_ENCODING};
 
 /// What the handles send to the writer thread.
@@ -39,10 +39,37 @@ pub(super) enum Command {
     },
 }
 
+/// What the writer thread shares with the handles and the join side.
+pub(super) struct ThreadShared {
+    /// The log file.
+    pub(super) path: PathBuf,
+    /// Set by `LogJoin::close` and when the writer thread stops.
+    pub(super) closed: AtomicBool,
+    /// Why the writer thread stopped early (an I/O error).
+    pub(super) failure: OnceLock<String>,
+    /// Written by the writer thread.
+    pub(super) progress: Progress,
+}
+
+/// Counters the writer thread updates as it goes.
+#[derive(Default)]
+pub(super) struct Progress {
+    pub(super) messages_written: AtomicU64,
+    pub(super) messages_flushed: AtomicU64,
+    pub(super) flushes: AtomicU64,
+}
+
+/// What the writer thread returns when it finishes.
+pub(super) struct WriterOutcome {
+    pub(super) messages_per_topic: BTreeMap<String, u64>,
+    pub(super) bytes_written: u64,
+    pub(super) flushes: u64,
+}
+
 /// The writer thread's state.
 pub(super) struct WriterTask {
     writer: mcap::Writer<BufWriter<File>>,
-    shared: Arc<Shared>,
+    shared: Arc<ThreadShared>,
     flush_interval: Duration,
     /// Topic per channel id.
     topics: HashMap<u16, String>,
@@ -57,7 +84,7 @@ pub(super) struct WriterTask {
 impl WriterTask {
     pub(super) fn new(
         writer: mcap::Writer<BufWriter<File>>,
-        shared: Arc<Shared>,
+        shared: Arc<ThreadShared>,
         flush_interval: Duration,
     ) -> Self {
         Self {

@@ -10,7 +10,7 @@ use std::collections::{BTreeMap, HashMap};
 use std::fs::File;
 use std::io::BufWriter;
 use std::marker::PhantomData;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, Ordering};
 use std::sync::mpsc::{self, SyncSender, TrySendError};
 use std::sync::{Arc, Mutex, OnceLock, PoisonError, Weak};
@@ -18,7 +18,7 @@ use std::thread::JoinHandle;
 
 use serde::Serialize;
 
-use super::task::{Command, WriterTask};
+use super::task::{Command, Progress, ThreadShared, WriterOutcome, WriterTask};
 use super::{
     LogError, LogOptions, FORMAT_VERSION, MESSAGE_ENCODING, RIGTWIN_METADATA, SCHEMA_ENCODING,
 };
@@ -56,7 +56,7 @@ impl SessionLog {
         let path = path.as_ref().to_path_buf();
         options.check().map_err(|reason| LogError::Options {
             path: path.clone(),
-            reason,
+            reason: Box::new(reason),
         })?;
         if let Some((name, _)) = metadata.iter().find(|(n, _)| n == RIGTWIN_METADATA) {
             return Err(LogError::ReservedMetadata {
@@ -125,16 +125,18 @@ impl SessionLog {
             .map_err(mcap_err("cannot flush the header".into()))?;
 
         let shared = Arc::new(Shared {
-            path: path.clone(),
+            thread: Arc::new(ThreadShared {
+                path: path.clone(),
+                closed: AtomicBool::new(false),
+                failure: OnceLock::new(),
+                progress: Progress::default(),
+            }),
             capacity: options.queue_capacity,
-            closed: AtomicBool::new(false),
-            failure: OnceLock::new(),
             registry: Mutex::new(Registry::default()),
             backlog_drops: AtomicU64::new(0),
-            progress: Progress::default(),
         });
         let (tx, rx) = mpsc::sync_channel(shared.capacity);
-        let task = WriterTask::new(writer, Arc::clone(&shared), options.flush_interval);
+        let task = WriterTask::new(writer, Arc::clone(&shared.thread), options.flush_interval);
         let thread = std::thread::Builder::new()
             .name("rigtwin-log".into())
             .spawn(move || task.run(rx))
@@ -156,43 +158,31 @@ impl SessionLog {
     }
 }
 
-/// State shared by the handles, the join side and the writer thread.
+/// State shared by the handles and the join side; the part the writer thread sees is
+/// [`ThreadShared`].
 pub(super) struct Shared {
-    /// The log file.
-    pub(super) path: PathBuf,
+    /// What the writer thread shares: the path, the closed flag, the failure, the progress.
+    pub(super) thread: Arc<ThreadShared>,
     /// Queue capacity, messages.
     pub(super) capacity: usize,
-    /// Set by [`LogJoin::close`] and when the writer thread stops.
-    pub(super) closed: AtomicBool,
-    /// Why the writer thread stopped early (an I/O error).
-    pub(super) failure: OnceLock<String>,
     /// The registered channels.
     pub(super) registry: Mutex<Registry>,
     /// Messages dropped because the queue was full.
     pub(super) backlog_drops: AtomicU64,
-    /// Written by the writer thread.
-    pub(super) progress: Progress,
 }
 
 impl Shared {
     fn closed_error(&self) -> LogError {
         LogError::Closed {
-            path: self.path.clone(),
+            path: self.thread.path.clone(),
             reason: self
+                .thread
                 .failure
                 .get()
                 .cloned()
                 .unwrap_or_else(|| "the log was closed".into()),
         }
     }
-}
-
-/// Counters the writer thread updates as it goes.
-#[derive(Default)]
-pub(super) struct Progress {
-    pub(super) messages_written: AtomicU64,
-    pub(super) messages_flushed: AtomicU64,
-    pub(super) flushes: AtomicU64,
 }
 
 /// The registered channels, by topic.
@@ -295,7 +285,7 @@ pub struct LogProgress {
 impl LogHandle {
     /// The log file.
     pub fn path(&self) -> &Path {
-        &self.inner.shared.path
+        &self.inner.shared.thread.path
     }
 
     /// Registers (or returns the existing) channel `topic` for messages of type `T`: message
@@ -309,7 +299,7 @@ impl LogHandle {
     ) -> Result<LogChannel<T>, LogError> {
         let schema = schemars::schema_for!(T);
         let data = serde_json::to_vec(&schema).map_err(|source| LogError::Serialize {
-            path: self.inner.shared.path.clone(),
+            path: self.inner.shared.thread.path.clone(),
             topic: topic.to_string(),
             source,
         })?;
@@ -332,7 +322,7 @@ impl LogHandle {
         schema_json: Vec<u8>,
     ) -> Result<RawChannel, LogError> {
         let shared = &self.inner.shared;
-        if shared.closed.load(Ordering::Acquire) {
+        if shared.thread.closed.load(Ordering::Acquire) {
             return Err(shared.closed_error());
         }
         let mut registry = shared
@@ -342,7 +332,7 @@ impl LogHandle {
         if let Some(existing) = registry.by_topic.get(topic) {
             if &*existing.schema_name != schema_name {
                 return Err(LogError::TopicConflict {
-                    path: shared.path.clone(),
+                    path: shared.thread.path.clone(),
                     topic: topic.to_string(),
                     existing: existing.schema_name.to_string(),
                     requested: schema_name.to_string(),
@@ -351,7 +341,7 @@ impl LogHandle {
             return Ok(existing.clone());
         }
         let id = u16::try_from(registry.by_topic.len() + 1).map_err(|_| LogError::Mcap {
-            path: shared.path.clone(),
+            path: shared.thread.path.clone(),
             what: format!("cannot register channel {topic}"),
             source: mcap::McapError::TooManyChannels,
         })?;
@@ -389,7 +379,7 @@ impl LogHandle {
         value: &T,
     ) -> Result<(), LogError> {
         let data = serde_json::to_vec(value).map_err(|source| LogError::Serialize {
-            path: self.inner.shared.path.clone(),
+            path: self.inner.shared.thread.path.clone(),
             topic: channel.topic().to_string(),
             source,
         })?;
@@ -429,11 +419,11 @@ impl LogHandle {
         let shared = &self.inner.shared;
         if !self.owns(channel) {
             return Err(LogError::ForeignChannel {
-                path: shared.path.clone(),
+                path: shared.thread.path.clone(),
                 topic: channel.topic.to_string(),
             });
         }
-        if shared.closed.load(Ordering::Acquire) {
+        if shared.thread.closed.load(Ordering::Acquire) {
             return Err(shared.closed_error());
         }
         let sequence = channel
@@ -459,7 +449,7 @@ impl LogHandle {
                 channel.counters.drops.fetch_add(1, Ordering::Relaxed);
                 shared.backlog_drops.fetch_add(1, Ordering::Relaxed);
                 Err(LogError::Backlog {
-                    path: shared.path.clone(),
+                    path: shared.thread.path.clone(),
                     topic: channel.topic.to_string(),
                     capacity: shared.capacity,
                 })
@@ -487,9 +477,17 @@ impl LogHandle {
 impl Shared {
     fn progress_snapshot(&self) -> LogProgress {
         LogProgress {
-            messages_written: self.progress.messages_written.load(Ordering::Relaxed),
-            messages_flushed: self.progress.messages_flushed.load(Ordering::Relaxed),
-            flushes: self.progress.flushes.load(Ordering::Relaxed),
+            messages_written: self
+                .thread
+                .progress
+                .messages_written
+                .load(Ordering::Relaxed),
+            messages_flushed: self
+                .thread
+                .progress
+                .messages_flushed
+                .load(Ordering::Relaxed),
+            flushes: self.thread.progress.flushes.load(Ordering::Relaxed),
             backlog_drops: self.backlog_drops.load(Ordering::Relaxed),
         }
     }
@@ -518,26 +516,19 @@ pub struct LogJoin {
     thread: JoinHandle<Result<WriterOutcome, LogError>>,
 }
 
-/// What the writer thread returns when it finishes.
-pub(super) struct WriterOutcome {
-    pub(super) messages_per_topic: BTreeMap<String, u64>,
-    pub(super) bytes_written: u64,
-    pub(super) flushes: u64,
-}
-
 impl LogJoin {
     /// Closes the log: later `log` calls fail with [`LogError::Closed`]; the writer thread
     /// writes what is queued, the summary and the footer, syncs the file to disk and stops.
     /// Waits for that (blocking: from async code call it in `spawn_blocking`). Returns the
     /// writer's first error if it failed on the way.
     pub fn close(self) -> Result<LogStats, LogError> {
-        self.shared.closed.store(true, Ordering::Release);
+        self.shared.thread.closed.store(true, Ordering::Release);
         if let Some(inner) = self.handle.upgrade() {
             // Waits for queue space; fails only if the thread already stopped.
             let _ = inner.tx.send(Command::Close);
         }
         let outcome = self.thread.join().map_err(|_| LogError::WriterPanicked {
-            path: self.shared.path.clone(),
+            path: self.shared.thread.path.clone(),
         })??;
         let drops_per_topic = self
             .shared
@@ -560,6 +551,6 @@ impl LogJoin {
 
     /// The log file.
     pub fn path(&self) -> &Path {
-        &self.shared.path
+        &self.shared.thread.path
     }
 }

@@ -116,21 +116,20 @@ impl DaqBlock {
         &self.counts[k * self.len..(k + 1) * self.len]
     }
 
-    /// Checks the block against a layout: length and count range. Returns a description of
-    /// the first problem (a block from hardware is external data).
-    pub fn check(&self, layout: &DaqLayout) -> Result<(), String> {
+    /// Checks the block against a layout: length and count range. Returns the first problem
+    /// (a block from hardware is external data).
+    pub fn check(&self, layout: &DaqLayout) -> Result<(), BlockError> {
         let n_ch = layout.channels.len();
         if self.len == 0 {
-            return Err(format!("block {}: no samples", self.seq));
+            return Err(BlockError::Empty { seq: self.seq });
         }
         if self.counts.len() != n_ch * self.len {
-            return Err(format!(
-                "block {}: {} counts for {} channels x {} samples",
-                self.seq,
-                self.counts.len(),
-                n_ch,
-                self.len
-            ));
+            return Err(BlockError::Shape {
+                seq: self.seq,
+                counts: self.counts.len(),
+                channels: n_ch,
+                len: self.len,
+            });
         }
         for (k, ch) in layout.channels.iter().enumerate() {
             if let Some(c) = self
@@ -138,14 +137,85 @@ impl DaqBlock {
                 .iter()
                 .find(|c| c.unsigned_abs() > ch.full_scale_counts.unsigned_abs())
             {
-                return Err(format!(
-                    "block {}, channel {}: count {} beyond full scale {}",
-                    self.seq, ch.name, c, ch.full_scale_counts
-                ));
+                return Err(BlockError::FullScale {
+                    seq: self.seq,
+                    channel: ch.name.clone(),
+                    count: *c,
+                    full_scale_counts: ch.full_scale_counts,
+                });
             }
         }
         Ok(())
     }
+}
+
+/// A block that does not fit its layout.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum BlockError {
+    /// No samples.
+    #[error("block {seq}: no samples")]
+    Empty {
+        /// Block sequence number.
+        seq: u64,
+    },
+    /// Not `channels x len` counts.
+    #[error("block {seq}: {counts} counts for {channels} channels x {len} samples")]
+    Shape {
+        /// Block sequence number.
+        seq: u64,
+        /// Counts in the block.
+        counts: usize,
+        /// Channels of the layout.
+        channels: usize,
+        /// Samples per channel of the block.
+        len: usize,
+    },
+    /// A count beyond its channel's full scale.
+    #[error("block {seq}, channel {channel}: count {count} beyond full scale {full_scale_counts}")]
+    FullScale {
+        /// Block sequence number.
+        seq: u64,
+        /// Channel name.
+        channel: String,
+        /// The count.
+        count: i32,
+        /// The channel's full scale, counts.
+        full_scale_counts: i32,
+    },
+}
+
+/// A drive command out of range.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum CommandError {
+    /// Frequency not finite, not > 0 or not below the DAQ's Nyquist frequency.
+    #[error(
+        "frequency_hz = {frequency_hz}: expected > 0 and below the DAQ's Nyquist frequency \
+         {nyquist_hz} Hz"
+    )]
+    Frequency {
+        /// The commanded frequency, Hz.
+        frequency_hz: f64,
+        /// The DAQ's Nyquist frequency, Hz.
+        nyquist_hz: f64,
+    },
+    /// Amplitude not finite or negative.
+    #[error("amplitude_v = {amplitude_v}: expected a finite amplitude >= 0 V")]
+    Amplitude {
+        /// The commanded amplitude, V.
+        amplitude_v: f64,
+    },
+    /// Ramp time not finite or negative.
+    #[error("ramp_s = {ramp_s}: expected a finite ramp time >= 0 s")]
+    Ramp {
+        /// The commanded ramp time, s.
+        ramp_s: f64,
+    },
+    /// A value not finite or out of range (the whole command shown).
+    #[error("{command:?}")]
+    Invalid {
+        /// The command.
+        command: DriveCommand,
+    },
 }
 
 /// A drive command: the shaker amplifier's input sine. The backend changes the frequency

@@ -1,5 +1,9 @@
 //! The rig: the [`RigBackend`] trait every backend implements (the simulated rig, [`sim`], and
-//! the CAN/serial hardware, [`hw`]) and the data it streams ([`daq`]).
+//! the CAN/serial hardware, [`hw`]), the data it streams ([`daq`]) and the channel map that
+//! says which DAQ channel plays which role ([`channels`]: built from the rig description, the
+//! base acceleration computed once). [`device`] is the rig's electronics emulated over the
+//! real links, driven by the simulated rig (`rigtwin firmware-sim`): it sits beside the
+//! backends, and [`hw`] never imports it nor [`sim`].
 //!
 //! Control code is generic over the backend and never knows which one it talks to. A backend
 //! delivers DAQ blocks in order at a fixed sample rate, their sequence numbers +1 per block;
@@ -7,35 +11,75 @@
 //! which the session treats as lost data and aborts on. It applies drive commands from the
 //! next block on and reports faults in its status.
 
+pub mod channels;
 pub mod daq;
+pub mod device;
 pub mod hw;
 pub mod sim;
-pub mod sim_backend;
 
 use std::future::Future;
 
 use crate::plan::TestSpec;
 
 pub use daq::{
-    ChannelKind, ChannelSpec, DaqBlock, DaqLayout, DriveCommand, DriveState, LinkCounters,
-    RigFault, RigStatus,
+    BlockError, ChannelKind, ChannelSpec, CommandError, DaqBlock, DaqLayout, DriveCommand,
+    DriveState, LinkCounters, RigFault, RigStatus,
 };
 
-/// Errors of a backend.
+/// A backend's own typed error, carried by a [`RigError`] (the hardware backend's
+/// [`hw::ConfigError`] and [`hw::LinkError`], the simulated rig's [`sim::SimRigError`], ...;
+/// downcast to inspect it). Boxed so this trait module does not depend on its backends.
+pub type BackendError = Box<dyn std::error::Error + Send + Sync + 'static>;
+
+/// Errors of a backend: the category (what the session can do about it) and the backend's
+/// typed error with the details.
+// NOTE: no `#[source]`: each message already shows the inner error, and the CLI prints the
+// chain (`{:#}`), which would then repeat it.
 #[derive(Debug, thiserror::Error)]
 pub enum RigError {
     /// The backend cannot be used as configured.
     #[error("rig backend configuration: {0}")]
-    Config(String),
+    Config(BackendError),
     /// A command was out of range.
     #[error("drive command rejected: {0}")]
-    Command(String),
+    Command(BackendError),
     /// The link to the rig (or the simulation thread) is gone.
     #[error("rig link lost: {0}")]
-    Link(String),
+    Link(BackendError),
     /// The backend was used out of order (e.g. a block requested before start).
     #[error("rig backend: {0}")]
-    State(String),
+    State(StateError),
+}
+
+impl RigError {
+    /// A configuration error.
+    pub fn config(e: impl Into<BackendError>) -> RigError {
+        RigError::Config(e.into())
+    }
+
+    /// A rejected command.
+    pub fn command(e: impl Into<BackendError>) -> RigError {
+        RigError::Command(e.into())
+    }
+
+    /// A lost link.
+    pub fn link(e: impl Into<BackendError>) -> RigError {
+        RigError::Link(e.into())
+    }
+}
+
+/// A backend used out of order.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum StateError {
+    /// `start` called twice.
+    #[error("already started")]
+    AlreadyStarted,
+    /// `next_block` before `start`.
+    #[error("next_block before start")]
+    NotStarted,
+    /// The simulated rig is missing (a previous block's computation failed).
+    #[error("simulation core missing")]
+    SimulationCoreMissing,
 }
 
 /// A test rig: a shaker drive and a DAQ stream.

@@ -114,7 +114,7 @@ pub fn recording(session: &SessionRead) -> Result<Recording, ReplayError> {
                 format!("{TOPIC_DAQ}: block {} where {i} was due (lost data)", b.seq),
             ));
         }
-        b.check(&layout).map_err(|m| content(path, m))?;
+        b.check(&layout).map_err(|e| content(path, e.to_string()))?;
     }
     let events = session
         .decode::<SessionEvent>(TOPIC_EVENTS)?

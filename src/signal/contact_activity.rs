@@ -2,7 +2,7 @@
 //! per-sample flags, impacts per excitation period, and clusters of impacts with their size
 //! histogram (the reference reports that "clusters of five impacts occur recurrently").
 //!
-//! Definitions used throughout (and by [`super::metrics`]):
+//! Definitions used throughout (and by the step metrics, `metrics.rs`):
 //! - a sample is *closed* when at least one contact pair is closed (simulation) or the contact
 //!   resistance says so (measurement);
 //! - an *interval* is a maximal run of closed samples `[start, end)`, after merging open gaps of

@@ -27,7 +27,7 @@ use crate::rom::Rom;
 use crate::sim::driven::{DrivenError, DrivenRom, SensorStep};
 use crate::sim::{StabilityLimits, TimeStep};
 
-use super::error::TwinError;
+use super::error::{BlockError, TwinError};
 use super::input::{InputMap, TwinInput};
 use super::output::{TwinBlock, TwinGap, TWIN_SENSORS};
 use super::spec::{AfterGap, TwinSpec};
@@ -107,11 +107,7 @@ impl Twin {
         // A provisional step far inside any stability limit lets the integrator check the ROM
         // and compute its limits; the twin step follows from them.
         let mut rom = DrivenRom::provisional(rom, TWIN_SENSORS).map_err(|e| match e {
-            DrivenError::Output(missing) => TwinError::Rom(format!(
-                "no output {:?} (outputs: {:?}); the twin predicts the beam sensors \
-                 {TWIN_SENSORS:?}",
-                missing.name, missing.available
-            )),
+            DrivenError::Output(missing) => TwinError::Rom(missing),
             DrivenError::Sim(e) => e.into(),
         })?;
         let limits = *rom.limits();
@@ -127,16 +123,17 @@ impl Twin {
                     spec.steps_per_reference_period
                 ),
             };
-            return Err(TwinError::Spec(format!(
-                "{key} = {value}: the twin step 1 / ({fs} Hz x {n}) = {dt:.4e} s is beyond the \
-                 open stability limit of the twin ROM, {:.4e} s (max(Omega) = {:.5e} rad/s, \
-                 w_max dt < 2, at least {:.1} steps per 1FU period); use \
-                 twin.steps_per_sample >= {}",
-                limits.dt_max_open(),
-                limits.omega_open,
-                limits.steps_per_period_open(),
-                (1.0 / (fs * limits.dt_max_open())).floor() + 1.0
-            )));
+            return Err(TwinError::StepBeyondLimit {
+                key,
+                value,
+                sample_rate: fs,
+                steps_per_sample: n,
+                dt,
+                dt_max: limits.dt_max_open(),
+                omega_open: limits.omega_open,
+                steps_per_period: limits.steps_per_period_open(),
+                min_steps_per_sample: (1.0 / (fs * limits.dt_max_open())).floor() + 1.0,
+            });
         }
         rom.set_time_step(TimeStep::Dt { dt })?;
         rom.set_clearance(clearance_m)?;
@@ -237,13 +234,15 @@ impl Twin {
     pub fn push_input(&mut self, input: &TwinInput) -> Result<TwinBlock, TwinError> {
         let len = input.len();
         if len == 0 {
-            return Err(TwinError::Block(format!("block {}: no samples", input.seq)));
+            return Err(BlockError::Empty { seq: input.seq }.into());
         }
         if let Some(i) = input.base_acceleration.iter().position(|a| !a.is_finite()) {
-            return Err(TwinError::Block(format!(
-                "block {}: base acceleration of sample {i} is {} (must be finite)",
-                input.seq, input.base_acceleration[i]
-            )));
+            return Err(BlockError::NonFinite {
+                seq: input.seq,
+                sample: i,
+                value: input.base_acceleration[i],
+            }
+            .into());
         }
         let fs = self.map.sample_rate();
         let gap = match self.next_sample {
@@ -257,11 +256,12 @@ impl Twin {
                 restarted: self.after_gap == AfterGap::RestartAtRest,
             }),
             Some(expected) => {
-                return Err(TwinError::Block(format!(
-                    "block {} starts at sample {}, before the end of the previous block \
-                     (block {}, next sample {expected}): blocks out of order or repeated",
-                    input.seq, input.first_sample, self.last_seq
-                )));
+                return Err(BlockError::OutOfOrder {
+                    seq: input.seq,
+                    first_sample: input.first_sample,
+                    next_sample: expected,
+                }
+                .into());
             }
         };
         if let Some(g) = &gap {

@@ -6,9 +6,10 @@
 //! block) while replay calls [`super::Twin::push_block`]: both run the same code, so they
 //! give the same bits.
 
-use crate::rig::daq::{ChannelKind, DaqBlock, DaqLayout};
+use crate::rig::channels::{base_acceleration, platform_accelerometers};
+use crate::rig::daq::{DaqBlock, DaqLayout};
 
-use super::error::TwinError;
+use super::error::{BlockError, LayoutError, TwinError};
 
 /// The base acceleration of one DAQ block and where the block sits in the stream.
 #[derive(Clone, Debug, PartialEq)]
@@ -50,32 +51,21 @@ impl InputMap {
     pub fn new(layout: &DaqLayout) -> Result<InputMap, TwinError> {
         let fs = layout.sample_rate;
         if !(fs.is_finite() && fs > 0.0) {
-            return Err(TwinError::Layout(format!(
-                "sample_rate = {fs}: expected a finite sample rate > 0 (Hz)"
-            )));
+            return Err(LayoutError::SampleRate(fs).into());
         }
-        let platform: Vec<(usize, f64)> = layout
-            .indices_of(ChannelKind::PlatformAcceleration)
-            .into_iter()
-            .map(|k| (k, layout.channels[k].scale))
-            .collect();
+        let platform = platform_accelerometers(layout);
         if platform.is_empty() {
-            return Err(TwinError::Layout(format!(
-                "no platform accelerometer (a channel of kind platform_acceleration) among the \
-                 channels [{}]: the twin is driven by the measured base acceleration",
-                layout
-                    .channels
-                    .iter()
-                    .map(|c| c.name.as_str())
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            )));
+            return Err(LayoutError::NoPlatform {
+                channels: layout.channels.iter().map(|c| c.name.clone()).collect(),
+            }
+            .into());
         }
         if let Some(&(k, s)) = platform.iter().find(|(_, s)| !s.is_finite()) {
-            return Err(TwinError::Layout(format!(
-                "channel {}: scale = {s}: expected a finite value per count (m/s^2)",
-                layout.channels[k].name
-            )));
+            return Err(LayoutError::Scale {
+                channel: layout.channels[k].name.clone(),
+                scale: s,
+            }
+            .into());
         }
         Ok(InputMap {
             platform,
@@ -98,30 +88,19 @@ impl InputMap {
     /// counts is not `channels x len`.
     pub fn extract(&self, block: &DaqBlock) -> Result<TwinInput, TwinError> {
         if block.len == 0 {
-            return Err(TwinError::Block(format!("block {}: no samples", block.seq)));
+            return Err(BlockError::Empty { seq: block.seq }.into());
         }
         if block.counts.len() != self.n_channels * block.len {
-            return Err(TwinError::Block(format!(
-                "block {}: {} counts, expected {} channels x {} samples = {} (channel-major); \
-                 the block does not fit the DAQ layout",
-                block.seq,
-                block.counts.len(),
-                self.n_channels,
-                block.len,
-                self.n_channels * block.len
-            )));
+            return Err(BlockError::Shape {
+                seq: block.seq,
+                counts: block.counts.len(),
+                channels: self.n_channels,
+                len: block.len,
+            }
+            .into());
         }
-        let inv_n = 1.0 / self.platform.len() as f64;
         let base_acceleration = (0..block.len)
-            .map(|i| {
-                // Fixed channel order: the same counts give the same bits.
-                let sum: f64 = self
-                    .platform
-                    .iter()
-                    .map(|&(k, scale)| f64::from(block.counts[k * block.len + i]) * scale)
-                    .sum();
-                sum * inv_n
-            })
+            .map(|i| base_acceleration(&self.platform, &block.counts, block.len, i))
             .collect();
         Ok(TwinInput {
             seq: block.seq,

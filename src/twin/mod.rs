@@ -16,7 +16,7 @@
 //!   the live twin and the twin replay.
 //!
 //! The twin beside a running session and the twin re-run on a recording are the session's
-//! (`crate::session::twin`, `crate::session::twin_replay`): the twin itself knows no log.
+//! (`session/twin.rs`, `session/twin_replay.rs`): the twin itself knows no log.
 //! - [`error`]: the error type [`TwinError`].
 
 // NOTE: validation uses negated comparisons such as `!(dt < limit)` on purpose: they reject
@@ -35,7 +35,7 @@ pub mod task;
 pub use clearance::ClearanceSchedule;
 pub use compare::{Completed, TwinComparison, TwinWindows};
 pub use engine::{Twin, TwinCounters};
-pub use error::TwinError;
+pub use error::{BlockError, LayoutError, TaskError, TwinError};
 pub use input::{InputMap, TwinInput};
 pub use output::{TwinBlock, TwinEvent, TwinGap, TwinSamples, TwinStatus, TwinTrace, TWIN_SENSORS};
 pub use spec::{AfterGap, TwinSpec};

@@ -35,7 +35,7 @@ use tokio::sync::mpsc::{unbounded_channel, UnboundedSender};
 use crate::rig::daq::DaqBlock;
 
 use super::engine::Twin;
-use super::error::TwinError;
+use super::error::{BlockError, TaskError, TwinError};
 use super::input::{InputMap, TwinInput};
 use super::output::{TwinEvent, TwinStatus};
 use super::spec::TwinSpec;
@@ -117,7 +117,7 @@ pub struct TwinTask {
     first_sample: Option<u64>,
     next_sample: Option<u64>,
     /// Why the thread ended abnormally, once joined.
-    failure: Option<String>,
+    failure: Option<TaskError>,
 }
 
 impl std::fmt::Debug for TwinTask {
@@ -151,7 +151,7 @@ impl TwinTask {
         let handle = std::thread::Builder::new()
             .name("rigtwin-twin".into())
             .spawn(move || run(twin, rx, out_tx, &thread_shared, throttle))
-            .map_err(|e| TwinError::Task(format!("cannot start the twin thread: {e}")))?;
+            .map_err(|e| TaskError::Spawn(e.to_string()))?;
         Ok((
             TwinTask {
                 tx: Some(tx),
@@ -185,19 +185,20 @@ impl TwinTask {
     /// [`TwinTask::push`] for an input already extracted with this twin's [`InputMap`].
     pub fn push_input(&mut self, input: TwinInput) -> Result<Pushed, TwinError> {
         if input.is_empty() {
-            return Err(TwinError::Block(format!("block {}: no samples", input.seq)));
+            return Err(BlockError::Empty { seq: input.seq }.into());
         }
         if let Some(next) = self.next_sample {
             if input.first_sample < next {
-                return Err(TwinError::Block(format!(
-                    "block {} starts at sample {}, before the end of the previous block offered \
-                     (next sample {next}): blocks out of order or repeated",
-                    input.seq, input.first_sample
-                )));
+                return Err(BlockError::OutOfOrder {
+                    seq: input.seq,
+                    first_sample: input.first_sample,
+                    next_sample: next,
+                }
+                .into());
             }
         }
         let Some(tx) = &self.tx else {
-            return Err(TwinError::Task("the twin task was shut down".into()));
+            return Err(TaskError::ShutDown.into());
         };
         self.offered += 1;
         self.first_sample.get_or_insert(input.first_sample);
@@ -222,9 +223,7 @@ impl TwinTask {
                 self.behind = true;
                 Ok(self.skip(&q.input, true))
             }
-            Err(TrySendError::Disconnected(_)) => Err(TwinError::Task(format!(
-                "the twin thread has stopped (block {seq} not taken); finish() reports why"
-            ))),
+            Err(TrySendError::Disconnected(_)) => Err(TaskError::Stopped { seq }.into()),
         }
     }
 
@@ -316,11 +315,11 @@ impl TwinTask {
                     .or_else(|| panic.downcast_ref::<String>().cloned())
                     .unwrap_or_else(|| "unknown panic".into());
                 self.shared.progress().running = false;
-                self.failure = Some(format!("the twin thread panicked: {what}"));
+                self.failure = Some(TaskError::Panicked(what));
             }
         }
         match &self.failure {
-            Some(f) => Err(TwinError::Task(f.clone())),
+            Some(f) => Err(f.clone().into()),
             None => Ok(self.status()),
         }
     }

@@ -1,6 +1,7 @@
-//! The simulated DAQ: the channel layout, the anti-alias filter at the truth rate on every
-//! channel, decimation to the DAQ rate, white sensor noise from a seeded ChaCha8 generator
-//! (deterministic), and quantisation to ADC counts with clipping at full scale.
+//! The simulated DAQ: the anti-alias filter at the truth rate on every channel, decimation to
+//! the DAQ rate, white sensor noise from a seeded ChaCha8 generator (deterministic), and
+//! quantisation to ADC counts with clipping at full scale. The channel layout is the rig's
+//! channel map ([`crate::rig::channels::layout`], re-exported here).
 //!
 //! Decimation keeps the filtered value of the first truth step of every DAQ sample period (the
 //! contact channel: its minimum over the period), so
@@ -9,58 +10,14 @@
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use crate::config::FIXED_CHANNEL_NAMES;
-use crate::rig::daq::{ChannelKind, ChannelSpec, DaqLayout};
+use crate::rig::daq::{ChannelKind, DaqLayout};
+
+// The channel layout of a `[daq]` table is the rig's channel map, shared with the hardware
+// path; re-exported here for the simulator's modules.
+pub use crate::rig::channels::{layout, FIXED_CHANNELS};
 
 use super::filter::Butterworth4;
 use super::spec::DaqSpec;
-
-/// The channels after the platform accelerometers, in layout order: the rig description's
-/// [`FIXED_CHANNEL_NAMES`] with their kinds.
-pub const FIXED_CHANNELS: [(&str, ChannelKind); 8] = [
-    (FIXED_CHANNEL_NAMES[0], ChannelKind::BeamAcceleration),
-    (FIXED_CHANNEL_NAMES[1], ChannelKind::BeamAcceleration),
-    (FIXED_CHANNEL_NAMES[2], ChannelKind::BeamAcceleration),
-    (FIXED_CHANNEL_NAMES[3], ChannelKind::BeamAcceleration),
-    (FIXED_CHANNEL_NAMES[4], ChannelKind::Vibrometer),
-    (FIXED_CHANNEL_NAMES[5], ChannelKind::ContactVoltage),
-    (FIXED_CHANNEL_NAMES[6], ChannelKind::DriveVoltage),
-    (FIXED_CHANNEL_NAMES[7], ChannelKind::DriveCurrent),
-];
-
-/// The layout of a (valid) DAQ spec: the platform accelerometers, then [`FIXED_CHANNELS`].
-pub fn layout(spec: &DaqSpec) -> DaqLayout {
-    let half = 2f64.powi(spec.adc_bits as i32 - 1);
-    let full_scale_counts = (half - 1.0) as i32;
-    let channel = |name: &str, kind: ChannelKind| {
-        let r = &spec.full_scale;
-        let range = match kind {
-            ChannelKind::PlatformAcceleration => r.platform_acceleration,
-            ChannelKind::BeamAcceleration => r.beam_acceleration,
-            ChannelKind::Vibrometer => r.vibrometer,
-            ChannelKind::ContactVoltage => r.contact_voltage,
-            ChannelKind::DriveVoltage => r.drive_voltage,
-            ChannelKind::DriveCurrent => r.drive_current,
-        };
-        ChannelSpec {
-            name: name.to_string(),
-            kind,
-            scale: range / half,
-            full_scale_counts,
-        }
-    };
-    let channels = spec
-        .platform_accelerometers
-        .iter()
-        .map(|n| channel(n, ChannelKind::PlatformAcceleration))
-        .chain(FIXED_CHANNELS.iter().map(|&(n, k)| channel(n, k)))
-        .collect();
-    DaqLayout {
-        sample_rate: spec.sample_rate,
-        block_size: spec.block_size,
-        channels,
-    }
-}
 
 /// Standard normal deviates by the Box-Muller transform (both deviates of a pair used).
 #[derive(Clone, Debug)]
@@ -228,36 +185,6 @@ impl Daq {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn layout_names_kinds_and_scales() {
-        let spec = DaqSpec::default();
-        let l = layout(&spec);
-        let names: Vec<&str> = l.channels.iter().map(|c| c.name.as_str()).collect();
-        assert_eq!(
-            names,
-            [
-                "platform_1",
-                "platform_2",
-                "platform_3",
-                "lower_tip",
-                "lower_mid",
-                "upper_tip",
-                "upper_mid",
-                "vibrometer",
-                "contact_voltage",
-                "drive_voltage",
-                "drive_current"
-            ]
-        );
-        assert_eq!(l.indices_of(ChannelKind::PlatformAcceleration), [0, 1, 2]);
-        assert_eq!(l.indices_of(ChannelKind::BeamAcceleration), [3, 4, 5, 6]);
-        let c = &l.channels[0];
-        assert_eq!(c.full_scale_counts, (1 << 23) - 1);
-        assert_eq!(c.scale, 100.0 / f64::from(1 << 23));
-        assert_eq!(l.block_size, 256);
-        assert_eq!(l.sample_rate, 10240.0);
-    }
 
     #[test]
     fn quantisation_rounds_and_clips() {

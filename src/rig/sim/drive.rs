@@ -4,7 +4,7 @@
 
 use std::f64::consts::TAU;
 
-use crate::rig::daq::{DriveCommand, DriveState};
+use crate::rig::daq::{CommandError, DriveCommand, DriveState};
 
 /// The sine generator at the amplifier input.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -16,28 +16,24 @@ pub struct DriveGenerator {
 
 impl DriveGenerator {
     /// Checks a command's ranges: frequency finite, > 0 and below `nyquist_hz`; amplitude and
-    /// ramp finite and >= 0. Returns a description of the first problem.
-    pub fn check(cmd: &DriveCommand, nyquist_hz: f64) -> Result<(), String> {
+    /// ramp finite and >= 0. Returns the first problem.
+    pub fn check(cmd: &DriveCommand, nyquist_hz: f64) -> Result<(), CommandError> {
         if !(cmd.frequency_hz.is_finite()
             && cmd.frequency_hz > 0.0
             && cmd.frequency_hz < nyquist_hz)
         {
-            return Err(format!(
-                "frequency_hz = {}: expected > 0 and below the DAQ's Nyquist frequency {} Hz",
-                cmd.frequency_hz, nyquist_hz
-            ));
+            return Err(CommandError::Frequency {
+                frequency_hz: cmd.frequency_hz,
+                nyquist_hz,
+            });
         }
         if !(cmd.amplitude_v.is_finite() && cmd.amplitude_v >= 0.0) {
-            return Err(format!(
-                "amplitude_v = {}: expected a finite amplitude >= 0 V",
-                cmd.amplitude_v
-            ));
+            return Err(CommandError::Amplitude {
+                amplitude_v: cmd.amplitude_v,
+            });
         }
         if !(cmd.ramp_s.is_finite() && cmd.ramp_s >= 0.0) {
-            return Err(format!(
-                "ramp_s = {}: expected a finite ramp time >= 0 s",
-                cmd.ramp_s
-            ));
+            return Err(CommandError::Ramp { ramp_s: cmd.ramp_s });
         }
         Ok(())
     }

@@ -1,7 +1,7 @@
 //! The simulated rig's synchronous core ([`SimRig`]): a truth ROM coupled two-way to an
 //! electrodynamic shaker, physical sensors, and a DAQ that filters, decimates, adds noise and
-//! quantises, block by block on virtual time. The async backend (threads, real-time pacing,
-//! the [`crate::rig::RigBackend`] impl) wraps it.
+//! quantises, block by block on virtual time. The async backend ([`backend`]: threads,
+//! real-time pacing, the [`crate::rig::RigBackend`] impl) wraps it.
 //!
 //! Per DAQ sample, `oversampling` truth steps of `dt = 1 / (sample_rate * oversampling)`:
 //! drive generator ([`drive`]) -> amplifier, coil, base and ROM ([`shaker`], [`truth`]) ->
@@ -18,6 +18,7 @@
 // NaN together with out-of-range values.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod backend;
 pub mod daq;
 pub mod drive;
 pub mod filter;
@@ -27,6 +28,7 @@ pub mod spec;
 pub mod truth;
 pub mod variants;
 
+pub use backend::SimBackend;
 pub use shaker::{base_acceleration_frf, BaseMode, Complex};
 pub use spec::{
     ChannelNoise, ChannelRanges, ContactCircuitSpec, DaqSpec, ShakerSpec, SimRigSpec, TruthSpec,
@@ -35,7 +37,7 @@ pub use variants::{Beam, ClampFrictionSpec, SensorGainSpec, TiltSpec, TruthVaria
 
 use serde::{Deserialize, Serialize};
 
-use crate::rig::daq::{DaqBlock, DaqLayout, DriveCommand, DriveState, RigFault};
+use crate::rig::daq::{CommandError, DaqBlock, DaqLayout, DriveCommand, DriveState, RigFault};
 use crate::rig::RigError;
 use crate::rom::Rom;
 use crate::sim::SimError;
@@ -59,7 +61,7 @@ pub enum SimRigError {
     Sim(#[from] SimError),
     /// A drive command out of range.
     #[error("drive command rejected: {0}")]
-    Command(String),
+    Command(CommandError),
     /// An injected fault that cannot apply.
     #[error("injected fault rejected: {0}")]
     Fault(String),
@@ -68,8 +70,8 @@ pub enum SimRigError {
 impl From<SimRigError> for RigError {
     fn from(e: SimRigError) -> RigError {
         match e {
-            SimRigError::Command(m) => RigError::Command(m),
-            other => RigError::Config(other.to_string()),
+            SimRigError::Command(m) => RigError::command(m),
+            other => RigError::config(other),
         }
     }
 }

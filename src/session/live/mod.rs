@@ -33,6 +33,7 @@ mod publisher;
 mod record;
 mod view;
 
+use crate::config::SpecError;
 use std::net::{IpAddr, Ipv4Addr, SocketAddr};
 use std::time::Duration;
 
@@ -93,7 +94,7 @@ pub enum LiveError {
     },
     /// The options are out of range.
     #[error("live view: bad options: {0}")]
-    Options(String),
+    Options(#[from] SpecError),
     /// A thread or the server's runtime could not start, or the SDK refused the server.
     #[error("live view: {what}: {detail}")]
     Start {
@@ -123,7 +124,7 @@ fn bind_hint(e: &std::io::Error) -> &'static str {
 /// Parses a live-view address: `PORT` (binds 127.0.0.1), `IP:PORT` (`127.0.0.1:8765`,
 /// `0.0.0.0:8765` for every interface), `[IPv6]:PORT` or `localhost:PORT`. Port 0 picks a free
 /// port. Never binds every interface unless the address says so.
-pub fn parse_addr(text: &str) -> Result<SocketAddr, String> {
+pub fn parse_addr(text: &str) -> Result<SocketAddr, AddrError> {
     let t = text.trim();
     if let Ok(port) = t.parse::<u16>() {
         return Ok(SocketAddr::new(IpAddr::V4(Ipv4Addr::LOCALHOST), port));
@@ -136,11 +137,21 @@ pub fn parse_addr(text: &str) -> Result<SocketAddr, String> {
             return Ok(SocketAddr::new(IpAddr::V4(Ipv4Addr::LOCALHOST), port));
         }
     }
-    Err(format!(
-        "{text:?} is not a listen address: expected PORT (binds 127.0.0.1, e.g. 8765), \
-         IP:PORT (e.g. 127.0.0.1:8765, or 0.0.0.0:8765 for every interface), [IPv6]:PORT or \
-         localhost:PORT, with PORT in 0..=65535 (0: a free port)"
-    ))
+    Err(AddrError {
+        text: text.to_owned(),
+    })
+}
+
+/// A live-view address that does not parse.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error(
+    "{text:?} is not a listen address: expected PORT (binds 127.0.0.1, e.g. 8765), \
+     IP:PORT (e.g. 127.0.0.1:8765, or 0.0.0.0:8765 for every interface), [IPv6]:PORT or \
+     localhost:PORT, with PORT in 0..=65535 (0: a free port)"
+)]
+pub struct AddrError {
+    /// The text given.
+    pub text: String,
 }
 
 /// How the live view serves a session.
@@ -174,19 +185,20 @@ impl Default for LiveOptions {
 }
 
 impl LiveOptions {
-    /// Checks the values; the first problem, described.
-    pub fn check(&self) -> Result<(), String> {
+    /// Checks the values; the first problem (option, value, what was expected).
+    pub fn check(&self) -> Result<(), SpecError> {
         if !(self.daq_points_per_second.is_finite() && self.daq_points_per_second > 0.0) {
-            return Err(format!(
-                "daq_points_per_second is {}, expected a positive rate in Hz",
-                self.daq_points_per_second
+            return Err(SpecError::new(
+                "daq_points_per_second",
+                self.daq_points_per_second,
+                "a positive rate in Hz",
             ));
         }
         if self.queue_capacity == 0 {
-            return Err("queue_capacity is 0, expected at least 1 record".into());
+            return Err(SpecError::new("queue_capacity", 0, "at least 1 record"));
         }
         if self.client_backlog == 0 {
-            return Err("client_backlog is 0, expected at least 1 message".into());
+            return Err(SpecError::new("client_backlog", 0, "at least 1 message"));
         }
         Ok(())
     }
@@ -228,7 +240,7 @@ mod tests {
             "::1:8765",
         ] {
             let e = parse_addr(bad).unwrap_err();
-            assert!(e.contains("expected PORT"), "{bad}: {e}");
+            assert!(e.to_string().contains("expected PORT"), "{bad}: {e}");
         }
     }
 
@@ -239,6 +251,6 @@ mod tests {
             daq_points_per_second: 0.0,
             ..LiveOptions::default()
         };
-        assert!(bad.check().unwrap_err().contains("daq_points_per_second"));
+        assert_eq!(bad.check().unwrap_err().key, "daq_points_per_second");
     }
 }

@@ -151,7 +151,7 @@ impl LiveView {
         addr: SocketAddr,
         options: LiveOptions,
     ) -> Result<(LiveRecorder, LiveView), LiveError> {
-        options.check().map_err(LiveError::Options)?;
+        options.check()?;
         // NOTE: the server gets its own runtime and thread, so client connections never run on
         // the session's workers.
         let runtime = tokio::runtime::Builder::new_multi_thread()

@@ -112,7 +112,11 @@ impl Model {
 
     /// Sets the time step: the damped leapfrog coefficients and the Delassus matrix, and
     /// returns a contact solver for it.
-    pub(super) fn set_dt(&mut self, dt: f64, contact: &ContactParameters) -> Result<ContactSolver, SimError> {
+    pub(super) fn set_dt(
+        &mut self,
+        dt: f64,
+        contact: &ContactParameters,
+    ) -> Result<ContactSolver, SimError> {
         let (m, nb) = (self.m, 3 * self.n_pairs);
         self.dt = dt;
         for i in 0..m {

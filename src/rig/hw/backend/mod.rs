@@ -22,7 +22,8 @@ use tokio::task::JoinHandle;
 use tokio::time::Instant;
 
 use crate::rig::{
-    ChannelKind, DaqBlock, DaqLayout, DriveCommand, LinkCounters, RigBackend, RigError, RigStatus,
+    ChannelKind, CommandError, DaqBlock, DaqLayout, DriveCommand, LinkCounters, RigBackend,
+    RigError, RigStatus, StateError,
 };
 
 mod tasks;
@@ -32,11 +33,27 @@ use tasks::{heartbeats, lock, open_serial, receiver, Link, Shared};
 use super::can::block::{BlockFormat, Reassembler};
 use super::can::candump::CandumpLog;
 use super::can::messages::{
-    DriveSetpoint, HostHeartbeat, Message, StreamCommand, StreamControl, TimeSyncRequest, NO_BLOCK,
+    DriveSetpoint, HostHeartbeat, Message, StreamCommand, StreamControl, TimeSyncRequest,
+    FIRST_HEARTBEAT_WAIT, HEARTBEAT_PERIOD, HEARTBEAT_TIMEOUT, NO_BLOCK,
 };
 use super::can::transport::{AnyTransport, CanAddress, CanTransport};
 use super::serial::port::{SerialClient, SerialError};
 use super::serial::protocol::{AmplifierStatus, VibrometerStatus};
+use super::{ConfigError, LinkError};
+
+/// Default serial answer timeout.
+pub const DEFAULT_SERIAL_TIMEOUT: Duration = Duration::from_millis(250);
+/// Default serial STATUS poll period.
+pub const DEFAULT_SERIAL_POLL: Duration = Duration::from_millis(200);
+/// Default vibrometer output filter, Hz (the default DAQ's anti-alias cutoff).
+pub const DEFAULT_VIBROMETER_FILTER_HZ: u32 = 5000;
+/// Pause between HOST_HEARTBEATs while waiting for the device's first heartbeat.
+const CONNECT_RETRY: Duration = Duration::from_millis(50);
+/// Pause after STREAM_CONTROL stop so the last frames in flight reach the candump log.
+const STOP_DRAIN: Duration = Duration::from_millis(50);
+/// Reassembled blocks queued for [`RigBackend::next_block`] (bounded: backpressure on the
+/// receiver task).
+const BLOCK_QUEUE: usize = 256;
 
 /// How to reach the rig and what to expect of it.
 #[derive(Clone, Debug)]
@@ -51,13 +68,14 @@ pub struct HwOptions {
     /// (`--can-log`).
     pub can_log: Option<PathBuf>,
     /// HOST_HEARTBEAT period; the device heartbeat is expected at the same period. Default
-    /// 100 ms.
+    /// [`HEARTBEAT_PERIOD`] (100 ms).
     pub heartbeat_period: Duration,
-    /// No DEVICE_HEARTBEAT for this long: the link is lost. Default 500 ms.
+    /// No DEVICE_HEARTBEAT for this long: the link is lost. Default [`HEARTBEAT_TIMEOUT`]
+    /// (500 ms).
     pub heartbeat_timeout: Duration,
-    /// Serial answer timeout. Default 250 ms.
+    /// Serial answer timeout. Default [`DEFAULT_SERIAL_TIMEOUT`] (250 ms).
     pub serial_timeout: Duration,
-    /// Serial STATUS poll period. Default 200 ms.
+    /// Serial STATUS poll period. Default [`DEFAULT_SERIAL_POLL`] (200 ms).
     pub serial_poll: Duration,
     /// The amplifier gain the rig description states (`shaker.amplifier_gain`), V/V; the
     /// amplifier's own must match.
@@ -74,12 +92,12 @@ impl HwOptions {
             ldv,
             amp,
             can_log: None,
-            heartbeat_period: Duration::from_millis(100),
-            heartbeat_timeout: Duration::from_millis(500),
-            serial_timeout: Duration::from_millis(250),
-            serial_poll: Duration::from_millis(200),
+            heartbeat_period: HEARTBEAT_PERIOD,
+            heartbeat_timeout: HEARTBEAT_TIMEOUT,
+            serial_timeout: DEFAULT_SERIAL_TIMEOUT,
+            serial_poll: DEFAULT_SERIAL_POLL,
             amplifier_gain,
-            vibrometer_filter_hz: 5000,
+            vibrometer_filter_hz: DEFAULT_VIBROMETER_FILTER_HZ,
         }
     }
 }
@@ -106,29 +124,32 @@ pub struct HwBackend {
     stopped: bool,
 }
 
-pub(super) fn config(e: impl std::fmt::Display) -> RigError {
-    RigError::Config(e.to_string())
-}
-
 impl HwBackend {
     /// Opens the CAN link and both serial ports and waits for the device's first heartbeat.
     /// `layout` is the rig description's channel map: every block header is checked against
     /// it. Must be called inside a tokio runtime.
     pub async fn connect(layout: DaqLayout, opts: HwOptions) -> Result<HwBackend, RigError> {
-        let format = BlockFormat::of(&layout).map_err(config)?;
-        if layout.indices_of(ChannelKind::Vibrometer).len() != 1 {
-            return Err(config(
-                "the hardware backend needs exactly one vibrometer channel in the channel map",
-            ));
+        let format =
+            BlockFormat::of(&layout).map_err(|e| RigError::config(ConfigError::Format(e)))?;
+        let vibrometers = layout.indices_of(ChannelKind::Vibrometer).len();
+        if vibrometers != 1 {
+            return Err(RigError::config(ConfigError::Vibrometers {
+                count: vibrometers,
+            }));
         }
         let transport = AnyTransport::open(&opts.can)
             .await
-            .map_err(|e| RigError::Config(format!("--can: {e}")))?;
+            .map_err(|e| RigError::config(ConfigError::Can(e)))?;
         let log = opts
             .can_log
             .as_ref()
             .map(|p| {
-                CandumpLog::create(p).map_err(|e| config(format!("--can-log {}: {e}", p.display())))
+                CandumpLog::create(p).map_err(|error| {
+                    RigError::config(ConfigError::CanLog {
+                        path: p.clone(),
+                        error,
+                    })
+                })
             })
             .transpose()?;
         let t0 = Instant::now();
@@ -147,7 +168,7 @@ impl HwBackend {
             shared: shared.clone(),
         };
         let (ldv, amp, amp_status) = open_serial(&opts, &layout, &shared)?;
-        let (blocks_tx, blocks) = mpsc::channel(256);
+        let (blocks_tx, blocks) = mpsc::channel(BLOCK_QUEUE);
         let mut b = HwBackend {
             layout,
             opts,
@@ -169,7 +190,7 @@ impl HwBackend {
         };
         b.spawn_tasks();
         // The device learns where we are from our first frame; wait for its heartbeat.
-        let wait = b.opts.heartbeat_timeout.max(Duration::from_millis(1000));
+        let wait = b.opts.heartbeat_timeout.max(FIRST_HEARTBEAT_WAIT);
         let deadline = Instant::now() + wait;
         loop {
             b.heartbeat_now().await?;
@@ -177,17 +198,15 @@ impl HwBackend {
                 break;
             }
             if let Some(g) = lock(&b.link.shared).gone.clone() {
-                return Err(RigError::Link(g));
+                return Err(RigError::link(g));
             }
             if Instant::now() >= deadline {
-                return Err(RigError::Link(format!(
-                    "CAN link {}: no DEVICE_HEARTBEAT within {:.1} s: is the rig (or \
-                     `rigtwin firmware-sim`) running and listening there?",
-                    b.link.transport.name(),
-                    wait.as_secs_f64()
-                )));
+                return Err(RigError::link(LinkError::NoDevice {
+                    link: b.link.transport.name(),
+                    wait_s: wait.as_secs_f64(),
+                }));
             }
-            tokio::time::sleep(Duration::from_millis(50)).await;
+            tokio::time::sleep(CONNECT_RETRY).await;
         }
         Ok(b)
     }
@@ -237,8 +256,8 @@ impl HwBackend {
 
     async fn serial(&self, client: &SerialClient, req: &str) -> Result<Vec<String>, RigError> {
         client.request(req).await.map_err(|e| match e {
-            SerialError::Gone { .. } => RigError::Link(e.to_string()),
-            _ => RigError::Config(e.to_string()),
+            SerialError::Gone { .. } => RigError::link(LinkError::Serial(e)),
+            _ => RigError::config(ConfigError::Serial(e)),
         })
     }
 
@@ -249,9 +268,11 @@ impl HwBackend {
             t.abort();
         }
         match self.log.take() {
-            Some(l) => l
-                .close()
-                .map_err(|e| RigError::Link(format!("--can-log: {e}"))),
+            Some(l) => l.close().map_err(|e| {
+                RigError::link(LinkError::CanLog {
+                    error: e.to_string(),
+                })
+            }),
             None => Ok(()),
         }
     }
@@ -264,7 +285,7 @@ impl RigBackend for HwBackend {
 
     async fn start(&mut self) -> Result<(), RigError> {
         if self.started {
-            return Err(RigError::State("already started".into()));
+            return Err(RigError::State(StateError::AlreadyStarted));
         }
         // Vibrometer: the range that makes its output match the channel map's full scale.
         let vib = &self.layout.channels[self.layout.indices_of(ChannelKind::Vibrometer)[0]];
@@ -278,30 +299,31 @@ impl RigBackend for HwBackend {
         )
         .await?;
         self.serial(&self.ldv, "CLEAR").await?;
-        let st =
-            VibrometerStatus::parse(&self.serial(&self.ldv, "STATUS").await?).map_err(config)?;
+        let st = VibrometerStatus::parse(&self.serial(&self.ldv, "STATUS").await?)
+            .map_err(|e| RigError::config(ConfigError::Status(e)))?;
         if st.range_mm_s != range_mm_s {
-            return Err(config(format!(
-                "vibrometer ({}): RANGE {} mm/s after setting {range_mm_s} mm/s (the channel \
-                 map's full scale of {})",
-                self.opts.ldv, st.range_mm_s, vib.name
-            )));
+            return Err(RigError::config(ConfigError::VibrometerRange {
+                port: self.opts.ldv.clone(),
+                range_mm_s: st.range_mm_s,
+                set_mm_s: range_mm_s,
+                channel: vib.name.clone(),
+            }));
         }
         // Amplifier: its gain must be the rig description's.
         let gain = self.serial(&self.amp, "GAIN").await?;
         let gain: f64 = gain.first().and_then(|g| g.parse().ok()).ok_or_else(|| {
-            config(format!(
-                "power amplifier ({}): GAIN answer {gain:?}",
-                self.opts.amp
-            ))
+            RigError::config(ConfigError::GainAnswer {
+                port: self.opts.amp.clone(),
+                answer: gain.clone(),
+            })
         })?;
         let want = self.opts.amplifier_gain;
         if (gain - want).abs() > 1e-9 * want.abs().max(1.0) {
-            return Err(config(format!(
-                "power amplifier ({}): gain {gain} V/V, but the rig description says \
-                 shaker.amplifier_gain = {want}: set the amplifier or the description",
-                self.opts.amp
-            )));
+            return Err(RigError::config(ConfigError::Gain {
+                port: self.opts.amp.clone(),
+                gain,
+                want,
+            }));
         }
         self.serial(&self.amp, "CLEAR").await?;
         self.serial(&self.amp, "ENABLE 1").await?;
@@ -325,9 +347,9 @@ impl RigBackend for HwBackend {
 
     async fn set_drive(&mut self, command: DriveCommand) -> Result<(), RigError> {
         let sp =
-            DriveSetpoint::from_command(self.setpoint_seq, &command).map_err(RigError::Command)?;
+            DriveSetpoint::from_command(self.setpoint_seq, &command).map_err(RigError::command)?;
         if !(command.ramp_s.is_finite() && command.amplitude_v.is_finite()) {
-            return Err(RigError::Command(format!("{command:?}")));
+            return Err(RigError::command(CommandError::Invalid { command }));
         }
         self.setpoint_seq = self.setpoint_seq.wrapping_add(1);
         self.link.send(&Message::DriveSetpoint(sp)).await
@@ -335,10 +357,10 @@ impl RigBackend for HwBackend {
 
     async fn next_block(&mut self) -> Result<Option<DaqBlock>, RigError> {
         if !self.started {
-            return Err(RigError::State("next_block before start".into()));
+            return Err(RigError::State(StateError::NotStarted));
         }
         if let Some(g) = lock(&self.link.shared).gone.clone() {
-            return Err(RigError::Link(g));
+            return Err(RigError::link(g));
         }
         let b = match self.blocks.recv().await {
             Some(Ok(b)) => b,
@@ -395,14 +417,14 @@ impl RigBackend for HwBackend {
         self.status.drive.amplitude_v = 0.0;
         self.status.drive.target_amplitude_v = 0.0;
         // Let the last frames in flight reach the log.
-        tokio::time::sleep(Duration::from_millis(50)).await;
+        tokio::time::sleep(STOP_DRAIN).await;
         self.blocks_tx.take();
         let log = self.close_log();
         if let Some(st) = *self.amp_status.lock().unwrap_or_else(|e| e.into_inner()) {
             tracing::debug!("last amplifier status: {st:?}");
         }
         stop?;
-        amp.map_err(|e| RigError::Link(e.to_string()))?;
+        amp.map_err(|e| RigError::link(LinkError::Serial(e)))?;
         log
     }
 }

@@ -14,13 +14,26 @@ use crate::rig::{ChannelKind, DaqBlock, DaqLayout, DriveState, LinkCounters, Rig
 
 use crate::rig::hw::can::block::{feed, Reassembler};
 use crate::rig::hw::can::candump::Direction;
-use crate::rig::hw::can::messages::{self, FaultCode, HostHeartbeat, Message, TimeSyncRequest};
+use crate::rig::hw::can::messages::{
+    self, FaultCode, HostHeartbeat, Message, TimeSyncRequest, TIME_SYNC_PERIOD,
+};
 use crate::rig::hw::can::transport::{AnyTransport, CanTransport, TransportError};
 use crate::rig::hw::can::CanFrame;
 use crate::rig::hw::serial::port::{self, SerialClient, SerialError};
 use crate::rig::hw::serial::protocol::{AmplifierStatus, VibrometerStatus};
 
-use super::{config, HwOptions};
+use super::HwOptions;
+use crate::rig::hw::{ConfigError, LinkError};
+
+/// Baud rate of the vibrometer controller's port (8N1).
+const LDV_BAUD: u32 = 115_200;
+/// Baud rate of the power amplifier's port (8N1).
+const AMP_BAUD: u32 = 9600;
+/// DRIVE_STATUS frames kept to find the drive of a delivered block.
+const DRIVE_HISTORY: usize = 16;
+/// A device heartbeat later than this many heartbeat periods counts as a miss (half a
+/// period of grace).
+const HEARTBEAT_MISS_PERIODS: f64 = 1.5;
 
 pub(super) type LogTx = std::sync::mpsc::Sender<(f64, Direction, CanFrame)>;
 
@@ -32,7 +45,7 @@ pub(super) struct Shared {
     pub(super) faults: Vec<RigFault>,
     pub(super) last_device_heartbeat: Instant,
     pub(super) device_heartbeats: u64,
-    pub(super) gone: Option<String>,
+    pub(super) gone: Option<LinkError>,
 }
 
 impl Shared {
@@ -71,12 +84,15 @@ impl Link {
                 Ok(())
             }
             Err(e) => {
-                let msg = format!("CAN link {}: {e}", self.transport.name());
-                s.counters.last_error = Some(msg.clone());
+                let err = LinkError::Can {
+                    link: self.transport.name(),
+                    error: e.to_string(),
+                };
+                s.counters.last_error = Some(err.to_string());
                 if matches!(e, TransportError::Gone(_)) {
-                    s.gone.get_or_insert_with(|| msg.clone());
+                    s.gone.get_or_insert_with(|| err.clone());
                 }
-                Err(RigError::Link(msg))
+                Err(RigError::link(err))
             }
         }
     }
@@ -98,10 +114,20 @@ pub(super) fn open_serial(
     layout: &DaqLayout,
     shared: &Arc<Mutex<Shared>>,
 ) -> Result<SerialLinks, RigError> {
-    let ldv_port = port::open(&opts.ldv, 115_200)
-        .map_err(|e| config(format!("--ldv (vibrometer controller): {e}")))?;
-    let amp_port =
-        port::open(&opts.amp, 9600).map_err(|e| config(format!("--amp (power amplifier): {e}")))?;
+    let ldv_port = port::open(&opts.ldv, LDV_BAUD).map_err(|error| {
+        RigError::config(ConfigError::SerialPort {
+            flag: "--ldv",
+            device: "vibrometer controller",
+            error,
+        })
+    })?;
+    let amp_port = port::open(&opts.amp, AMP_BAUD).map_err(|error| {
+        RigError::config(ConfigError::SerialPort {
+            flag: "--amp",
+            device: "power amplifier",
+            error,
+        })
+    })?;
     let vib_channel = layout.channels[layout.indices_of(ChannelKind::Vibrometer)[0]]
         .name
         .clone();
@@ -216,9 +242,12 @@ pub(super) async fn receiver(
                 continue;
             }
             Err(e) => {
-                let msg = format!("CAN link {}: {e}", link.transport.name());
-                lock(&link.shared).gone.get_or_insert_with(|| msg.clone());
-                let _ = blocks.send(Err(RigError::Link(msg))).await;
+                let err = LinkError::Can {
+                    link: link.transport.name(),
+                    error: e.to_string(),
+                };
+                lock(&link.shared).gone.get_or_insert_with(|| err.clone());
+                let _ = blocks.send(Err(RigError::link(err))).await;
                 return;
             }
         };
@@ -248,7 +277,7 @@ pub(super) async fn receiver(
                     Message::BlockHeader(_) | Message::Samples(_) => {
                         if let Err(e) = feed(&mut reasm, &m) {
                             s.counters.last_error = Some(e.to_string());
-                            fatal = Some(RigError::Config(e.to_string()));
+                            fatal = Some(RigError::config(ConfigError::Header(e)));
                         }
                         while let Some(b) = reasm.pop() {
                             ready.push(b);
@@ -270,7 +299,7 @@ pub(super) async fn receiver(
                     }
                     Message::DriveStatus(d) => {
                         s.drives.push_back((d.block_seq, d.drive()));
-                        if s.drives.len() > 16 {
+                        if s.drives.len() > DRIVE_HISTORY {
                             s.drives.pop_front();
                         }
                     }
@@ -315,7 +344,9 @@ pub(super) async fn heartbeats(
 ) {
     let mut tick = tokio::time::interval(period);
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
-    let per_second = (1.0 / period.as_secs_f64()).round().max(1.0) as u64;
+    let per_second = (TIME_SYNC_PERIOD.as_secs_f64() / period.as_secs_f64())
+        .round()
+        .max(1.0) as u64;
     let mut n: u64 = 0;
     let mut last_counted = None;
     loop {
@@ -343,31 +374,30 @@ pub(super) async fn heartbeats(
             let since = s.last_device_heartbeat.elapsed();
             // One miss per heartbeat period that passed without one (after a grace of half
             // a period).
-            if since > period.mul_f64(1.5) && last_counted != Some(s.device_heartbeats) {
+            let late = since > period.mul_f64(HEARTBEAT_MISS_PERIODS);
+            if late && last_counted != Some(s.device_heartbeats) {
                 s.counters.heartbeat_misses += 1;
             }
-            if since > period.mul_f64(1.5) {
+            if late {
                 last_counted = None;
             } else {
                 last_counted = Some(s.device_heartbeats);
             }
             if since > timeout && s.gone.is_none() {
-                let msg = format!(
-                    "CAN link {}: no DEVICE_HEARTBEAT for {:.2} s (timeout {:.2} s): the rig DAQ \
-                     is gone",
-                    link.transport.name(),
-                    since.as_secs_f64(),
-                    timeout.as_secs_f64()
-                );
-                s.gone = Some(msg.clone());
-                s.counters.last_error = Some(msg.clone());
-                Some(msg)
+                let err = LinkError::HeartbeatLost {
+                    link: link.transport.name(),
+                    since_s: since.as_secs_f64(),
+                    timeout_s: timeout.as_secs_f64(),
+                };
+                s.gone = Some(err.clone());
+                s.counters.last_error = Some(err.to_string());
+                Some(err)
             } else {
                 None
             }
         };
-        if let Some(msg) = lost {
-            let _ = blocks.send(Err(RigError::Link(msg))).await;
+        if let Some(err) = lost {
+            let _ = blocks.send(Err(RigError::link(err))).await;
         }
     }
 }

@@ -29,28 +29,93 @@ pub struct BlockFormat {
     pub sample_rate: u32,
 }
 
+/// A channel map that cannot travel on the bus.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum BlockFormatError {
+    /// No channel, or more than the 16 bits of ChannelMask.
+    #[error("{channels} DAQ channels: the CAN block header's ChannelMask holds 1..=16")]
+    Channels {
+        /// Channels in the layout.
+        channels: usize,
+    },
+    /// No sample, or more than BlockSize holds.
+    #[error("block size {block_size}: the CAN block header's BlockSize holds 1..=65535")]
+    BlockSize {
+        /// Samples per channel per block.
+        block_size: usize,
+    },
+    /// A sample rate the SampleRate field cannot carry.
+    #[error("sample rate {sample_rate} Hz does not fit the header's SampleRate field")]
+    SampleRate {
+        /// The layout's sample rate, Hz.
+        sample_rate: f64,
+    },
+}
+
+/// A block that cannot be split into frames of its format.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum SplitError {
+    /// The block's shape is not the format's.
+    #[error(
+        "block {seq}: {counts} counts of {len} samples, the format wants {channels} channels x \
+         {block_size}"
+    )]
+    Shape {
+        /// Block.
+        seq: u64,
+        /// Counts in the block.
+        counts: usize,
+        /// Samples per channel in the block.
+        len: usize,
+        /// Channels of the format.
+        channels: usize,
+        /// Samples per channel of the format.
+        block_size: usize,
+    },
+    /// A sequence number beyond the header's 32 bits.
+    #[error("block {seq} beyond u32")]
+    Seq {
+        /// Block.
+        seq: u64,
+    },
+    /// A count beyond the 24 bits of a sample.
+    #[error("block {seq}, channel {channel}, sample {sample}: count {count} does not fit 24 bits")]
+    Count {
+        /// Block.
+        seq: u64,
+        /// Channel index.
+        channel: usize,
+        /// Sample index.
+        sample: usize,
+        /// The count.
+        count: i32,
+    },
+    /// More sample frames than their 8-bit index holds.
+    #[error("block {seq}: more than 256 sample frames")]
+    Frames {
+        /// Block.
+        seq: u64,
+    },
+}
+
 impl BlockFormat {
     /// The format of a layout; `Err` when it cannot travel on the bus (more than 16
     /// channels, blocks beyond 65535 samples, a sample rate beyond the field).
-    pub fn of(layout: &DaqLayout) -> Result<BlockFormat, String> {
+    pub fn of(layout: &DaqLayout) -> Result<BlockFormat, BlockFormatError> {
         let n = layout.channels.len();
         if n == 0 || n > 16 {
-            return Err(format!(
-                "{n} DAQ channels: the CAN block header's ChannelMask holds 1..=16"
-            ));
+            return Err(BlockFormatError::Channels { channels: n });
         }
         if layout.block_size == 0 || layout.block_size > usize::from(u16::MAX) {
-            return Err(format!(
-                "block size {}: the CAN block header's BlockSize holds 1..=65535",
-                layout.block_size
-            ));
+            return Err(BlockFormatError::BlockSize {
+                block_size: layout.block_size,
+            });
         }
         let rate = (layout.sample_rate / SAMPLE_RATE_RES).round();
         if !(rate >= 1.0 && rate <= f64::from(u32::MAX)) {
-            return Err(format!(
-                "sample rate {} Hz does not fit the header's SampleRate field",
-                layout.sample_rate
-            ));
+            return Err(BlockFormatError::SampleRate {
+                sample_rate: layout.sample_rate,
+            });
         }
         Ok(BlockFormat {
             channel_mask: ((1u32 << n) - 1) as u16,
@@ -70,20 +135,19 @@ pub fn split_block(
     block: &DaqBlock,
     format: &BlockFormat,
     timestamp_us: u64,
-) -> Result<Vec<Message>, String> {
+) -> Result<Vec<Message>, SplitError> {
     let n_ch = format.channels();
     let len = usize::from(format.block_size);
     if block.len != len || block.counts.len() != n_ch * len {
-        return Err(format!(
-            "block {}: {} counts of {} samples, the format wants {} channels x {}",
-            block.seq,
-            block.counts.len(),
-            block.len,
-            n_ch,
-            len
-        ));
+        return Err(SplitError::Shape {
+            seq: block.seq,
+            counts: block.counts.len(),
+            len: block.len,
+            channels: n_ch,
+            block_size: len,
+        });
     }
-    let seq = u32::try_from(block.seq).map_err(|_| format!("block {} beyond u32", block.seq))?;
+    let seq = u32::try_from(block.seq).map_err(|_| SplitError::Seq { seq: block.seq })?;
     let total = n_ch * len;
     let mut stream = Vec::with_capacity(total);
     let mut crc = Crc32::new();
@@ -91,10 +155,12 @@ pub fn split_block(
         for k in 0..n_ch {
             let c = block.counts[k * len + i];
             if !(INT24_MIN..=INT24_MAX).contains(&c) {
-                return Err(format!(
-                    "block {}, channel {k}, sample {i}: count {c} does not fit 24 bits",
-                    block.seq
-                ));
+                return Err(SplitError::Count {
+                    seq: block.seq,
+                    channel: k,
+                    sample: i,
+                    count: c,
+                });
             }
             crc.update(&c.to_le_bytes()[..3]);
             stream.push(c);
@@ -115,8 +181,7 @@ pub fn split_block(
         samples[..chunk.len()].copy_from_slice(chunk);
         out.push(Message::Samples(SampleFrame {
             block_seq: seq as u16,
-            index: u8::try_from(f)
-                .map_err(|_| format!("block {}: more than 256 sample frames", block.seq))?,
+            index: u8::try_from(f).map_err(|_| SplitError::Frames { seq: block.seq })?,
             count: chunk.len() as u8,
             samples,
         }));

@@ -39,6 +39,69 @@ pub enum TransportError {
     Open(String),
 }
 
+/// A datagram that is not a tunnel frame; the message names the byte and what is wrong.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum TunnelError {
+    /// Shorter than the header.
+    #[error("tunnel datagram of {len} bytes: shorter than the {TUNNEL_HEADER}-byte header")]
+    Short {
+        /// Datagram length, bytes.
+        len: usize,
+    },
+    /// Byte 0 is not [`TUNNEL_VERSION`].
+    #[error("tunnel datagram byte 0 (version) = {version}: expected {TUNNEL_VERSION}")]
+    Version {
+        /// The version byte.
+        version: u8,
+    },
+    /// Flag bits beyond the four defined.
+    #[error("tunnel datagram byte 1 (flags) = {flags:#04x}: unknown bits")]
+    Flags {
+        /// The flags byte.
+        flags: u8,
+    },
+    /// The length byte disagrees with the datagram.
+    #[error("tunnel datagram byte 2 (length) = {len}, but {data} data bytes follow the header")]
+    Length {
+        /// The length byte.
+        len: usize,
+        /// Data bytes after the header.
+        data: usize,
+    },
+    /// Identifier, length and flags do not make a valid frame.
+    #[error(
+        "tunnel datagram: id {id:#x}{} with {len} bytes is not a valid {} frame",
+        extended_note(.extended),
+        frame_kind(.fd)
+    )]
+    Frame {
+        /// Identifier.
+        id: u32,
+        /// 29-bit identifier.
+        extended: bool,
+        /// CAN FD.
+        fd: bool,
+        /// Data bytes.
+        len: usize,
+    },
+}
+
+fn extended_note(extended: &bool) -> &'static str {
+    if *extended {
+        " (extended)"
+    } else {
+        ""
+    }
+}
+
+fn frame_kind(fd: &bool) -> &'static str {
+    if *fd {
+        "CAN FD"
+    } else {
+        "classic CAN"
+    }
+}
+
 /// A bidirectional CAN link. Methods take `&self` so one transport serves a reader task and
 /// writers at the same time.
 pub trait CanTransport: Send + Sync {
@@ -67,31 +130,23 @@ pub fn tunnel_encode(frame: &CanFrame, out: &mut Vec<u8>) {
 }
 
 /// Decodes a tunnel datagram; `Err` names the byte and what is wrong.
-pub fn tunnel_decode(d: &[u8]) -> Result<CanFrame, String> {
+pub fn tunnel_decode(d: &[u8]) -> Result<CanFrame, TunnelError> {
     if d.len() < TUNNEL_HEADER {
-        return Err(format!(
-            "tunnel datagram of {} bytes: shorter than the {TUNNEL_HEADER}-byte header",
-            d.len()
-        ));
+        return Err(TunnelError::Short { len: d.len() });
     }
     if d[0] != TUNNEL_VERSION {
-        return Err(format!(
-            "tunnel datagram byte 0 (version) = {}: expected {TUNNEL_VERSION}",
-            d[0]
-        ));
+        return Err(TunnelError::Version { version: d[0] });
     }
     let flags = d[1];
     if flags & !0x0F != 0 {
-        return Err(format!(
-            "tunnel datagram byte 1 (flags) = {flags:#04x}: unknown bits"
-        ));
+        return Err(TunnelError::Flags { flags });
     }
     let len = usize::from(d[2]);
     if d.len() != TUNNEL_HEADER + len {
-        return Err(format!(
-            "tunnel datagram byte 2 (length) = {len}, but {} data bytes follow the header",
-            d.len() - TUNNEL_HEADER
-        ));
+        return Err(TunnelError::Length {
+            len,
+            data: d.len() - TUNNEL_HEADER,
+        });
     }
     let id = u32::from_le_bytes([d[4], d[5], d[6], d[7]]);
     let (fd, brs, esi, ext) = (
@@ -100,12 +155,11 @@ pub fn tunnel_decode(d: &[u8]) -> Result<CanFrame, String> {
         flags & 4 != 0,
         flags & 8 != 0,
     );
-    CanFrame::new(id, ext, fd, brs, esi, &d[TUNNEL_HEADER..]).ok_or_else(|| {
-        format!(
-            "tunnel datagram: id {id:#x}{} with {len} bytes is not a valid {} frame",
-            if ext { " (extended)" } else { "" },
-            if fd { "CAN FD" } else { "classic CAN" }
-        )
+    CanFrame::new(id, ext, fd, brs, esi, &d[TUNNEL_HEADER..]).ok_or(TunnelError::Frame {
+        id,
+        extended: ext,
+        fd,
+        len,
     })
 }
 
@@ -278,7 +332,7 @@ impl SocketCanTransport {
     /// Opens `iface`. Without SocketCAN in the kernel, or without the interface, the error
     /// says which and what to do.
     pub fn open(iface: &str) -> Result<SocketCanTransport, TransportError> {
-        probe_socketcan().map_err(TransportError::Open)?;
+        probe_socketcan().map_err(|e| TransportError::Open(e.to_string()))?;
         let socket = socketcan::tokio::CanFdSocket::open(iface).map_err(|e| {
             TransportError::Open(if e.raw_os_error() == Some(libc::ENODEV) {
                 format!(
@@ -297,20 +351,29 @@ impl SocketCanTransport {
     }
 }
 
+/// The kernel has no SocketCAN: the message names the missing support and the alternative.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error(
+    "SocketCAN is not available in this kernel: socket(AF_CAN, SOCK_RAW, CAN_RAW) failed: \
+     {error}. The kernel needs CAN support (CONFIG_CAN, CONFIG_CAN_RAW: modules `can` and \
+     `can_raw`, `modprobe can_raw`) and a CAN interface; without them use the UDP tunnel, e.g. \
+     --can udp:127.0.0.1:47000 (rigtwin firmware-sim)"
+)]
+pub struct NoSocketCan {
+    /// What socket(2) said.
+    pub error: String,
+}
+
 /// Checks that the kernel has SocketCAN: a raw CAN socket (address family AF_CAN, protocol
 /// CAN_RAW) can be created. The error names the missing kernel support.
 #[cfg(target_os = "linux")]
-pub fn probe_socketcan() -> Result<(), String> {
+pub fn probe_socketcan() -> Result<(), NoSocketCan> {
     // SAFETY: plain socket(2) call; the descriptor is closed right away.
     let fd = unsafe { libc::socket(libc::AF_CAN, libc::SOCK_RAW, libc::CAN_RAW) };
     if fd < 0 {
-        let e = std::io::Error::last_os_error();
-        return Err(format!(
-            "SocketCAN is not available in this kernel: socket(AF_CAN, SOCK_RAW, CAN_RAW) \
-             failed: {e}. The kernel needs CAN support (CONFIG_CAN, CONFIG_CAN_RAW: modules \
-             `can` and `can_raw`, `modprobe can_raw`) and a CAN interface; without them use \
-             the UDP tunnel, e.g. --can udp:127.0.0.1:47000 (rigtwin firmware-sim)"
-        ));
+        return Err(NoSocketCan {
+            error: std::io::Error::last_os_error().to_string(),
+        });
     }
     // SAFETY: fd is a descriptor we own.
     unsafe { libc::close(fd) };
@@ -398,16 +461,54 @@ pub enum CanAddress {
     },
 }
 
+/// A `--can` argument that is not a link.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum CanAddressError {
+    /// A UDP address that does not parse.
+    #[error(
+        "--can {arg}: {which} address {address:?}: {error} (expected HOST:PORT, IPv6 as \
+         [ADDR]:PORT)"
+    )]
+    Address {
+        /// The whole argument.
+        arg: String,
+        /// "local" or "remote".
+        which: &'static str,
+        /// The address.
+        address: String,
+        /// Why it does not parse.
+        error: std::net::AddrParseError,
+    },
+    /// Local and remote addresses of different families (IPv4 and IPv6).
+    #[error("--can {arg}: local and remote addresses of different families")]
+    Families {
+        /// The whole argument.
+        arg: String,
+    },
+    /// Neither `udp:...` nor a SocketCAN interface name.
+    #[error(
+        "--can {arg}: expected a SocketCAN interface name (e.g. can0, at most 15 characters) \
+         or udp:[LOCAL@]HOST:PORT"
+    )]
+    Interface {
+        /// The whole argument.
+        arg: String,
+    },
+}
+
 impl std::str::FromStr for CanAddress {
-    type Err = String;
+    type Err = CanAddressError;
 
     /// `IFACE` (SocketCAN), or `udp:REMOTE` / `udp:LOCAL@REMOTE` with `HOST:PORT` addresses
     /// (IPv6 in brackets; without LOCAL the wildcard of REMOTE's family, port 0).
-    fn from_str(s: &str) -> Result<CanAddress, String> {
+    fn from_str(s: &str) -> Result<CanAddress, CanAddressError> {
         if let Some(rest) = s.strip_prefix("udp:") {
-            let parse = |a: &str, what: &str| -> Result<SocketAddr, String> {
-                a.parse().map_err(|e| {
-                    format!("--can {s}: {what} address {a:?}: {e} (expected HOST:PORT, IPv6 as [ADDR]:PORT)")
+            let parse = |a: &str, which: &'static str| -> Result<SocketAddr, CanAddressError> {
+                a.parse().map_err(|error| CanAddressError::Address {
+                    arg: s.to_string(),
+                    which,
+                    address: a.to_string(),
+                    error,
                 })
             };
             let (local, remote) = match rest.split_once('@') {
@@ -422,9 +523,7 @@ impl std::str::FromStr for CanAddress {
                 }
             });
             if local.is_ipv4() != remote.is_ipv4() {
-                return Err(format!(
-                    "--can {s}: local and remote addresses of different families"
-                ));
+                return Err(CanAddressError::Families { arg: s.to_string() });
             }
             return Ok(CanAddress::Udp { local, remote });
         }
@@ -435,10 +534,7 @@ impl std::str::FromStr for CanAddress {
         if ok {
             Ok(CanAddress::SocketCan(s.to_string()))
         } else {
-            Err(format!(
-                "--can {s}: expected a SocketCAN interface name (e.g. can0, at most 15 \
-                 characters) or udp:[LOCAL@]HOST:PORT"
-            ))
+            Err(CanAddressError::Interface { arg: s.to_string() })
         }
     }
 }

@@ -15,12 +15,32 @@ use super::protocol::{parse_reply, Reply};
 /// Unanswered requests in a row after which the link counts as gone.
 pub const MAX_SILENT: u32 = 3;
 
-/// Opens a serial port (8N1, no flow control) with a short read timeout.
-pub fn open(path: &str, baud: u32) -> Result<serialport::TTYPort, String> {
+/// Read timeout of an open port: how long a worker's read waits before it checks its
+/// deadlines and requests again.
+pub const READ_TIMEOUT: Duration = Duration::from_millis(20);
+
+/// Pause after a read that returned nothing before reading again.
+const IDLE_POLL: Duration = Duration::from_millis(5);
+
+/// A serial port that could not be opened.
+#[derive(Clone, Debug, thiserror::Error)]
+#[error("serial port {path}: {error}")]
+pub struct OpenError {
+    /// The port's path.
+    pub path: String,
+    /// What `serialport` said.
+    pub error: serialport::Error,
+}
+
+/// Opens a serial port (8N1, no flow control) with a short read timeout ([`READ_TIMEOUT`]).
+pub fn open(path: &str, baud: u32) -> Result<serialport::TTYPort, OpenError> {
     serialport::new(path, baud)
-        .timeout(Duration::from_millis(20))
+        .timeout(READ_TIMEOUT)
         .open_native()
-        .map_err(|e| format!("serial port {path}: {e}"))
+        .map_err(|error| OpenError {
+            path: path.to_string(),
+            error,
+        })
 }
 
 /// Why a request failed.
@@ -160,7 +180,7 @@ impl Worker {
         while Instant::now() < deadline {
             let n = match self.port.read(&mut buf) {
                 Ok(0) => {
-                    std::thread::sleep(Duration::from_millis(5));
+                    std::thread::sleep(IDLE_POLL);
                     continue;
                 }
                 Ok(n) => n,

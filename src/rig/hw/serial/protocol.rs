@@ -11,6 +11,98 @@
 //! ILK=1: interlock open, output off; LIM: output limit, V), `CLEAR`.
 //! Error codes: 1 unknown command, 2 bad argument, 3 refused (interlock open, overload latched).
 
+/// A request, an answer or a STATUS answer's values that do not follow the protocol. The
+/// messages quote what arrived.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum ProtocolError {
+    /// The body does not start with a tag 0..=999.
+    #[error("{what} {body:?}: expected a tag 0..=999 first")]
+    Tag {
+        /// "request" or "answer".
+        what: &'static str,
+        /// The body.
+        body: String,
+    },
+    /// A request without a verb.
+    #[error("request {body:?}: no command")]
+    NoCommand {
+        /// The body.
+        body: String,
+    },
+    /// A request with more than one argument.
+    #[error("request {body:?}: more than one argument")]
+    ExtraArgument {
+        /// The body.
+        body: String,
+    },
+    /// `OK` without the verb answered.
+    #[error("answer {body:?}: OK without a command")]
+    OkWithoutCommand {
+        /// The body.
+        body: String,
+    },
+    /// `ERR` without a numeric code.
+    #[error("answer {body:?}: ERR without a numeric code")]
+    ErrWithoutCode {
+        /// The body.
+        body: String,
+    },
+    /// Neither `OK` nor `ERR` after the tag.
+    #[error("answer {body:?}: expected OK or ERR after the tag")]
+    NoOutcome {
+        /// The body.
+        body: String,
+    },
+    /// A STATUS answer without one of its keys.
+    #[error("{device} STATUS {values:?}: no {key}=")]
+    MissingKey {
+        /// "vibrometer" or "amplifier".
+        device: &'static str,
+        /// The answer's values.
+        values: Vec<String>,
+        /// The key missing.
+        key: &'static str,
+    },
+    /// A STATUS flag that is not 0 or 1.
+    #[error("{device} STATUS {key}={value}: expected 0 or 1")]
+    NotAFlag {
+        /// "vibrometer" or "amplifier".
+        device: &'static str,
+        /// The key.
+        key: &'static str,
+        /// Its value.
+        value: String,
+    },
+    /// A STATUS value that is not a number.
+    #[error("{device} STATUS {key}={value}: not a number")]
+    NotANumber {
+        /// "vibrometer" or "amplifier".
+        device: &'static str,
+        /// The key.
+        key: &'static str,
+        /// Its value.
+        value: String,
+    },
+    /// The vibrometer's signal level beyond 100 %.
+    #[error("{device} STATUS LEVEL={level}: expected 0..=100")]
+    Level {
+        /// "vibrometer".
+        device: &'static str,
+        /// The level, %.
+        level: u8,
+    },
+    /// The amplifier's gain or limit is not finite.
+    #[error("{device} STATUS GAIN={gain} LIM={limit_v}: not finite")]
+    NotFinite {
+        /// "amplifier".
+        device: &'static str,
+        /// Gain, V/V.
+        gain: f64,
+        /// Output limit, V.
+        limit_v: f64,
+    },
+}
+
 /// A parsed request: tag, verb, optional argument.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Request {
@@ -23,21 +115,25 @@ pub struct Request {
 }
 
 /// Parses a request body.
-pub fn parse_request(body: &str) -> Result<Request, String> {
+pub fn parse_request(body: &str) -> Result<Request, ProtocolError> {
+    let body_ = || body.to_string();
     let mut it = body.split(' ');
     let tag = it
         .next()
         .and_then(|t| t.parse::<u16>().ok())
         .filter(|t| *t <= 999)
-        .ok_or_else(|| format!("request {body:?}: expected a tag 0..=999 first"))?;
+        .ok_or_else(|| ProtocolError::Tag {
+            what: "request",
+            body: body_(),
+        })?;
     let verb = it
         .next()
         .filter(|v| !v.is_empty())
-        .ok_or_else(|| format!("request {body:?}: no command"))?
+        .ok_or_else(|| ProtocolError::NoCommand { body: body_() })?
         .to_string();
     let arg = it.next().map(str::to_string);
     if it.next().is_some() {
-        return Err(format!("request {body:?}: more than one argument"));
+        return Err(ProtocolError::ExtraArgument { body: body_() });
     }
     Ok(Request { tag, verb, arg })
 }
@@ -62,18 +158,22 @@ pub enum Reply {
 }
 
 /// Parses an answer body into (tag, reply).
-pub fn parse_reply(body: &str) -> Result<(u16, Reply), String> {
+pub fn parse_reply(body: &str) -> Result<(u16, Reply), ProtocolError> {
+    let body_ = || body.to_string();
     let mut it = body.split(' ');
     let tag = it
         .next()
         .and_then(|t| t.parse::<u16>().ok())
         .filter(|t| *t <= 999)
-        .ok_or_else(|| format!("answer {body:?}: expected a tag 0..=999 first"))?;
+        .ok_or_else(|| ProtocolError::Tag {
+            what: "answer",
+            body: body_(),
+        })?;
     match it.next() {
         Some("OK") => {
             let verb = it
                 .next()
-                .ok_or_else(|| format!("answer {body:?}: OK without a command"))?
+                .ok_or_else(|| ProtocolError::OkWithoutCommand { body: body_() })?
                 .to_string();
             Ok((
                 tag,
@@ -87,7 +187,7 @@ pub fn parse_reply(body: &str) -> Result<(u16, Reply), String> {
             let code = it
                 .next()
                 .and_then(|c| c.parse().ok())
-                .ok_or_else(|| format!("answer {body:?}: ERR without a numeric code"))?;
+                .ok_or_else(|| ProtocolError::ErrWithoutCode { body: body_() })?;
             Ok((
                 tag,
                 Reply::Err {
@@ -96,7 +196,7 @@ pub fn parse_reply(body: &str) -> Result<(u16, Reply), String> {
                 },
             ))
         }
-        _ => Err(format!("answer {body:?}: expected OK or ERR after the tag")),
+        _ => Err(ProtocolError::NoOutcome { body: body_() }),
     }
 }
 
@@ -109,29 +209,48 @@ pub fn format_reply(tag: u16, reply: &Reply) -> String {
     }
 }
 
-fn fields(values: &[String], keys: &[&str], what: &str) -> Result<Vec<String>, String> {
+fn fields(
+    values: &[String],
+    keys: &[&'static str],
+    device: &'static str,
+) -> Result<Vec<String>, ProtocolError> {
     keys.iter()
-        .map(|k| {
+        .map(|&key| {
             values
                 .iter()
-                .find_map(|v| v.strip_prefix(k).and_then(|r| r.strip_prefix('=')))
+                .find_map(|v| v.strip_prefix(key).and_then(|r| r.strip_prefix('=')))
                 .map(str::to_string)
-                .ok_or_else(|| format!("{what} STATUS {values:?}: no {k}="))
+                .ok_or_else(|| ProtocolError::MissingKey {
+                    device,
+                    values: values.to_vec(),
+                    key,
+                })
         })
         .collect()
 }
 
-fn flag(v: &str, key: &str, what: &str) -> Result<bool, String> {
+fn flag(v: &str, key: &'static str, device: &'static str) -> Result<bool, ProtocolError> {
     match v {
         "0" => Ok(false),
         "1" => Ok(true),
-        _ => Err(format!("{what} STATUS {key}={v}: expected 0 or 1")),
+        _ => Err(ProtocolError::NotAFlag {
+            device,
+            key,
+            value: v.to_string(),
+        }),
     }
 }
 
-fn number<T: std::str::FromStr>(v: &str, key: &str, what: &str) -> Result<T, String> {
-    v.parse()
-        .map_err(|_| format!("{what} STATUS {key}={v}: not a number"))
+fn number<T: std::str::FromStr>(
+    v: &str,
+    key: &'static str,
+    device: &'static str,
+) -> Result<T, ProtocolError> {
+    v.parse().map_err(|_| ProtocolError::NotANumber {
+        device,
+        key,
+        value: v.to_string(),
+    })
 }
 
 /// The vibrometer controller's status.
@@ -159,12 +278,12 @@ impl VibrometerStatus {
     }
 
     /// Parses the STATUS answer's values.
-    pub fn parse(values: &[String]) -> Result<VibrometerStatus, String> {
+    pub fn parse(values: &[String]) -> Result<VibrometerStatus, ProtocolError> {
         const W: &str = "vibrometer";
         let f = fields(values, &["RANGE", "FILTER", "LEVEL", "OVR"], W)?;
         let level: u8 = number(&f[2], "LEVEL", W)?;
         if level > 100 {
-            return Err(format!("{W} STATUS LEVEL={level}: expected 0..=100"));
+            return Err(ProtocolError::Level { device: W, level });
         }
         Ok(VibrometerStatus {
             range_mm_s: number(&f[0], "RANGE", W)?,
@@ -203,13 +322,17 @@ impl AmplifierStatus {
     }
 
     /// Parses the STATUS answer's values.
-    pub fn parse(values: &[String]) -> Result<AmplifierStatus, String> {
+    pub fn parse(values: &[String]) -> Result<AmplifierStatus, ProtocolError> {
         const W: &str = "amplifier";
         let f = fields(values, &["EN", "OVL", "ILK", "GAIN", "LIM"], W)?;
         let gain: f64 = number(&f[3], "GAIN", W)?;
         let limit_v: f64 = number(&f[4], "LIM", W)?;
         if !(gain.is_finite() && limit_v.is_finite()) {
-            return Err(format!("{W} STATUS GAIN={gain} LIM={limit_v}: not finite"));
+            return Err(ProtocolError::NotFinite {
+                device: W,
+                gain,
+                limit_v,
+            });
         }
         Ok(AmplifierStatus {
             enabled: flag(&f[0], "EN", W)?,

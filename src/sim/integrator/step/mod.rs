@@ -48,7 +48,6 @@
 // max(Omega) dt < 2 remains. The price is a small numerical dissipation of the closed-contact
 // oscillation, O(dt^2 k) per step, which also rules out energy growth at impacts.
 
-
 mod contact;
 mod free;
 mod update;

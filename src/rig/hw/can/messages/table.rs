@@ -96,6 +96,16 @@ pub const SAMPLES_PER_FRAME: usize = 20;
 /// `HOST_HEARTBEAT.ConsumedSeq` before the first block.
 pub const NO_BLOCK: u32 = u32::MAX;
 
+/// HOST_HEARTBEAT and DEVICE_HEARTBEAT period (10/s, `firmware-interfaces/README.md`).
+pub const HEARTBEAT_PERIOD: std::time::Duration = std::time::Duration::from_millis(100);
+/// No heartbeat from the other end for this long: the link is lost (the host aborts, the
+/// device ramps the drive down by itself).
+pub const HEARTBEAT_TIMEOUT: std::time::Duration = std::time::Duration::from_millis(500);
+/// TIME_SYNC_REQUEST period (at start, then 1/s).
+pub const TIME_SYNC_PERIOD: std::time::Duration = std::time::Duration::from_secs(1);
+/// How long the host waits at least for the first DEVICE_HEARTBEAT after opening the link.
+pub const FIRST_HEARTBEAT_WAIT: std::time::Duration = std::time::Duration::from_secs(1);
+
 /// Identifiers.
 pub mod id {
     /// FAULT (device -> host).

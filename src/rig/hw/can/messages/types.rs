@@ -82,33 +82,61 @@ pub struct DriveSetpoint {
     pub ramp: u32,
 }
 
+/// A drive command that does not fit DRIVE_SETPOINT's signals.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum SetpointError {
+    /// Amplitude or ramp time beyond its 32-bit raw range (or not finite).
+    #[error(
+        "DRIVE_SETPOINT {signal} = {value}: outside 0..={} ({res} per count, 32 bits)",
+        f64::from(u32::MAX) * .res
+    )]
+    Range {
+        /// Signal ("Amplitude", "RampTime").
+        signal: &'static str,
+        /// The commanded value.
+        value: f64,
+        /// The signal's resolution per count.
+        res: f64,
+    },
+    /// A frequency that is not finite and > 0 (or beyond the field).
+    #[error("DRIVE_SETPOINT Frequency = {frequency_hz} Hz: expected > 0 and finite")]
+    Frequency {
+        /// The commanded frequency, Hz.
+        frequency_hz: f64,
+    },
+    /// A frequency that rounds to 0.
+    #[error("DRIVE_SETPOINT Frequency = {frequency_hz} Hz: expected > 0")]
+    ZeroFrequency {
+        /// The commanded frequency, Hz.
+        frequency_hz: f64,
+    },
+}
+
 impl DriveSetpoint {
     /// Quantises a drive command (nearest raw values); `Err` names the field out of range.
-    pub fn from_command(seq: u16, cmd: &crate::rig::DriveCommand) -> Result<DriveSetpoint, String> {
-        let q = |name: &str, v: f64, res: f64| -> Result<u32, String> {
-            let r = (v / res).round();
-            if v.is_finite() && r >= 0.0 && r <= f64::from(u32::MAX) {
+    pub fn from_command(
+        seq: u16,
+        cmd: &crate::rig::DriveCommand,
+    ) -> Result<DriveSetpoint, SetpointError> {
+        let q = |signal: &'static str, value: f64, res: f64| -> Result<u32, SetpointError> {
+            let r = (value / res).round();
+            if value.is_finite() && r >= 0.0 && r <= f64::from(u32::MAX) {
                 Ok(r as u32)
             } else {
-                Err(format!(
-                    "DRIVE_SETPOINT {name} = {v}: outside 0..={} ({res} per count, 32 bits)",
-                    f64::from(u32::MAX) * res
-                ))
+                Err(SetpointError::Range { signal, value, res })
             }
         };
         let f = (cmd.frequency_hz / FREQUENCY_RES).round();
         if !(cmd.frequency_hz.is_finite() && (1.0..1.8e19).contains(&f)) {
-            return Err(format!(
-                "DRIVE_SETPOINT Frequency = {} Hz: expected > 0 and finite",
-                cmd.frequency_hz
-            ));
+            return Err(SetpointError::Frequency {
+                frequency_hz: cmd.frequency_hz,
+            });
         }
         let frequency = f as u64;
         if frequency == 0 {
-            return Err(format!(
-                "DRIVE_SETPOINT Frequency = {} Hz: expected > 0",
-                cmd.frequency_hz
-            ));
+            return Err(SetpointError::ZeroFrequency {
+                frequency_hz: cmd.frequency_hz,
+            });
         }
         Ok(DriveSetpoint {
             seq,

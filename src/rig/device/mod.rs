@@ -1,4 +1,8 @@
-//! The other end of the hardware links, driven by the simulated rig: `rigtwin firmware-sim`.
+//! The rig's electronics emulated: the other end of the hardware links, driven by the
+//! simulated rig (`rigtwin firmware-sim`). It sits beside the backends: it uses the link
+//! codecs of [`crate::rig::hw`] and the simulated rig of [`crate::rig::sim`]; the hardware
+//! backend knows nothing of it.
+//!
 //! It speaks exactly the protocols of `firmware-interfaces/` — the CAN FD messages of
 //! `rig.dbc` over the UDP tunnel, the vibrometer and amplifier protocols over two
 //! pseudo-terminals — so `rigtwin run --backend hw` runs the whole hardware path here.
@@ -27,10 +31,60 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use crate::rig::hw::can::transport::UdpTunnel;
+use crate::rig::hw::can::block::SplitError;
+use crate::rig::hw::can::transport::{TransportError, UdpTunnel};
 use crate::rig::hw::serial::protocol::{AmplifierStatus, VibrometerStatus};
-use crate::rig::sim::SimRig;
+use crate::rig::sim::{SimRig, SimRigError};
 use crate::rig::ChannelKind;
+
+pub use crate::rig::hw::can::messages::{HEARTBEAT_PERIOD, HEARTBEAT_TIMEOUT};
+
+/// Blocks the device computes ahead of the host's `HOST_HEARTBEAT.ConsumedSeq` with
+/// [`Pace::Virtual`] (the host declares block s lost when the header of s + 2 arrives).
+pub const VIRTUAL_LEAD_BLOCKS: i64 = 3;
+/// Read timeout of the pseudo-terminal masters (how often a serial thread checks for stop).
+const PTY_READ_TIMEOUT: Duration = Duration::from_millis(20);
+/// The vibrometer's output filter at power-up, Hz.
+const POWER_UP_FILTER_HZ: u32 = 5000;
+/// The vibrometer's signal level reported, %.
+const SIGNAL_LEVEL: u8 = 87;
+
+/// Why the device could not start or serve a session.
+#[derive(Debug, thiserror::Error)]
+pub enum DeviceError {
+    /// The UDP tunnel could not be bound.
+    #[error("{0}")]
+    Tunnel(TransportError),
+    /// The bound tunnel has no local address.
+    #[error("UDP tunnel: no local address")]
+    NoLocalAddress,
+    /// The simulated rig's channel map has no vibrometer.
+    #[error("the channel map has no vibrometer channel")]
+    NoVibrometer,
+    /// A pseudo-terminal could not be created or set up.
+    #[error("{what}: {error}")]
+    Pty {
+        /// What failed.
+        what: &'static str,
+        /// What `serialport` said.
+        error: serialport::Error,
+    },
+    /// A pseudo-terminal without a name.
+    #[error("pseudo-terminal without a name")]
+    PtyName,
+    /// A serial device's thread could not be started.
+    #[error("{0}")]
+    Thread(std::io::Error),
+    /// The simulated rig rejected an injected fault or a drive command.
+    #[error("{0}")]
+    Rig(SimRigError),
+    /// A block could not be split into frames.
+    #[error("{0}")]
+    Split(SplitError),
+    /// The simulated rig's block computation panicked or was cancelled.
+    #[error("simulated rig: {0}")]
+    Task(tokio::task::JoinError),
+}
 
 pub use faults::{Inject, LinkFault};
 pub use serial::Port;
@@ -42,8 +96,9 @@ use session::Session;
 pub enum Pace {
     /// Block k leaves no earlier than the wall time of its last sample.
     Realtime,
-    /// As fast as possible, at most three blocks ahead of the host (so that a lost block is
-    /// detected: the host declares block s lost when the header of s + 2 arrives).
+    /// As fast as possible, at most [`VIRTUAL_LEAD_BLOCKS`] blocks ahead of the host (so that
+    /// a lost block is detected: the host declares block s lost when the header of s + 2
+    /// arrives).
     Virtual,
 }
 
@@ -54,9 +109,9 @@ pub struct FirmwareOptions {
     pub listen: SocketAddr,
     /// Pacing.
     pub pace: Pace,
-    /// DEVICE_HEARTBEAT period (default 100 ms).
+    /// DEVICE_HEARTBEAT period (default [`HEARTBEAT_PERIOD`], 100 ms).
     pub heartbeat_period: Duration,
-    /// HOST_HEARTBEAT timeout (default 500 ms).
+    /// HOST_HEARTBEAT timeout (default [`HEARTBEAT_TIMEOUT`], 500 ms).
     pub heartbeat_timeout: Duration,
     /// Safety ramp-down time, s (default 0.5).
     pub ramp_down_s: f64,
@@ -125,16 +180,19 @@ impl std::fmt::Debug for FirmwareSim {
     }
 }
 
-fn pty() -> Result<(serialport::TTYPort, serialport::TTYPort, String), String> {
+fn pty() -> Result<(serialport::TTYPort, serialport::TTYPort, String), DeviceError> {
     use serialport::SerialPort;
-    let (mut master, slave) =
-        serialport::TTYPort::pair().map_err(|e| format!("creating a pseudo-terminal: {e}"))?;
+    let (mut master, slave) = serialport::TTYPort::pair().map_err(|error| DeviceError::Pty {
+        what: "creating a pseudo-terminal",
+        error,
+    })?;
     master
-        .set_timeout(Duration::from_millis(20))
-        .map_err(|e| format!("pseudo-terminal: {e}"))?;
-    let name = slave
-        .name()
-        .ok_or_else(|| "pseudo-terminal without a name".to_string())?;
+        .set_timeout(PTY_READ_TIMEOUT)
+        .map_err(|error| DeviceError::Pty {
+            what: "pseudo-terminal",
+            error,
+        })?;
+    let name = slave.name().ok_or(DeviceError::PtyName)?;
     Ok((master, slave, name))
 }
 
@@ -147,25 +205,23 @@ impl FirmwareSim {
         opts: FirmwareOptions,
         amplifier_gain: f64,
         amplifier_limit_v: f64,
-    ) -> Result<FirmwareSim, String> {
+    ) -> Result<FirmwareSim, DeviceError> {
         let tunnel = UdpTunnel::listen(opts.listen)
             .await
-            .map_err(|e| e.to_string())?;
-        let can_addr = tunnel
-            .local_addr()
-            .ok_or_else(|| "UDP tunnel: no local address".to_string())?;
+            .map_err(DeviceError::Tunnel)?;
+        let can_addr = tunnel.local_addr().ok_or(DeviceError::NoLocalAddress)?;
         let layout = rig.layout();
         let vib = layout
             .indices_of(ChannelKind::Vibrometer)
             .first()
             .map(|&k| &layout.channels[k])
-            .ok_or_else(|| "the channel map has no vibrometer channel".to_string())?;
+            .ok_or(DeviceError::NoVibrometer)?;
         let range = vib.scale * (f64::from(vib.full_scale_counts) + 1.0);
         let devices = Arc::new(Mutex::new(Devices {
             vib: VibrometerStatus {
                 range_mm_s: (range * 1000.0).round() as u32,
-                filter_hz: 5000,
-                level: 87,
+                filter_hz: POWER_UP_FILTER_HZ,
+                level: SIGNAL_LEVEL,
                 over_range: false,
             },
             amp: AmplifierStatus {
@@ -188,7 +244,7 @@ impl FirmwareSim {
                 std::thread::Builder::new()
                     .name(format!("fw-{which:?}"))
                     .spawn(move || serial::serve(which, master, d, s))
-                    .map_err(|e| e.to_string())?,
+                    .map_err(DeviceError::Thread)?,
             );
         }
         Ok(FirmwareSim {
@@ -214,7 +270,7 @@ impl FirmwareSim {
     }
 
     /// Serves sessions (one with `once`); `on_end` gets each session's report.
-    pub async fn run(&mut self, mut on_end: impl FnMut(&SessionReport)) -> Result<(), String> {
+    pub async fn run(&mut self, mut on_end: impl FnMut(&SessionReport)) -> Result<(), DeviceError> {
         loop {
             let r = Session::new(self).run().await?;
             on_end(&r);

@@ -17,7 +17,33 @@ use crate::rig::sim::SimRig;
 use crate::rig::{ChannelKind, DaqBlock, DriveCommand, RigFault};
 
 use super::serial::Devices;
-use super::{FirmwareSim, Inject, LinkFault, Pace, SessionReport};
+use super::{
+    DeviceError, FirmwareSim, Inject, LinkFault, Pace, SessionReport, VIRTUAL_LEAD_BLOCKS,
+};
+
+/// Pause after a failed tunnel receive (the host went away: ICMP unreachable) before the
+/// next one; the heartbeat timeout decides whether the session ends.
+const RECV_RETRY: Duration = Duration::from_millis(10);
+/// FAULT frames' channel byte when the fault concerns no channel.
+const NO_CHANNEL: u8 = 255;
+
+/// How a session ended ([`SessionReport::reason`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum End {
+    /// The host sent STREAM_CONTROL stop.
+    Stop,
+    /// No HOST_HEARTBEAT in time; the safety ramp-down finished.
+    HeartbeatLost,
+}
+
+impl End {
+    fn as_str(self) -> &'static str {
+        match self {
+            End::Stop => "stop",
+            End::HeartbeatLost => "heartbeat_lost",
+        }
+    }
+}
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum State {
@@ -125,11 +151,11 @@ impl<'a> Session<'a> {
         )
     }
 
-    fn start(&mut self) -> Result<(), String> {
+    fn start(&mut self) -> Result<(), DeviceError> {
         let mut rig = self.fw.rig.clone();
         for f in &self.fw.opts.inject {
             if let Inject::Rig(r) = f {
-                rig.schedule(r.clone()).map_err(|e| e.to_string())?;
+                rig.schedule(r.clone()).map_err(DeviceError::Rig)?;
             }
         }
         self.rig = Some(rig);
@@ -162,7 +188,7 @@ impl<'a> Session<'a> {
         }
     }
 
-    async fn on_frame(&mut self, f: CanFrame) -> Result<Option<String>, String> {
+    async fn on_frame(&mut self, f: CanFrame) -> Result<Option<End>, DeviceError> {
         self.report.frames_received += 1;
         let from = self.fw.tunnel.last_from();
         if self.state == State::Idle {
@@ -188,7 +214,7 @@ impl<'a> Session<'a> {
                 }
                 StreamCommand::Stop => {
                     if self.state != State::Idle {
-                        return Ok(Some("stop".into()));
+                        return Ok(Some(End::Stop));
                     }
                 } // (On stop the drive goes off at once: see `run`.)
             },
@@ -248,7 +274,7 @@ impl<'a> Session<'a> {
             self.report.amplitude_at_loss_v = self.rig.as_ref().map(|r| r.drive().amplitude_v);
             self.state = State::SafetyRamp;
             self.gate();
-            self.fault(FaultCode::HeartbeatLost, 255, 0, FLAG_HEARTBEAT)
+            self.fault(FaultCode::HeartbeatLost, NO_CHANNEL, 0, FLAG_HEARTBEAT)
                 .await;
         }
     }
@@ -294,7 +320,7 @@ impl<'a> Session<'a> {
         }
         if self.devices().amp.interlock_open && !self.interlock_reported {
             self.interlock_reported = true;
-            self.fault(FaultCode::Interlock, 255, 0, FLAG_INTERLOCK)
+            self.fault(FaultCode::Interlock, NO_CHANNEL, 0, FLAG_INTERLOCK)
                 .await;
         }
     }
@@ -316,7 +342,7 @@ impl<'a> Session<'a> {
             .collect()
     }
 
-    async fn on_block(&mut self, rig: SimRig, block: DaqBlock) -> Result<Option<String>, String> {
+    async fn on_block(&mut self, rig: SimRig, block: DaqBlock) -> Result<Option<End>, DeviceError> {
         let drive = rig.drive();
         let faults = rig.faults().to_vec();
         self.rig = Some(rig);
@@ -331,11 +357,11 @@ impl<'a> Session<'a> {
                 RigFault::DriveSaturated { limit_v } => {
                     self.devices().amp.overload = true;
                     let v = (limit_v / messages::FAULT_VALUE_RES).round() as i32;
-                    self.fault(FaultCode::DriveSaturated, 255, v, FLAG_OVERLOAD)
+                    self.fault(FaultCode::DriveSaturated, NO_CHANNEL, v, FLAG_OVERLOAD)
                         .await;
                 }
                 RigFault::OverRange { channel } => {
-                    let k = layout.index(channel).unwrap_or(255);
+                    let k = layout.index(channel).unwrap_or(usize::from(NO_CHANNEL));
                     if layout.channels.get(k).map(|c| c.kind) == Some(ChannelKind::Vibrometer) {
                         self.devices().vib.over_range = true;
                     }
@@ -343,7 +369,7 @@ impl<'a> Session<'a> {
                         .await;
                 }
                 RigFault::Device { .. } => {
-                    self.fault(FaultCode::DeviceError, 255, 0, FLAG_DEVICE)
+                    self.fault(FaultCode::DeviceError, NO_CHANNEL, 0, FLAG_DEVICE)
                         .await;
                 }
             }
@@ -363,7 +389,8 @@ impl<'a> Session<'a> {
         self.send(&status).await;
         let timestamp_us = (self.stream_start - self.t0).as_micros() as u64
             + (block.first_sample as f64 / layout.sample_rate * 1e6).round() as u64;
-        let mut frames: Vec<CanFrame> = split_block(&block, &self.format, timestamp_us)?
+        let mut frames: Vec<CanFrame> = split_block(&block, &self.format, timestamp_us)
+            .map_err(DeviceError::Split)?
             .iter()
             .map(Message::encode)
             .collect();
@@ -403,7 +430,7 @@ impl<'a> Session<'a> {
         if self.state == State::SafetyRamp {
             self.report.safety_ramp_blocks += 1;
             if drive.amplitude_v == 0.0 && drive.target_amplitude_v == 0.0 {
-                return Ok(Some("heartbeat_lost".into()));
+                return Ok(Some(End::HeartbeatLost));
             }
         }
         Ok(None)
@@ -416,18 +443,18 @@ impl<'a> Session<'a> {
         match self.fw.opts.pace {
             Pace::Virtual if self.state == State::Streaming => {
                 let consumed = self.consumed.map_or(-1, i64::from);
-                (self.seq as i64) <= consumed + 3
+                (self.seq as i64) <= consumed + VIRTUAL_LEAD_BLOCKS
             }
             _ => true,
         }
     }
 
-    fn compute(&mut self) -> Result<(), String> {
+    fn compute(&mut self) -> Result<(), DeviceError> {
         let Some(mut rig) = self.rig.take() else {
             return Ok(());
         };
         for c in self.commands.drain(..) {
-            rig.set_drive(c).map_err(|e| e.to_string())?;
+            rig.set_drive(c).map_err(DeviceError::Rig)?;
         }
         self.pending = Some(tokio::task::spawn_blocking(move || {
             let b = rig.next_block();
@@ -437,7 +464,7 @@ impl<'a> Session<'a> {
         Ok(())
     }
 
-    pub(super) async fn run(mut self) -> Result<SessionReport, String> {
+    pub(super) async fn run(mut self) -> Result<SessionReport, DeviceError> {
         let mut tick = tokio::time::interval(self.fw.opts.heartbeat_period);
         tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
         let end = loop {
@@ -456,12 +483,12 @@ impl<'a> Session<'a> {
                     }
                     Err(TransportError::Malformed(_)) => self.report.rx_errors += 1,
                     // The host went away (ICMP unreachable): the heartbeat timeout decides.
-                    Err(_) => tokio::time::sleep(Duration::from_millis(10)).await,
+                    Err(_) => tokio::time::sleep(RECV_RETRY).await,
                 },
                 _ = tick.tick() => self.on_tick().await,
                 r = async { self.pending.as_mut().expect("guarded").await }, if self.pending.is_some() => {
                     self.pending = None;
-                    let (rig, block) = r.map_err(|e| format!("simulated rig: {e}"))?;
+                    let (rig, block) = r.map_err(DeviceError::Task)?;
                     self.timed_faults().await;
                     if let Some(end) = self.on_block(rig, block).await? {
                         break end;
@@ -474,7 +501,7 @@ impl<'a> Session<'a> {
                 self.rig = Some(rig);
             }
         }
-        if end == "stop" {
+        if end == End::Stop {
             // STREAM_CONTROL stop: drive off (the host ramped it down before).
             if let Some(rig) = self.rig.as_mut() {
                 let f = rig.drive().frequency_hz.max(1.0);
@@ -485,7 +512,7 @@ impl<'a> Session<'a> {
                 });
             }
         }
-        self.report.reason = end;
+        self.report.reason = end.as_str().to_string();
         self.report.final_amplitude_v = self.rig.as_ref().map_or(0.0, |r| r.drive().amplitude_v);
         let serial_rx_errors = self.devices().rx_errors;
         self.report.serial_rx_errors = serial_rx_errors;

@@ -15,10 +15,16 @@ use tokio::time::Instant;
 
 use crate::plan::TestSpec;
 
-use super::sim::{InjectedFault, SimRig};
-use super::{
-    DaqBlock, DaqLayout, DriveCommand, DriveState, RigBackend, RigError, RigFault, RigStatus,
+use super::{InjectedFault, SimRig};
+use crate::rig::{
+    CommandError, DaqBlock, DaqLayout, DriveCommand, DriveState, RigBackend, RigError, RigFault,
+    RigStatus, StateError,
 };
+
+/// The simulation task computing a block panicked or was cancelled.
+#[derive(Debug, thiserror::Error)]
+#[error("simulation task: {0}")]
+pub struct TaskFailed(tokio::task::JoinError);
 
 type Pending = JoinHandle<(SimRig, DaqBlock, DriveState, Vec<RigFault>, bool)>;
 
@@ -67,9 +73,8 @@ impl SimBackend {
         match self.pending.take() {
             None => Ok(None),
             Some(h) => {
-                let (rig, block, drive, faults, stalled) = h
-                    .await
-                    .map_err(|e| RigError::Link(format!("simulation task: {e}")))?;
+                let (rig, block, drive, faults, stalled) =
+                    h.await.map_err(|e| RigError::link(TaskFailed(e)))?;
                 self.rig = Some(rig);
                 Ok(Some((block, drive, faults, stalled)))
             }
@@ -80,14 +85,12 @@ impl SimBackend {
         let mut rig = self
             .rig
             .take()
-            .ok_or_else(|| RigError::State("simulation core missing".into()))?;
+            .ok_or(RigError::State(StateError::SimulationCoreMissing))?;
         for f in self.faults.drain(..) {
-            rig.schedule(f)
-                .map_err(|e| RigError::Config(e.to_string()))?;
+            rig.schedule(f).map_err(RigError::config)?;
         }
         for c in self.commands.drain(..) {
-            rig.set_drive(c)
-                .map_err(|e| RigError::Command(e.to_string()))?;
+            rig.set_drive(c).map_err(RigError::command)?;
         }
         self.pending = Some(tokio::task::spawn_blocking(move || {
             let stalled_before = rig.stalled();
@@ -107,7 +110,7 @@ impl RigBackend for SimBackend {
 
     async fn start(&mut self) -> Result<(), RigError> {
         if self.started.is_some() {
-            return Err(RigError::State("already started".into()));
+            return Err(RigError::State(StateError::AlreadyStarted));
         }
         self.started = Some(Instant::now());
         self.status.running = true;
@@ -122,7 +125,7 @@ impl RigBackend for SimBackend {
             && command.ramp_s.is_finite()
             && command.ramp_s >= 0.0;
         if !valid {
-            return Err(RigError::Command(format!("{command:?}")));
+            return Err(RigError::command(CommandError::Invalid { command }));
         }
         self.commands.push(command);
         Ok(())
@@ -139,7 +142,7 @@ impl RigBackend for SimBackend {
 
     async fn next_block(&mut self) -> Result<Option<DaqBlock>, RigError> {
         let Some(started) = self.started else {
-            return Err(RigError::State("next_block before start".into()));
+            return Err(RigError::State(StateError::NotStarted));
         };
         if self.stalled {
             std::future::pending::<()>().await;

@@ -44,6 +44,11 @@ pub struct Devices {
     pub rx_errors: u64,
 }
 
+/// Pause after a read that returned nothing before reading again.
+const IDLE_POLL: Duration = Duration::from_millis(5);
+/// Pause after a port error (no client holds the other end yet, or a write failed).
+const PORT_RETRY: Duration = Duration::from_millis(20);
+
 /// Allowed vibrometer output filters, Hz.
 pub const FILTERS_HZ: [u32; 5] = [1000, 2560, 5000, 20000, 100000];
 
@@ -117,7 +122,7 @@ pub fn serve(
     while !stop.load(std::sync::atomic::Ordering::Relaxed) {
         let n = match port.read(&mut buf) {
             Ok(0) => {
-                std::thread::sleep(Duration::from_millis(5));
+                std::thread::sleep(IDLE_POLL);
                 continue;
             }
             Ok(n) => n,
@@ -125,7 +130,7 @@ pub fn serve(
             Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
             Err(_) => {
                 // EIO while no one holds the other end open: wait for a client.
-                std::thread::sleep(Duration::from_millis(20));
+                std::thread::sleep(PORT_RETRY);
                 continue;
             }
         };
@@ -160,7 +165,7 @@ pub fn serve(
                 out.extend_from_slice(l.as_bytes());
             }
             if port.write_all(&out).and_then(|_| port.flush()).is_err() {
-                std::thread::sleep(Duration::from_millis(20));
+                std::thread::sleep(PORT_RETRY);
             }
         }
     }

@@ -77,9 +77,9 @@ pub(crate) fn run(a: FirmwareSimArgs) -> anyhow::Result<()> {
     };
     let (truth, _, _) = super::models::cached_rom(&truth_cfg, a.rebuild, a.quiet)?;
     let spec = SimRigSpec::from_config(&cfg);
-    let clearance_m = a
-        .clearance
-        .map_or(cfg.contact.clearance, |c| c * cfg.rig.beam_length);
+    let clearance_m = a.clearance.map_or(cfg.contact.clearance, |c| {
+        crate::plan::per_l_to_metres(c, cfg.rig.beam_length)
+    });
     let rig = SimRig::new(&truth, &spec, clearance_m).context("simulated rig")?;
     let opts = FirmwareOptions {
         listen: a.can_listen,

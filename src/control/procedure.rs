@@ -12,7 +12,7 @@
 
 use std::f64::consts::TAU;
 
-use crate::plan::{Plan, TestSpec};
+use crate::plan::{per_l_to_metres, Plan, TestSpec};
 use crate::rig::channels::{base_acceleration, platform_accelerometers};
 use crate::rig::{ChannelKind, DaqBlock, DaqLayout, DriveCommand, DriveState};
 
@@ -56,14 +56,56 @@ pub struct BlockOutcome {
     pub done: bool,
 }
 
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// Where the procedure is within a step, with the state that stage owns.
+#[derive(Debug)]
 enum Stage {
-    /// The step's frequency starts with the next block.
-    Pending,
-    Settle,
-    Record,
+    /// The step's frequency starts with the next block; `blocks` received so far while the
+    /// drive had not taken it.
+    Pending { blocks: u32 },
+    /// Waiting for the response to settle.
+    Settle { settle: SettleDetector },
+    /// Recording a window (the settle detector keeps seeing the response).
+    Record {
+        settle: SettleDetector,
+        window: RecordWindow,
+    },
+    /// The plan is complete.
     Done,
 }
+
+impl Stage {
+    fn phase(&self) -> Phase {
+        match self {
+            Stage::Pending { .. } => Phase::Transition,
+            Stage::Settle { .. } => Phase::Settle,
+            Stage::Record { .. } => Phase::Record,
+            Stage::Done => Phase::Done,
+        }
+    }
+
+    /// The settle detector of a step past its transition.
+    fn settle_detector(&mut self) -> Option<&mut SettleDetector> {
+        match self {
+            Stage::Settle { settle } | Stage::Record { settle, .. } => Some(settle),
+            Stage::Pending { .. } | Stage::Done => None,
+        }
+    }
+}
+
+/// A record window being filled: channel-major counts of `len` samples from sample `first`.
+#[derive(Debug)]
+struct RecordWindow {
+    first: u64,
+    len: usize,
+    counts: Vec<i32>,
+    recorded: usize,
+    /// Whether the step settled before this window (or the settle time ran out).
+    settled: bool,
+}
+
+/// Ramp time of the drive command that starts a test (from rest or from the previous test's
+/// level), s. Steps within a test change frequency without a ramp.
+const TEST_START_RAMP_S: f64 = 0.25;
 
 /// The stepped-sine state machine.
 #[derive(Debug)]
@@ -76,19 +118,15 @@ pub struct Procedure {
     step: usize,
     ratios: Vec<f64>,
     stage: Stage,
+    /// The amplitude controller, made at the first step's transition and retuned at every
+    /// later one.
     controller: Option<AmplitudeController>,
-    settle: Option<SettleDetector>,
+    /// First sample of the running step's settling.
     step_start_sample: u64,
+    /// Settle time of the running step (fixed by its first record window), s.
     settle_seconds: f64,
-    settled: bool,
-    record_first: u64,
-    record_len: usize,
-    record: Vec<i32>,
-    recorded: usize,
     last_update: Option<ControlUpdate>,
     drive_v: f64,
-    /// Blocks received while waiting for the drive to take a step's frequency.
-    pending_blocks: u32,
     /// Record window of the step (1-based).
     record_attempt: u32,
 }
@@ -150,19 +188,12 @@ impl Procedure {
             test: 0,
             step: 0,
             ratios: setup.plan.tests[0].omega_ratios(),
-            stage: Stage::Pending,
+            stage: Stage::Pending { blocks: 0 },
             controller: None,
-            settle: None,
             step_start_sample: 0,
             settle_seconds: 0.0,
-            settled: false,
-            record_first: 0,
-            record_len: 0,
-            record: Vec::new(),
-            recorded: 0,
             last_update: None,
             drive_v: initial.min(setup.safety.max_drive_v),
-            pending_blocks: 0,
             record_attempt: 1,
         })
     }
@@ -176,7 +207,7 @@ impl Procedure {
     }
 
     fn target(&self) -> f64 {
-        self.spec().level * self.setup.beam_length
+        per_l_to_metres(self.spec().level, self.setup.beam_length)
     }
 
     /// Index of the running test and step.
@@ -206,7 +237,7 @@ impl Procedure {
             },
         });
         self.push_test_start(&mut out, time, sample);
-        self.push_step_start(&mut out, time, sample, 0.25);
+        self.push_step_start(&mut out, time, sample, TEST_START_RAMP_S);
         out
     }
 
@@ -241,7 +272,7 @@ impl Procedure {
             amplitude_v: self.drive_v,
             ramp_s,
         });
-        self.stage = Stage::Pending;
+        self.stage = Stage::Pending { blocks: 0 };
     }
 
     /// Processes one block (already checked by the safety monitor for shape and sequence);
@@ -254,70 +285,51 @@ impl Procedure {
     ) -> Result<BlockOutcome, AbortReason> {
         let mut out = BlockOutcome::default();
         let dt = self.layout.dt();
-        if self.stage == Stage::Done {
-            out.done = true;
-            return Ok(out);
-        }
-        if self.stage == Stage::Pending {
-            let f = self.omega() / TAU;
-            if (drive.frequency_hz - f).abs() > 1e-9 * f {
-                self.pending_blocks += 1;
-                if self.pending_blocks > MAX_PENDING_BLOCKS {
-                    return Err(AbortReason::Backend {
-                        message: format!(
-                            "the drive did not take the step's frequency {f:.4} Hz within {MAX_PENDING_BLOCKS} blocks (it runs at {:.4} Hz)",
-                            drive.frequency_hz
-                        ),
-                    });
-                }
-                out.control = Some(self.control_state(block));
+        match &mut self.stage {
+            Stage::Done => {
+                out.done = true;
                 return Ok(out);
             }
-            self.pending_blocks = 0;
-            let (omega, target) = (self.omega(), self.target());
-            match &mut self.controller {
-                Some(c) => c.retune(target, omega, dt, block.time),
-                None => AmplitudeController::new(
-                    &self.setup.control,
-                    self.setup.safety.max_drive_v,
-                    target,
-                    omega,
-                    dt,
-                    block.time,
-                    self.drive_v,
-                )
-                .map(|c| self.controller = Some(c)),
+            Stage::Pending { blocks } => {
+                let f = self.ratios[self.step] * self.setup.omega_ref / TAU;
+                if (drive.frequency_hz - f).abs() > 1e-9 * f {
+                    *blocks += 1;
+                    if *blocks > MAX_PENDING_BLOCKS {
+                        return Err(AbortReason::Backend {
+                            message: format!(
+                                "the drive did not take the step's frequency {f:.4} Hz within {MAX_PENDING_BLOCKS} blocks (it runs at {:.4} Hz)",
+                                drive.frequency_hz
+                            ),
+                        });
+                    }
+                    out.control = Some(self.control_state(block));
+                    return Ok(out);
+                }
+                self.begin_settle(block, dt)?;
             }
-            .map_err(|e| AbortReason::Backend {
-                message: format!("controller: {e}"),
-            })?;
-            self.settle = Some(SettleDetector::new(
-                &self.setup.control,
-                self.spec().settle_periods,
-            ));
-            self.step_start_sample = block.first_sample;
-            self.record_attempt = 1;
-            self.stage = Stage::Settle;
+            Stage::Settle { .. } | Stage::Record { .. } => {}
         }
         let mut drive_changed = false;
         for i in 0..block.len {
-            if matches!(self.stage, Stage::Pending | Stage::Done) {
+            if matches!(self.stage, Stage::Pending { .. } | Stage::Done) {
                 break; // the rest of the block belongs to the previous frequency
             }
             let sample = block.first_sample + i as u64;
             let a_base = base_acceleration(&self.platform, &block.counts, block.len, i);
             if let Some(k) = self.vibrometer {
                 let v = self.layout.channels[k].value(block.counts[k * block.len + i]);
-                self.settle.as_mut().expect("settling").push_response(v);
-            }
-            if self.stage == Stage::Record {
-                let n = self.record_len;
-                for k in 0..self.layout.channels.len() {
-                    self.record[k * n + self.recorded] = block.counts[k * block.len + i];
+                if let Some(settle) = self.stage.settle_detector() {
+                    settle.push_response(v);
                 }
-                self.recorded += 1;
             }
-            let controller = self.controller.as_mut().expect("retuned");
+            if let Stage::Record { window, .. } = &mut self.stage {
+                let n = window.len;
+                for k in 0..self.layout.channels.len() {
+                    window.counts[k * n + window.recorded] = block.counts[k * block.len + i];
+                }
+                window.recorded += 1;
+            }
+            let controller = self.controller.as_mut().expect("made at the transition");
             if let Some(u) = controller.push(a_base) {
                 safety.check_update(&u, controller.target_m())?;
                 if u.drive_v != self.drive_v {
@@ -325,18 +337,19 @@ impl Procedure {
                     drive_changed = true;
                 }
                 self.last_update = Some(u);
-                if self.stage == Stage::Settle {
-                    let s = self.settle.as_mut().expect("settling").period_done(u.error);
+                if let Stage::Settle { settle } = &mut self.stage {
+                    let s = settle.period_done(u.error);
                     if s != Settle::Wait {
                         self.begin_record(&mut out, sample + 1, s == Settle::Settled);
                     }
                 }
             }
-            if self.stage == Stage::Record && self.recorded == self.record_len {
+            if matches!(&self.stage, Stage::Record { window, .. } if window.recorded == window.len)
+            {
                 self.end_record(&mut out, block.time + (i + 1) as f64 * dt, sample + 1)?;
             }
         }
-        if drive_changed && out.command.is_none() && self.stage != Stage::Done {
+        if drive_changed && out.command.is_none() && !matches!(self.stage, Stage::Done) {
             out.command = Some(DriveCommand {
                 frequency_hz: self.omega() / TAU,
                 amplitude_v: self.drive_v,
@@ -344,8 +357,36 @@ impl Procedure {
             });
         }
         out.control = Some(self.control_state(block));
-        out.done = self.stage == Stage::Done;
+        out.done = matches!(self.stage, Stage::Done);
         Ok(out)
+    }
+
+    /// The drive runs at the step's frequency from `block` on: retunes (or makes) the
+    /// controller and starts settling.
+    fn begin_settle(&mut self, block: &DaqBlock, dt: f64) -> Result<(), AbortReason> {
+        let (omega, target) = (self.omega(), self.target());
+        match &mut self.controller {
+            Some(c) => c.retune(target, omega, dt, block.time),
+            None => AmplitudeController::new(
+                &self.setup.control,
+                self.setup.safety.max_drive_v,
+                target,
+                omega,
+                dt,
+                block.time,
+                self.drive_v,
+            )
+            .map(|c| self.controller = Some(c)),
+        }
+        .map_err(|e| AbortReason::Backend {
+            message: format!("controller: {e}"),
+        })?;
+        self.stage = Stage::Settle {
+            settle: SettleDetector::new(&self.setup.control, self.spec().settle_periods),
+        };
+        self.step_start_sample = block.first_sample;
+        self.record_attempt = 1;
+        Ok(())
     }
 
     fn control_state(&self, block: &DaqBlock) -> ControlState {
@@ -355,12 +396,7 @@ impl Procedure {
             seq: block.seq,
             test: self.test,
             step: self.step,
-            phase: match self.stage {
-                Stage::Pending => Phase::Transition,
-                Stage::Settle => Phase::Settle,
-                Stage::Record => Phase::Record,
-                Stage::Done => Phase::Done,
-            },
+            phase: self.stage.phase(),
             frequency_hz: self.omega() / TAU,
             target_m: self.target(),
             measured_m: u.map(|u| u.measured_m),
@@ -370,19 +406,29 @@ impl Procedure {
         }
     }
 
+    /// Starts a record window at sample `first` (from settling, or again after a rejected
+    /// window).
     fn begin_record(&mut self, out: &mut BlockOutcome, first: u64, settled: bool) {
         let dt = self.layout.dt();
         let spp = TAU / (self.omega() * dt);
         let periods = f64::from(self.spec().record_periods);
-        self.record_len = (periods * spp).ceil() as usize + 1;
-        self.record = vec![0; self.record_len * self.layout.channels.len()];
-        self.recorded = 0;
-        self.record_first = first;
-        self.settled = settled;
+        let len = (periods * spp).ceil() as usize + 1;
+        let window = RecordWindow {
+            first,
+            len,
+            counts: vec![0; len * self.layout.channels.len()],
+            recorded: 0,
+            settled,
+        };
         if self.record_attempt == 1 {
             self.settle_seconds = (first - self.step_start_sample) as f64 * dt;
         }
-        self.stage = Stage::Record;
+        self.stage = match std::mem::replace(&mut self.stage, Stage::Done) {
+            Stage::Settle { settle } | Stage::Record { settle, .. } => {
+                Stage::Record { settle, window }
+            }
+            other => unreachable!("a record window starts from settling, not {other:?}"),
+        };
         out.events.push(SessionEvent {
             time: first as f64 * dt,
             sample: first,
@@ -401,6 +447,9 @@ impl Procedure {
         time: f64,
         sample: u64,
     ) -> Result<(), AbortReason> {
+        let Stage::Record { window, .. } = &self.stage else {
+            unreachable!("a record window ends while recording");
+        };
         let info = StepInfo {
             test: self.spec().name.clone(),
             step: self.step,
@@ -409,14 +458,14 @@ impl Procedure {
             base_amp_target: self.target(),
             drive_amplitude: self.drive_v,
             settle_seconds: self.settle_seconds,
-            settled: self.settled,
-            record_first_sample: self.record_first,
-            record_samples: self.record_len,
+            settled: window.settled,
+            record_first_sample: window.first,
+            record_samples: window.len,
             contact_threshold_v: self.setup.control.contact_threshold_v,
             record_attempt: self.record_attempt,
         };
         let summary =
-            summarize(&self.layout, &info, &self.record).map_err(|e| AbortReason::Backend {
+            summarize(&self.layout, &info, &window.counts).map_err(|e| AbortReason::Backend {
                 message: format!("step summary: {e}"),
             })?;
         let base_amp_error = summary.base_amp_measured / info.base_amp_target - 1.0;
@@ -432,7 +481,7 @@ impl Procedure {
                 },
             });
             self.record_attempt += 1;
-            let settled = self.settled;
+            let settled = window.settled;
             self.begin_record(out, sample, settled);
             return Ok(());
         }
@@ -442,7 +491,6 @@ impl Procedure {
             kind: EventKind::RecordEnd { info: info.clone() },
         });
         out.steps.push((info, summary));
-        self.record = Vec::new();
         // Next step, next test, or done.
         if self.step + 1 < self.ratios.len() {
             self.step += 1;
@@ -465,7 +513,7 @@ impl Procedure {
                     (self.drive_v * self.target() / old).min(self.setup.safety.max_drive_v);
                 out.begin_test = Some(self.test);
                 self.push_test_start(out, time, sample);
-                self.push_step_start(out, time, sample, 0.25);
+                self.push_step_start(out, time, sample, TEST_START_RAMP_S);
             } else {
                 self.stage = Stage::Done;
             }

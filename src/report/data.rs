@@ -10,6 +10,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::plan::Direction;
+use crate::signal::StepMetrics;
 
 /// Where a curve came from. Sources are drawn with different line styles so that overlays
 /// stay readable: simulation solid, measurement markers on a thin line, twin dashed.
@@ -104,6 +105,33 @@ pub struct TestCurve {
 }
 
 impl TestCurve {
+    /// The curve of a test from `(Omega / omega_2, metrics)` per step, in step order.
+    pub fn from_steps(
+        name: &str,
+        level: f64,
+        direction: Direction,
+        source: Source,
+        steps: &[(f64, &StepMetrics)],
+    ) -> TestCurve {
+        let col =
+            |f: fn(&StepMetrics) -> f64| -> Vec<f64> { steps.iter().map(|(_, m)| f(m)).collect() };
+        TestCurve {
+            name: name.to_owned(),
+            level,
+            direction,
+            source,
+            omega_ratio: steps.iter().map(|(w, _)| *w).collect(),
+            rms_upper: col(|m| m.rms_upper),
+            rms_lower: col(|m| m.rms_lower),
+            amp_min_upper: col(|m| m.amp_min_upper),
+            amp_mean_upper: col(|m| m.amp_mean_upper),
+            amp_max_upper: col(|m| m.amp_max_upper),
+            amp_min_lower: col(|m| m.amp_min_lower),
+            amp_mean_lower: col(|m| m.amp_mean_lower),
+            amp_max_lower: col(|m| m.amp_max_lower),
+        }
+    }
+
     /// The RMS vector of a beam.
     pub fn rms(&self, beam: Beam) -> &[f64] {
         match beam {

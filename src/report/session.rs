@@ -77,27 +77,12 @@ pub enum SessionReportError {
 
 /// The frequency-response curve of test `t` from `(Omega / omega_2, metrics)` per step.
 fn test_curve(t: &TestSummary, source: Source, steps: &[(f64, &StepMetrics)]) -> TestCurve {
-    let col =
-        |f: fn(&StepMetrics) -> f64| -> Vec<f64> { steps.iter().map(|(_, m)| f(m)).collect() };
-    TestCurve {
-        name: t.name.clone(),
-        level: t.level,
-        direction: if t.direction == "up" {
-            Direction::Up
-        } else {
-            Direction::Down
-        },
-        source,
-        omega_ratio: steps.iter().map(|(w, _)| *w).collect(),
-        rms_upper: col(|m| m.rms_upper),
-        rms_lower: col(|m| m.rms_lower),
-        amp_min_upper: col(|m| m.amp_min_upper),
-        amp_mean_upper: col(|m| m.amp_mean_upper),
-        amp_max_upper: col(|m| m.amp_max_upper),
-        amp_min_lower: col(|m| m.amp_min_lower),
-        amp_mean_lower: col(|m| m.amp_mean_lower),
-        amp_max_lower: col(|m| m.amp_max_lower),
-    }
+    let direction = if t.direction == "up" {
+        Direction::Up
+    } else {
+        Direction::Down
+    };
+    TestCurve::from_steps(&t.name, t.level, direction, source, steps)
 }
 
 /// The twin's logged prediction (`/twin/blocks`) over the record window of `info` (samples `dt`

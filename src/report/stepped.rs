@@ -14,24 +14,18 @@ use super::{
 
 /// The frequency-response curve of a simulated test.
 fn curve(r: &TestResult) -> TestCurve {
-    let col = |f: fn(&crate::signal::StepMetrics) -> f64| -> Vec<f64> {
-        r.steps.iter().map(|s| f(&s.metrics)).collect()
-    };
-    TestCurve {
-        name: r.spec.name.clone(),
-        level: r.spec.level,
-        direction: r.spec.direction,
-        source: Source::Simulation,
-        omega_ratio: r.steps.iter().map(|s| s.omega_ratio).collect(),
-        rms_upper: col(|m| m.rms_upper),
-        rms_lower: col(|m| m.rms_lower),
-        amp_min_upper: col(|m| m.amp_min_upper),
-        amp_mean_upper: col(|m| m.amp_mean_upper),
-        amp_max_upper: col(|m| m.amp_max_upper),
-        amp_min_lower: col(|m| m.amp_min_lower),
-        amp_mean_lower: col(|m| m.amp_mean_lower),
-        amp_max_lower: col(|m| m.amp_max_lower),
-    }
+    let steps: Vec<(f64, &crate::signal::StepMetrics)> = r
+        .steps
+        .iter()
+        .map(|s| (s.omega_ratio, &s.metrics))
+        .collect();
+    TestCurve::from_steps(
+        &r.spec.name,
+        r.spec.level,
+        r.spec.direction,
+        Source::Simulation,
+        &steps,
+    )
 }
 
 /// A trace as a time history u/(Omega l), time from the start of the record window.

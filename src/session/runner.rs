@@ -24,6 +24,10 @@ use super::summary::SessionSummary;
 /// first block at least this long after the last record.
 pub const STATUS_PERIOD_S: f64 = 1.0;
 
+/// Frequency of the ramp-down command when no step ever set one (a fault before the first
+/// drive command), Hz: any valid frequency does, the amplitude is ramped to zero.
+const RAMP_DOWN_IDLE_FREQUENCY_HZ: f64 = 1.0;
+
 /// A recorder's error as the abort it causes.
 fn log_abort(e: RecordError) -> AbortReason {
     AbortReason::Log {
@@ -247,7 +251,7 @@ pub async fn run_session<B: RigBackend, R: SessionRecorder>(
             frequency_hz: if frequency_hz > 0.0 {
                 frequency_hz
             } else {
-                1.0
+                RAMP_DOWN_IDLE_FREQUENCY_HZ
             },
             amplitude_v: 0.0,
             ramp_s: ramp,

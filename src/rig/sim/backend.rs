@@ -135,7 +135,7 @@ impl RigBackend for SimBackend {
         // Applies from the next block computed (the one after the block in flight).
         self.faults.push(InjectedFault::ClearanceChange {
             at_s: 0.0,
-            clearance_m: test.clearance * self.beam_length,
+            clearance_m: test.clearance_m(self.beam_length),
         });
         Ok(())
     }

@@ -96,10 +96,12 @@ impl<R: SessionRecorder> Run<'_, R> {
         layout: &DaqLayout,
         status: &RigStatus,
     ) -> Result<(), AbortReason> {
-        self.recorder.block(block).map_err(log_abort)?;
+        // The block is accounted for before it is recorded: the ramp-down after a recorder
+        // failure (a full disk) runs on these times and must see them advance.
         self.summary.blocks += 1;
         self.last_block_end = block.time + block.len as f64 / layout.sample_rate;
         self.summary.rig_seconds = self.last_block_end;
+        self.recorder.block(block).map_err(log_abort)?;
         if block.time - self.last_status >= STATUS_PERIOD_S || block.seq == 0 {
             self.last_status = block.time;
             self.recorder
@@ -266,8 +268,13 @@ pub async fn run_session<B: RigBackend, R: SessionRecorder>(
         )
     );
     if daq_alive {
-        let end = t_now + ramp + layout.block_size as f64 / layout.sample_rate;
-        while run.last_block_end < end {
+        let block_s = layout.block_size as f64 / layout.sample_rate;
+        let end = t_now + ramp + block_s;
+        // However the blocks' times behave, the ramp takes no more blocks than its length.
+        let max_blocks = (ramp / block_s).ceil() as u64 + 2;
+        let mut taken = 0u64;
+        while run.last_block_end < end && taken < max_blocks {
+            taken += 1;
             match tokio::time::timeout(timeout, backend.next_block()).await {
                 Ok(Ok(Some(b))) => {
                     let status = backend.status();
@@ -304,4 +311,205 @@ pub async fn run_session<B: RigBackend, R: SessionRecorder>(
     };
     let _ = run.recorder.event(&end);
     Ok(run.summary)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::{ControlSpec, DaqSpec, SafetySpec};
+    use crate::log::LogError;
+    use crate::plan::Plan;
+    use crate::rig::{DriveState, RigError};
+
+    /// A rig that streams quiet blocks (all counts zero) and takes every command at once.
+    struct QuietRig {
+        layout: DaqLayout,
+        seq: u64,
+        drive: DriveState,
+        stopped: bool,
+        commands: Vec<DriveCommand>,
+    }
+
+    impl RigBackend for QuietRig {
+        fn layout(&self) -> &DaqLayout {
+            &self.layout
+        }
+        async fn start(&mut self) -> Result<(), RigError> {
+            Ok(())
+        }
+        async fn set_drive(&mut self, cmd: DriveCommand) -> Result<(), RigError> {
+            self.drive.frequency_hz = cmd.frequency_hz;
+            self.drive.target_amplitude_v = cmd.amplitude_v;
+            self.commands.push(cmd);
+            Ok(())
+        }
+        async fn next_block(&mut self) -> Result<Option<DaqBlock>, RigError> {
+            // Yields like a real stream, so that the test's timeout can fire on a hang.
+            tokio::task::yield_now().await;
+            let n = self.layout.block_size;
+            let first_sample = self.seq * n as u64;
+            let block = DaqBlock {
+                seq: self.seq,
+                first_sample,
+                time: first_sample as f64 / self.layout.sample_rate,
+                len: n,
+                counts: vec![0; n * self.layout.channels.len()],
+            };
+            self.seq += 1;
+            Ok(Some(block))
+        }
+        fn status(&self) -> RigStatus {
+            RigStatus {
+                running: !self.stopped,
+                drive: self.drive,
+                ..RigStatus::default()
+            }
+        }
+        async fn stop(&mut self) -> Result<(), RigError> {
+            self.stopped = true;
+            Ok(())
+        }
+    }
+
+    /// A recorder whose disk fills up: every block from block `fail_from` on fails to record,
+    /// and so does everything after it.
+    struct DiskFull {
+        fail_from: u64,
+        full: bool,
+        events: Vec<SessionEvent>,
+    }
+
+    impl DiskFull {
+        fn check(&self) -> Result<(), RecordError> {
+            if self.full {
+                return Err(RecordError::Log(LogError::Closed {
+                    path: "full.mcap".into(),
+                    reason: "No space left on device (os error 28)".into(),
+                }));
+            }
+            Ok(())
+        }
+    }
+
+    impl SessionRecorder for DiskFull {
+        fn layout(&mut self, _: &DaqLayout) -> Result<(), RecordError> {
+            Ok(())
+        }
+        fn block(&mut self, block: &DaqBlock) -> Result<(), RecordError> {
+            self.full |= block.seq >= self.fail_from;
+            self.check()
+        }
+        fn control(&mut self, _: &ControlState) -> Result<(), RecordError> {
+            self.check()
+        }
+        fn event(&mut self, event: &SessionEvent) -> Result<(), RecordError> {
+            // Kept in memory to see what the session said, whether or not the disk took it.
+            self.events.push(event.clone());
+            self.check()
+        }
+        fn status(&mut self, _: f64, _: &RigStatus) -> Result<(), RecordError> {
+            self.check()
+        }
+        fn step(
+            &mut self,
+            _: f64,
+            _: &crate::control::StepInfo,
+            _: &crate::control::StepSummary,
+        ) -> Result<(), RecordError> {
+            self.check()
+        }
+    }
+
+    /// Issue 17, case 1: a recorder failure (a full disk) aborts the session, which ramps the
+    /// drive down over the ramp time, stops the stream and returns; it used to spin forever
+    /// because the blocks of the ramp were never accounted for.
+    #[test]
+    fn a_full_disk_aborts_ramps_down_and_returns() {
+        let layout = crate::rig::channels::layout(&DaqSpec::default());
+        let plan = Plan::from_str(
+            "[[test]]\nname = \"t\"\nlevel = 6e-5\nclearance = 2.78e-3\ndirection = \"up\"\n\
+             omega_start = 0.95\nomega_end = 1.05\nsteps = 3\nsettle_periods = 20\n\
+             record_periods = 20\n",
+            "full-disk.toml",
+        )
+        .unwrap();
+        let safety = SafetySpec::default();
+        let setup = SessionSetup {
+            plan,
+            control: ControlSpec::default(),
+            safety: safety.clone(),
+            omega_ref: std::f64::consts::TAU * 51.27,
+            beam_length: 0.3,
+        };
+        let mut rig = QuietRig {
+            layout: layout.clone(),
+            seq: 0,
+            drive: DriveState::default(),
+            stopped: false,
+            commands: Vec::new(),
+        };
+        let mut recorder = DiskFull {
+            fail_from: 5,
+            full: false,
+            events: Vec::new(),
+        };
+        let runtime = tokio::runtime::Builder::new_current_thread()
+            .enable_time()
+            .build()
+            .unwrap();
+        let summary = runtime
+            .block_on(async {
+                tokio::time::timeout(
+                    Duration::from_secs(20),
+                    run_session(
+                        &mut rig,
+                        &setup,
+                        &mut recorder,
+                        std::future::pending(),
+                        &mut |_| {},
+                    ),
+                )
+                .await
+            })
+            .expect("the session returns after a full disk instead of hanging")
+            .unwrap();
+        let block_s = layout.block_size as f64 / layout.sample_rate;
+        let abort = recorder
+            .events
+            .iter()
+            .find_map(|e| match &e.kind {
+                EventKind::Abort { reason, .. } => Some((e.time, reason.clone())),
+                _ => None,
+            })
+            .expect("an abort event");
+        assert!(
+            matches!(abort.1, AbortReason::Log { .. }),
+            "aborted for {:?}",
+            abort.1
+        );
+        assert!(
+            (abort.0 - 6.0 * block_s).abs() < 1e-9,
+            "the abort stands after the failed block 5: {}",
+            abort.0
+        );
+        // The drive ramps to zero over the ramp time, then the stream stops.
+        let last = rig.commands.last().expect("a ramp-down command");
+        assert_eq!(last.amplitude_v, 0.0);
+        assert_eq!(last.ramp_s, safety.ramp_down_s);
+        assert!(rig.stopped, "the stream is stopped");
+        let ramp_blocks = rig.seq - 6;
+        let expected = (safety.ramp_down_s / block_s).ceil() as u64 + 1;
+        assert!(
+            ramp_blocks >= expected - 1 && ramp_blocks <= expected + 1,
+            "{ramp_blocks} blocks of ramp-down, expected about {expected}"
+        );
+        assert!(summary.aborted);
+        assert!(
+            (summary.rig_seconds - rig.seq as f64 * block_s).abs() < 1e-9,
+            "the summary's rig time covers every block taken: {} s",
+            summary.rig_seconds
+        );
+        let end = recorder.events.last().expect("a session end");
+        assert!(matches!(end.kind, EventKind::SessionEnd { aborted: true }));
+    }
 }

@@ -475,3 +475,48 @@ fn a_session_killed_mid_test_leaves_a_replayable_log() {
     assert!(o.status.success(), "{}", text(&o));
     assert!(text(&o).contains("not closed"), "{}", text(&o));
 }
+
+/// Issue 17, cases 4 and 6: Ctrl-C (SIGINT) and SIGTERM (`kill`, `timeout`, `systemctl stop`)
+/// on the simulated rig abort the session as the operator's: the ramp-down is logged block by
+/// block down to zero drive, the log ends with `session_end` and is closed, the summary says
+/// why, and the exit is non-zero. (SIGTERM used to end the process at once; SIGINT cut the
+/// drive in one step because a cancelled `next_block` dropped the simulation core.)
+#[test]
+fn sigint_and_sigterm_ramp_down_and_close_the_log() {
+    for (signal, name) in [(libc::SIGINT, "SIGINT"), (libc::SIGTERM, "SIGTERM")] {
+        let dir = tempfile::tempdir().unwrap();
+        let plan = write_plan(dir.path(), PLAN);
+        let mcap = dir.path().join("session.mcap");
+        let summary = dir.path().join("summary.json");
+        // Paced to the wall clock so that the signal lands mid-test.
+        let mut child = Command::new(env!("CARGO_BIN_EXE_rigtwin"))
+            .env("RIGTWIN_CACHE", cache())
+            .args(["run", "--plan", &plan, "--quiet", "--realtime", "--out"])
+            .arg(&mcap)
+            .arg("--json")
+            .arg(&summary)
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        cli_support::wait_for_log_growth(&mut child, &mcap, 300_000);
+        // SAFETY: kill(2) on the child's pid, which is alive (not yet waited for).
+        let sent = unsafe { libc::kill(child.id() as libc::pid_t, signal) };
+        assert_eq!(sent, 0, "{name} not sent");
+        let o = child.wait_with_output().unwrap();
+        let out = text(&o);
+        assert!(
+            !o.status.success(),
+            "{name}: exit status {:?}\n{out}",
+            o.status
+        );
+        assert!(
+            o.status.code().is_some(),
+            "{name}: killed by the signal instead of handling it\n{out}"
+        );
+        assert!(out.contains("session aborted"), "{name}: {out}");
+        check_aborted_log(&mcap, "operator");
+        let s = json(&summary);
+        assert_eq!(s["aborted"], true, "{name}: {s}");
+    }
+}

@@ -26,8 +26,8 @@ use super::spec::SafetySpec;
 )]
 #[serde(tag = "kind", rename_all = "snake_case")]
 pub enum AbortReason {
-    /// The operator stopped the session (Ctrl-C).
-    #[error("operator stop (Ctrl-C)")]
+    /// The operator stopped the session (Ctrl-C / SIGINT, or SIGTERM).
+    #[error("operator stop (SIGINT or SIGTERM)")]
     Operator,
     /// No DAQ block arrived in time.
     #[error("DAQ silent for {seconds} s (watchdog, safety.daq_timeout_s) after block {last_seq}")]

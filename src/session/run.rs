@@ -32,6 +32,9 @@ pub enum RunError {
     /// The async runtime could not start.
     #[error("starting the async runtime: {0}")]
     Runtime(#[source] std::io::Error),
+    /// The handlers of SIGINT and SIGTERM could not be installed.
+    #[error("installing the SIGINT and SIGTERM handlers: {0}")]
+    Signal(#[source] std::io::Error),
     /// The session log could not be created.
     #[error("creating the session log {path}: {source}")]
     LogCreate {
@@ -219,9 +222,7 @@ pub fn run<B: RigBackend>(
 
     let t0 = Instant::now();
     let (mut summary, overruns, link) = runtime.block_on(async {
-        let shutdown = async {
-            let _ = tokio::signal::ctrl_c().await;
-        };
+        let shutdown = operator_stop()?;
         let s = run_session(&mut backend, &setup, &mut recorder, shutdown, progress).await?;
         let status = backend.status();
         Ok::<_, RunError>((s, status.overruns, status.link))
@@ -246,5 +247,22 @@ pub fn run<B: RigBackend>(
         live,
         twin,
         link,
+    })
+}
+
+/// Completes when the operator stops the session: Ctrl-C (SIGINT) or SIGTERM (`kill`,
+/// `timeout`, `systemctl stop`); both abort it with a ramp-down and a closed log. The handlers
+/// are installed here, before the session starts, so that neither signal kills the process
+/// outright once the rig may be driven.
+fn operator_stop() -> Result<impl std::future::Future<Output = ()>, RunError> {
+    use tokio::signal::unix::{signal, SignalKind};
+    let install = |kind| signal(kind).map_err(RunError::Signal);
+    let mut interrupt = install(SignalKind::interrupt())?;
+    let mut terminate = install(SignalKind::terminate())?;
+    Ok(async move {
+        tokio::select! {
+            _ = interrupt.recv() => {}
+            _ = terminate.recv() => {}
+        }
     })
 }

@@ -3,8 +3,9 @@
 //! [`SessionRecorder`] (the MCAP log, teed with the live view and the live twin by [`Tee`])
 //! and ramps the drive down at the end or on an abort, recording the blocks of the ramp.
 //!
-//! Shutdown (Ctrl-C) is a future passed in: when it completes, the session aborts with
-//! [`AbortReason::Operator`]. The DAQ watchdog is a wall-clock timeout on every block.
+//! Shutdown (SIGINT or SIGTERM, whose handlers `session::run` installs) is a future passed
+//! in: when it completes, the session aborts with [`AbortReason::Operator`]. The DAQ watchdog
+//! is a wall-clock timeout on every block.
 //!
 //! [`Tee`]: super::recorder::Tee
 
@@ -270,10 +271,15 @@ pub async fn run_session<B: RigBackend, R: SessionRecorder>(
     if daq_alive {
         let block_s = layout.block_size as f64 / layout.sample_rate;
         let end = t_now + ramp + block_s;
-        // However the blocks' times behave, the ramp takes no more blocks than its length.
-        let max_blocks = (ramp / block_s).ceil() as u64 + 2;
+        // Until the ramp's time has passed and the backend reports the drive at zero (a
+        // block computed before the command, e.g. one in flight when Ctrl-C cancelled a
+        // wait, delays the ramp by a block); however the blocks' times and the drive behave,
+        // no more blocks than the ramp's length and a few in flight.
+        let max_blocks = (ramp / block_s).ceil() as u64 + 4;
         let mut taken = 0u64;
-        while run.last_block_end < end && taken < max_blocks {
+        while taken < max_blocks
+            && (run.last_block_end < end || backend.status().drive.amplitude_v != 0.0)
+        {
             taken += 1;
             match tokio::time::timeout(timeout, backend.next_block()).await {
                 Ok(Ok(Some(b))) => {

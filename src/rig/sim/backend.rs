@@ -34,6 +34,10 @@ pub struct SimBackend {
     rig: Option<SimRig>,
     layout: DaqLayout,
     pending: Option<Pending>,
+    /// A computed block waiting for its wall-clock time (`realtime`), kept here so that a
+    /// cancelled `next_block` (the session's shutdown branch winning a `select!`) loses
+    /// nothing: the next call hands it out.
+    ready: Option<(DaqBlock, DriveState, Vec<RigFault>)>,
     commands: Vec<DriveCommand>,
     faults: Vec<InjectedFault>,
     realtime: bool,
@@ -51,6 +55,7 @@ impl SimBackend {
             layout: rig.layout().clone(),
             rig: Some(rig),
             pending: None,
+            ready: None,
             commands: Vec::new(),
             faults: Vec::new(),
             realtime,
@@ -66,19 +71,20 @@ impl SimBackend {
         self.faults.push(fault);
     }
 
-    /// Takes the core back from the computation in flight (if any).
+    /// Takes the core back from the computation in flight (if any). Cancel-safe: the
+    /// computation stays in flight until it is awaited to the end.
     async fn settle_pending(
         &mut self,
     ) -> Result<Option<(DaqBlock, DriveState, Vec<RigFault>, bool)>, RigError> {
-        match self.pending.take() {
-            None => Ok(None),
-            Some(h) => {
-                let (rig, block, drive, faults, stalled) =
-                    h.await.map_err(|e| RigError::link(TaskFailed(e)))?;
-                self.rig = Some(rig);
-                Ok(Some((block, drive, faults, stalled)))
-            }
-        }
+        let Some(h) = self.pending.as_mut() else {
+            return Ok(None);
+        };
+        let done = h.await;
+        self.pending = None;
+        let (rig, block, drive, faults, stalled) =
+            done.map_err(|e| RigError::link(TaskFailed(e)))?;
+        self.rig = Some(rig);
+        Ok(Some((block, drive, faults, stalled)))
     }
 
     fn spawn_next(&mut self) -> Result<(), RigError> {
@@ -147,25 +153,34 @@ impl RigBackend for SimBackend {
         if self.stalled {
             std::future::pending::<()>().await;
         }
-        let Some((block, drive, faults, stalled)) = self.settle_pending().await? else {
-            return Ok(None);
-        };
-        if stalled {
-            // The DAQ stopped: this block and all later ones never arrive.
-            self.stalled = true;
-            std::future::pending::<()>().await;
-        }
-        self.spawn_next()?;
-        let end = block.time + block.len as f64 / self.layout.sample_rate;
-        if self.realtime {
-            let deadline = started + Duration::from_secs_f64(end);
-            let now = Instant::now();
-            if now > deadline + Duration::from_secs_f64(block.len as f64 / self.layout.sample_rate)
-            {
-                self.status.overruns += 1;
+        if self.ready.is_none() {
+            let Some((block, drive, faults, stalled)) = self.settle_pending().await? else {
+                return Ok(None);
+            };
+            if stalled {
+                // The DAQ stopped: this block and all later ones never arrive.
+                self.stalled = true;
+                std::future::pending::<()>().await;
             }
-            tokio::time::sleep_until(deadline).await;
+            self.spawn_next()?;
+            if self.realtime {
+                let len_s = block.len as f64 / self.layout.sample_rate;
+                let deadline = started + Duration::from_secs_f64(block.time + len_s);
+                if Instant::now() > deadline + Duration::from_secs_f64(len_s) {
+                    self.status.overruns += 1;
+                }
+            }
+            self.ready = Some((block, drive, faults));
         }
+        // Cancel-safe from here: the block stays in `ready` until the wait is over.
+        let end = {
+            let (block, _, _) = self.ready.as_ref().expect("set above");
+            block.time + block.len as f64 / self.layout.sample_rate
+        };
+        if self.realtime {
+            tokio::time::sleep_until(started + Duration::from_secs_f64(end)).await;
+        }
+        let (block, drive, faults) = self.ready.take().expect("set above");
         self.status.time = end;
         self.status.drive = drive;
         self.status.faults = faults;

@@ -443,6 +443,22 @@ fn a_window_off_the_tolerance_is_recorded_again() {
     );
 }
 
+/// `rigtwin run` of `plan` into `mcap` (and the summary into `json`), paced to the wall clock
+/// so that a kill or a signal lands mid-test; its output piped.
+fn spawn_realtime_session(plan: &str, mcap: &Path, json: Option<&Path>) -> std::process::Child {
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_rigtwin"));
+    cmd.env("RIGTWIN_CACHE", cache())
+        .args(["run", "--plan", plan, "--quiet", "--realtime", "--out"])
+        .arg(mcap);
+    if let Some(j) = json {
+        cmd.arg("--json").arg(j);
+    }
+    cmd.stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap()
+}
+
 /// A session killed with SIGKILL mid-test leaves a log that `rigtwin replay` reads up to the
 /// last flush (the writer flushes at least once a second).
 #[test]
@@ -450,15 +466,7 @@ fn a_session_killed_mid_test_leaves_a_replayable_log() {
     let dir = tempfile::tempdir().unwrap();
     let plan = write_plan(dir.path(), PLAN);
     let mcap = dir.path().join("session.mcap");
-    // Paced to the wall clock so that the kill lands mid-test.
-    let mut child = Command::new(env!("CARGO_BIN_EXE_rigtwin"))
-        .env("RIGTWIN_CACHE", cache())
-        .args(["run", "--plan", &plan, "--quiet", "--realtime", "--out"])
-        .arg(&mcap)
-        .stdout(std::process::Stdio::null())
-        .stderr(std::process::Stdio::null())
-        .spawn()
-        .unwrap();
+    let mut child = spawn_realtime_session(&plan, &mcap, None);
     // Wait until the log holds a few flushes of DAQ data, then kill.
     cli_support::wait_for_log_growth(&mut child, &mcap, 300_000);
     std::thread::sleep(std::time::Duration::from_millis(1500));
@@ -488,17 +496,7 @@ fn sigint_and_sigterm_ramp_down_and_close_the_log() {
         let plan = write_plan(dir.path(), PLAN);
         let mcap = dir.path().join("session.mcap");
         let summary = dir.path().join("summary.json");
-        // Paced to the wall clock so that the signal lands mid-test.
-        let mut child = Command::new(env!("CARGO_BIN_EXE_rigtwin"))
-            .env("RIGTWIN_CACHE", cache())
-            .args(["run", "--plan", &plan, "--quiet", "--realtime", "--out"])
-            .arg(&mcap)
-            .arg("--json")
-            .arg(&summary)
-            .stdout(std::process::Stdio::piped())
-            .stderr(std::process::Stdio::piped())
-            .spawn()
-            .unwrap();
+        let mut child = spawn_realtime_session(&plan, &mcap, Some(&summary));
         cli_support::wait_for_log_growth(&mut child, &mcap, 300_000);
         // SAFETY: kill(2) on the child's pid, which is alive (not yet waited for).
         let sent = unsafe { libc::kill(child.id() as libc::pid_t, signal) };

@@ -103,6 +103,30 @@ fn cases() -> Vec<Case> {
             vec![">= 1"],
         ),
         (
+            "record periods beyond the memory guard (issue 17: 4e9 aborted the session)",
+            edit_second(
+                "name = \"up\"",
+                "name = \"up\"\nrecord_periods = 4000000000",
+            ),
+            "record_periods",
+            test2(),
+            vec!["test 2 \"up\"", "= 4000000000", "<= 100000"],
+        ),
+        (
+            "frequency steps beyond the guard (issue 17: 1e8 aborted simulate)",
+            edit("steps = 13", "steps = 100000000"),
+            "steps",
+            PlanLocation::Defaults,
+            vec!["= 100000000", "<= 10000"],
+        ),
+        (
+            "a simulated record window too large for memory",
+            edit("steps = 13", "steps = 13\nsteps_per_period = 10000000"),
+            "steps_per_period",
+            PlanLocation::Defaults,
+            vec!["record_periods x steps_per_period <= 1e8", "= 2e8"],
+        ),
+        (
             "negative level",
             edit("level = 6.0e-5", "level = -6.0e-5"),
             "level",
@@ -286,6 +310,11 @@ fn validate_rechecks_a_plan_built_in_code() {
     let err = p.validate().unwrap_err();
     assert_eq!(err.key(), Some("record_periods"), "{err}");
     assert!(err.to_string().contains("test 2 \"up\""), "{err}");
+    let mut p = parse(GOOD).unwrap();
+    p.tests[0].record_periods = 4_000_000_000;
+    let err = p.validate().unwrap_err();
+    assert_eq!(err.key(), Some("record_periods"), "{err}");
+    assert!(err.to_string().contains("<= 100000"), "{err}");
     let mut p = parse(GOOD).unwrap();
     p.tests[0].direction = Direction::Up;
     assert_eq!(p.validate().unwrap_err().key(), Some("direction"));

@@ -155,6 +155,39 @@ pub enum SetupError {
     /// The frequency or length reference is not positive.
     #[error("omega_ref and beam_length must be > 0")]
     BadReference,
+    /// A test's record window would not fit in memory.
+    #[error(
+        "plan {plan}, test {test:?}: record_periods = {record_periods} at Omega/omega_2 = \
+         {omega_ratio} needs a record window of {bytes:.3e} bytes ({samples} samples x \
+         {channels} channels), more than the limit of {MAX_RECORD_WINDOW_BYTES:.3e} bytes: \
+         record fewer periods"
+    )]
+    RecordWindow {
+        /// Where the plan came from.
+        plan: String,
+        /// The test.
+        test: String,
+        /// Its record periods.
+        record_periods: u32,
+        /// The step with the longest window.
+        omega_ratio: f64,
+        /// Samples per channel of that window.
+        samples: usize,
+        /// Channels of the layout.
+        channels: usize,
+        /// Bytes of ADC counts the window needs.
+        bytes: f64,
+    },
+}
+
+/// Largest record window the procedure keeps in memory, bytes of ADC counts.
+pub const MAX_RECORD_WINDOW_BYTES: f64 = 2.0 * 1024.0 * 1024.0 * 1024.0;
+
+/// Samples per channel of a record window of `periods` at `omega` (rad/s) with samples `dt`
+/// apart: whole periods and the sample that closes the last one.
+fn record_samples(periods: u32, omega: f64, dt: f64) -> usize {
+    let spp = TAU / (omega * dt);
+    (f64::from(periods) * spp).ceil() as usize + 1
 }
 
 impl Procedure {
@@ -174,6 +207,25 @@ impl Procedure {
         }
         if !(setup.omega_ref > 0.0 && setup.beam_length > 0.0) {
             return Err(SetupError::BadReference);
+        }
+        let channels = layout.channels.len();
+        for t in &setup.plan.tests {
+            // The longest window is at the lowest frequency.
+            let omega_ratio = t.omega_start.min(t.omega_end);
+            let samples =
+                record_samples(t.record_periods, omega_ratio * setup.omega_ref, layout.dt());
+            let bytes = (samples as f64) * (channels * std::mem::size_of::<i32>()) as f64;
+            if bytes > MAX_RECORD_WINDOW_BYTES {
+                return Err(SetupError::RecordWindow {
+                    plan: setup.plan.source.clone(),
+                    test: t.name.clone(),
+                    record_periods: t.record_periods,
+                    omega_ratio,
+                    samples,
+                    channels,
+                    bytes,
+                });
+            }
         }
         let initial = if setup.control.initial_drive_v > 0.0 {
             setup.control.initial_drive_v
@@ -410,9 +462,7 @@ impl Procedure {
     /// window).
     fn begin_record(&mut self, out: &mut BlockOutcome, first: u64, settled: bool) {
         let dt = self.layout.dt();
-        let spp = TAU / (self.omega() * dt);
-        let periods = f64::from(self.spec().record_periods);
-        let len = (periods * spp).ceil() as usize + 1;
+        let len = record_samples(self.spec().record_periods, self.omega(), dt);
         let window = RecordWindow {
             first,
             len,
@@ -519,5 +569,52 @@ impl Procedure {
             }
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::{ControlSpec, DaqSpec, SafetySpec};
+
+    fn setup(record_periods: u32) -> SessionSetup {
+        let text = format!(
+            "[[test]]\nname = \"slow\"\nlevel = 6e-5\nclearance = 2.78e-3\ndirection = \"up\"\n\
+             omega_start = 0.1\nomega_end = 0.2\nsteps = 2\nsettle_periods = 20\n\
+             record_periods = {record_periods}\n"
+        );
+        SessionSetup {
+            plan: Plan::from_str(&text, "slow.toml").unwrap(),
+            control: ControlSpec::default(),
+            safety: SafetySpec::default(),
+            omega_ref: TAU * 51.27,
+            beam_length: 0.3,
+        }
+    }
+
+    /// Issue 17, case 5: a record window that does not fit in memory is refused before the
+    /// session starts (4e9 periods aborted a session mid-test with the drive on); the plan's
+    /// own limit allows 1e5 periods, which at 0.1 omega_2 is 8.8 GB of counts.
+    #[test]
+    fn a_record_window_beyond_memory_is_refused_at_setup() {
+        let layout = crate::rig::channels::layout(&DaqSpec::default());
+        let e = Procedure::new(&setup(100_000), &layout).unwrap_err();
+        let msg = e.to_string();
+        assert!(
+            matches!(
+                e,
+                SetupError::RecordWindow {
+                    record_periods: 100_000,
+                    channels: 11,
+                    ..
+                }
+            ),
+            "{msg}"
+        );
+        assert!(
+            msg.contains("test \"slow\"") && msg.contains("limit"),
+            "{msg}"
+        );
+        assert!(Procedure::new(&setup(1_000), &layout).is_ok());
     }
 }

@@ -16,6 +16,48 @@ const CLEARANCE_MAX: f64 = 0.1;
 /// Exclusive upper bound of Omega / omega_2.
 const OMEGA_MAX: f64 = 10.0;
 
+/// Largest accepted number of frequency steps per test (a typo guard: the paper's tests
+/// have 20-40).
+pub const MAX_STEPS: u32 = 10_000;
+/// Largest accepted settle time, excitation periods (a typo guard: hours at the rig's
+/// frequencies).
+pub const MAX_SETTLE_PERIODS: u32 = 1_000_000;
+/// Largest accepted record window, excitation periods: the rig keeps the window in memory
+/// (about 9 kB per period at 51 Hz, 10,240 Hz and 11 channels), so this bounds it to about
+/// 1 GB at the rig's first bending frequency.
+pub const MAX_RECORD_PERIODS: u32 = 100_000;
+/// Largest accepted number of time steps per excitation period of a simulation.
+pub const MAX_STEPS_PER_PERIOD: u32 = 10_000_000;
+/// Largest accepted simulated record window, time steps (`record_periods x
+/// steps_per_period`): the virtual stepped sine keeps about 40 bytes per step of it, so this
+/// bounds it to about 4 GB.
+pub const MAX_RECORD_STEPS: u64 = 100_000_000;
+
+/// The largest accepted value of a count key.
+fn count_max(key: &str) -> u32 {
+    match key {
+        "steps" => MAX_STEPS,
+        "settle_periods" => MAX_SETTLE_PERIODS,
+        "record_periods" => MAX_RECORD_PERIODS,
+        "steps_per_period" => MAX_STEPS_PER_PERIOD,
+        _ => u32::MAX,
+    }
+}
+
+/// The simulated record window's size rule (on `record_periods`).
+fn check_record_steps(record_periods: u32, steps_per_period: u32) -> Result<(), String> {
+    let n = u64::from(record_periods) * u64::from(steps_per_period);
+    if n <= MAX_RECORD_STEPS {
+        Ok(())
+    } else {
+        Err(format!(
+            "record_periods x steps_per_period <= {MAX_RECORD_STEPS:e} time steps (the \
+             simulated record window is kept in memory, about 40 bytes per step), got \
+             {record_periods} x {steps_per_period} = {n:e}"
+        ))
+    }
+}
+
 /// A value rule: `Err` carries the expectation.
 type Rule = fn(f64) -> Result<(), String>;
 
@@ -49,10 +91,11 @@ fn check_omega(v: f64) -> Result<(), String> {
     }
 }
 
-fn check_count(v: i64, what: &str) -> Result<u32, String> {
+fn check_count(v: i64, what: &str, max: u32) -> Result<u32, String> {
     match u32::try_from(v) {
-        Ok(n) if n >= 1 => Ok(n),
-        _ => Err(format!("an integer number of {what}, >= 1")),
+        Ok(n) if (1..=max).contains(&n) => Ok(n),
+        _ if max == u32::MAX => Err(format!("an integer number of {what}, >= 1")),
+        _ => Err(format!("an integer number of {what}, >= 1 and <= {max}")),
     }
 }
 
@@ -173,9 +216,10 @@ impl Merged<'_> {
         what: &str,
         pick: impl Fn(&RawTest) -> &Option<i64>,
     ) -> Result<u32, PlanError> {
-        let expected = format!("an integer number of {what}, >= 1");
+        let max = count_max(key);
+        let expected = format!("an integer number of {what}, >= 1 and <= {max}");
         let (v, at) = self.get(key, &expected, pick)?;
-        check_count(v, what).map_err(|e| self.invalid(at, key, v.to_string(), e))
+        check_count(v, what, max).map_err(|e| self.invalid(at, key, v.to_string(), e))
     }
 
     fn build(&self) -> Result<TestSpec, PlanError> {
@@ -217,8 +261,15 @@ impl Merged<'_> {
         })?;
         let (spp, spp_at) =
             self.get_or(i64::from(DEFAULT_STEPS_PER_PERIOD), |t| &t.steps_per_period);
-        let steps_per_period = check_count(spp, "time steps per excitation period")
-            .map_err(|e| self.invalid(spp_at, "steps_per_period", spp.to_string(), e))?;
+        let steps_per_period = check_count(
+            spp,
+            "time steps per excitation period",
+            count_max("steps_per_period"),
+        )
+        .map_err(|e| self.invalid(spp_at.clone(), "steps_per_period", spp.to_string(), e))?;
+        check_record_steps(record_periods, steps_per_period).map_err(|e| {
+            self.invalid(spp_at, "steps_per_period", steps_per_period.to_string(), e)
+        })?;
         check_sweep(direction, omega_start, omega_end, steps)
             .map_err(|e| self.invalid(dir_at, "direction", format!("{dir:?}"), e))?;
         Ok(TestSpec {
@@ -337,8 +388,11 @@ pub(super) fn check_plan(plan: &Plan) -> Result<(), PlanError> {
             ),
         ];
         for (key, v, what) in counts {
-            check_count(i64::from(v), what).map_err(|e| invalid(key, v.to_string(), e))?;
+            check_count(i64::from(v), what, count_max(key))
+                .map_err(|e| invalid(key, v.to_string(), e))?;
         }
+        check_record_steps(t.record_periods, t.steps_per_period)
+            .map_err(|e| invalid("steps_per_period", t.steps_per_period.to_string(), e))?;
         check_sweep(t.direction, t.omega_start, t.omega_end, t.steps)
             .map_err(|e| invalid("direction", format!("{:?}", t.direction.as_str()), e))?;
     }

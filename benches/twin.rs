@@ -118,7 +118,7 @@ fn main() {
     .expect("default ROM");
     let l = rom.meta.beam_length;
     let w2 = rom.omega_ref();
-    let layout = rigtwin::rig::sim::daq::layout(&DaqSpec::default());
+    let layout = rigtwin::rig::channels::layout(&DaqSpec::default());
     let fs = layout.sample_rate;
     let block_s = layout.block_size as f64 / fs;
     let spec = TwinSpec::default();

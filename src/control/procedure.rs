@@ -13,8 +13,8 @@
 use std::f64::consts::TAU;
 
 use crate::plan::{per_l_to_metres, Plan, TestSpec};
-use crate::rig::channels::{base_acceleration, platform_accelerometers};
-use crate::rig::{ChannelKind, DaqBlock, DaqLayout, DriveCommand, DriveState};
+use crate::rig::channels::ChannelMap;
+use crate::rig::{DaqBlock, DaqLayout, DriveCommand, DriveState};
 
 use super::amplitude::{AmplitudeController, ControlUpdate};
 use super::events::{ControlState, EventKind, Phase, SessionEvent};
@@ -112,8 +112,8 @@ const TEST_START_RAMP_S: f64 = 0.25;
 pub struct Procedure {
     setup: SessionSetup,
     layout: DaqLayout,
-    platform: Vec<(usize, f64)>,
-    vibrometer: Option<usize>,
+    /// The channels' roles (platform accelerometers, vibrometer).
+    channels: ChannelMap,
     test: usize,
     step: usize,
     ratios: Vec<f64>,
@@ -201,8 +201,8 @@ impl Procedure {
                 plan: setup.plan.source.clone(),
             });
         }
-        let platform = platform_accelerometers(layout);
-        if platform.is_empty() {
+        let map = ChannelMap::of(layout);
+        if map.platform.is_empty() {
             return Err(SetupError::NoPlatform);
         }
         if !(setup.omega_ref > 0.0 && setup.beam_length > 0.0) {
@@ -235,8 +235,7 @@ impl Procedure {
         Ok(Procedure {
             setup: setup.clone(),
             layout: layout.clone(),
-            platform,
-            vibrometer: layout.indices_of(ChannelKind::Vibrometer).first().copied(),
+            channels: map,
             test: 0,
             step: 0,
             ratios: setup.plan.tests[0].omega_ratios(),
@@ -367,8 +366,8 @@ impl Procedure {
                 break; // the rest of the block belongs to the previous frequency
             }
             let sample = block.first_sample + i as u64;
-            let a_base = base_acceleration(&self.platform, &block.counts, block.len, i);
-            if let Some(k) = self.vibrometer {
+            let a_base = self.channels.base_acceleration(&block.counts, block.len, i);
+            if let Some(k) = self.channels.vibrometer {
                 let v = self.layout.channels[k].value(block.counts[k * block.len + i]);
                 if let Some(settle) = self.stage.settle_detector() {
                     settle.push_response(v);

@@ -10,8 +10,8 @@
 //! voltage below the threshold. The metrics are those of `rigtwin simulate`
 //! ([`crate::signal::step_metrics`]), normalised by Omega times the target amplitude.
 
-use crate::rig::channels::{base_acceleration, platform_accelerometers};
-use crate::rig::{ChannelKind, DaqLayout};
+use crate::rig::channels::ChannelMap;
+use crate::rig::DaqLayout;
 use crate::signal::{
     demodulate, integrate_periodic, PeriodGrid, SignalError, StepMetrics, StepRecord,
 };
@@ -124,17 +124,6 @@ pub enum SummaryError {
     },
 }
 
-fn first(layout: &DaqLayout, kind: ChannelKind, name: Option<&str>) -> Option<usize> {
-    if let Some(n) = name {
-        if let Some(i) = layout.index(n) {
-            if layout.channels[i].kind == kind {
-                return Some(i);
-            }
-        }
-    }
-    layout.indices_of(kind).first().copied()
-}
-
 /// The physical signals of a record window, as the summary uses them.
 #[derive(Clone, Debug, PartialEq)]
 pub struct WindowSignals {
@@ -180,12 +169,12 @@ pub fn window_signals(
             .map(|&c| ch.value(c))
             .collect()
     };
-    let platform = platform_accelerometers(layout);
-    if platform.is_empty() {
+    let map = ChannelMap::of(layout);
+    if map.platform.is_empty() {
         return Err(SummaryError::MissingChannel("platform acceleration"));
     }
     let a_base: Vec<f64> = (0..n)
-        .map(|i| base_acceleration(&platform, counts, n, i))
+        .map(|i| map.base_acceleration(counts, n, i))
         .collect();
 
     let dt = layout.dt();
@@ -195,21 +184,19 @@ pub fn window_signals(
         let rel: Vec<f64> = values(k).iter().zip(&a_base).map(|(a, b)| a - b).collect();
         integrate_periodic(&rel, dt, &grid).map_err(sig)
     };
-    let upper = match layout.indices_of(ChannelKind::Vibrometer).first() {
-        Some(&k) => values(k).iter().zip(&v_base).map(|(v, b)| v - b).collect(),
+    let upper = match map.vibrometer {
+        Some(k) => values(k).iter().zip(&v_base).map(|(v, b)| v - b).collect(),
         None => relative_velocity(
-            first(layout, ChannelKind::BeamAcceleration, Some("upper_tip"))
+            map.upper_tip
                 .ok_or(SummaryError::MissingChannel("upper_tip acceleration"))?,
         )?,
     };
-    let k_lower = layout
-        .index("lower_tip")
+    let k_lower = map
+        .lower_tip
         .ok_or(SummaryError::MissingChannel("lower_tip acceleration"))?;
     let lower = relative_velocity(k_lower)?;
-    let k_contact = layout
-        .indices_of(ChannelKind::ContactVoltage)
-        .first()
-        .copied()
+    let k_contact = map
+        .contact_voltage
         .ok_or(SummaryError::MissingChannel("contact voltage"))?;
     let closed: Vec<bool> = values(k_contact)
         .iter()

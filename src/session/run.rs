@@ -174,7 +174,7 @@ fn log_records(r: &SessionRequest<'_>) -> (Vec<MetadataRecord>, Vec<Attachment>)
 
 /// Runs the plan on `backend` (on `runtime`), logging to the request's file, with the live
 /// twin and the live view when asked; `progress` sees every block's control state. Returns when
-/// the session is done, aborted (the abort is in the summary) or stopped by Ctrl-C.
+/// the session is done, aborted (the abort is in the summary) or stopped by SIGINT or SIGTERM.
 pub fn run<B: RigBackend>(
     runtime: &tokio::runtime::Runtime,
     mut backend: B,

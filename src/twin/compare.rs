@@ -11,6 +11,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::control::{StepInfo, StepSummary};
 use crate::signal::{spectrum_distance_db, StepMetrics, StepRecord};
+// The lower and upper tip's indices in the twin's sensors (`TWIN_SENSORS`).
+use crate::sim::driven::{LOWER_TIP, UPPER_TIP};
 
 use super::TwinBlock;
 
@@ -36,10 +38,6 @@ pub struct TwinComparison {
     #[serde(default)]
     pub spectrum_distance_db: Option<f64>,
 }
-
-/// Index of the lower and upper tip in the twin's sensors ([`super::TWIN_SENSORS`]).
-const LOWER_TIP: usize = 0;
-const UPPER_TIP: usize = crate::sim::driven::UPPER_TIP;
 
 /// The twin's output samples from `first` on, to cut record windows from.
 #[derive(Debug, Default)]

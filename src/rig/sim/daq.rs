@@ -1,7 +1,7 @@
 //! The simulated DAQ: the anti-alias filter at the truth rate on every channel, decimation to
 //! the DAQ rate, white sensor noise from a seeded ChaCha8 generator (deterministic), and
 //! quantisation to ADC counts with clipping at full scale. The channel layout is the rig's
-//! channel map ([`crate::rig::channels::layout`], re-exported here).
+//! channel map ([`crate::rig::channels::layout`]).
 //!
 //! Decimation keeps the filtered value of the first truth step of every DAQ sample period (the
 //! contact channel: its minimum over the period), so
@@ -11,10 +11,6 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use crate::rig::daq::{ChannelKind, DaqLayout};
-
-// The channel layout of a `[daq]` table is the rig's channel map, shared with the hardware
-// path; re-exported here for the simulator's modules.
-pub use crate::rig::channels::{layout, FIXED_CHANNELS};
 
 use super::filter::Butterworth4;
 use super::spec::DaqSpec;
@@ -208,7 +204,7 @@ mod tests {
             adc_bits,
             ..DaqSpec::default()
         };
-        let l = layout(&spec);
+        let l = crate::rig::channels::layout(&spec);
         let nc = l.channels.len();
         let rest = vec![0.0; nc];
         let mut daq = Daq::new(&spec, &l, 4, &rest);

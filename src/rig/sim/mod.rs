@@ -246,7 +246,7 @@ impl SimRig {
             }
             Ok(dt)
         })?;
-        let layout = daq::layout(&spec.daq);
+        let layout = crate::rig::channels::layout(&spec.daq);
         let gains = variants::sensor_gain::resolve(&hidden.sensor_gains, &layout)?;
         let sensors = Sensors::new(
             spec.daq.platform_accelerometers.len(),

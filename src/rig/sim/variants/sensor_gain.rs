@@ -49,11 +49,11 @@ pub fn apply(gains: &[(usize, f64)], values: &mut [f64]) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::rig::sim::{daq, DaqSpec};
+    use crate::rig::sim::DaqSpec;
 
     #[test]
     fn resolves_names_and_scales_only_those_channels() {
-        let layout = daq::layout(&DaqSpec::default());
+        let layout = crate::rig::channels::layout(&DaqSpec::default());
         let gains = resolve(
             &[
                 SensorGainSpec {

@@ -28,7 +28,7 @@ use rigtwin::config::RigConfig;
 use rigtwin::rig::daq::{ChannelKind, DaqBlock, DaqLayout};
 use rigtwin::rig::sim::DaqSpec;
 use rigtwin::rom::build::BuildOptions;
-use rigtwin::twin::{Twin, TwinEvent, TwinSpec, TwinTask};
+use rigtwin::twin::{Twin, TwinEvent, TwinModel, TwinSpec, TwinTask};
 
 struct Args {
     repeat: usize,
@@ -156,7 +156,8 @@ fn main() {
     for case in &cases {
         let omega = case.omega_ratio * w2;
         let clearance = case.clearance * l;
-        let mut twin = Twin::new(&rom, &spec, &layout, clearance).expect("twin");
+        let mut twin =
+            Twin::new(&TwinModel::nominal(&rom), &spec, &layout, clearance).expect("twin");
         let settle_blocks = (case.share * args.settle * 2.0 * PI / omega / block_s).ceil() as u64;
         let run_blocks = (case.share * args.seconds / block_s).ceil() as u64;
         for b in blocks(&layout, 0, settle_blocks, case.level * l, omega) {

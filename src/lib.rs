@@ -22,6 +22,7 @@ pub mod contact;
 pub mod control;
 pub mod fe;
 pub mod log;
+pub mod physics;
 pub mod plan;
 pub mod report;
 pub mod rig;

@@ -482,3 +482,109 @@ fn documented_truth_variants_examples_are_valid() {
         (2000.0, 80)
     );
 }
+
+/// `[model]`: a table written by a program reads back identically, and the description stays
+/// the same otherwise (its canonical hash: `[model]` is not part of the ROM's identity).
+#[test]
+fn model_table_round_trips_and_is_not_hashed() {
+    use rigtwin::config::{
+        with_model, Beam, ClampFrictionSpec, ClearanceSpec, ModalCorrectionSpec, PhysicsSpec,
+        RigConfig, SensorGainSpec, TestClearanceSpec, TiltSpec, WearSpec, DEFAULT_RIG_TOML,
+    };
+    let model = PhysicsSpec {
+        modes: vec![ModalCorrectionSpec {
+            mode: "1FU".into(),
+            frequency_hz: Some(101.23456789012345),
+            damping_ratio: Some(0.00104),
+        }],
+        clamp_friction: Some(ClampFrictionSpec {
+            stiffness_fraction: 0.0731,
+            half_slip_tip_amplitude: 3.3e-5,
+            sliders: 48,
+            beams: vec![Beam::Upper],
+        }),
+        clearance: Some(ClearanceSpec {
+            offset: -1.234e-6,
+            tests: vec![TestClearanceSpec {
+                test: "3-high-up".into(),
+                clearance: 1.2345678e-3,
+            }],
+        }),
+        wear: Some(WearSpec {
+            coefficient: 2.5e-7,
+            max_growth: Some(1e-4),
+        }),
+        tilt: Some(TiltSpec {
+            angle: -2.2e-3,
+            axis: [0.6, 0.8],
+        }),
+        sensor_gains: vec![SensorGainSpec {
+            channel: "lower_tip".into(),
+            gain: 0.9512345,
+        }],
+    };
+    let text = with_model(DEFAULT_RIG_TOML, "default", &model).unwrap();
+    let cfg = RigConfig::from_str(&text, "written").unwrap();
+    assert_eq!(cfg.model, model);
+    let nominal = RigConfig::default_rig();
+    assert_eq!(
+        cfg.model().canonical_hash(),
+        nominal.model().canonical_hash()
+    );
+    // Written again from the written text: the same text.
+    assert_eq!(with_model(&text, "written", &model).unwrap(), text);
+    // No extension: no [model] table.
+    let plain = with_model(&text, "written", &PhysicsSpec::default()).unwrap();
+    assert!(!plain.contains("[model"), "{plain}");
+    assert_eq!(
+        RigConfig::from_str(&plain, "plain").unwrap().model,
+        PhysicsSpec::default()
+    );
+}
+
+/// Bad `[model]` values name the file and the key.
+#[test]
+fn bad_model_values_name_the_file_and_key() {
+    use rigtwin::config::{RigConfig, DEFAULT_RIG_TOML};
+    for (table, expect) in [
+        (
+            "[model]\nmodes = [{ mode = \"1FU\", damping_ratio = -0.01 }]\n",
+            "model.modes[0].damping_ratio = -0.01: expected",
+        ),
+        (
+            "[model]\nmodes = [{ mode = \"1FU\" }]\n",
+            "model.modes[0].frequency_hz",
+        ),
+        (
+            "[model]\nmodes = [{ mode = \"1FU\", frequency_hz = 100.0 }, { mode = \"1FU\", \
+             frequency_hz = 101.0 }]\n",
+            "model.modes[1].mode = \"1FU\": expected each mode listed once",
+        ),
+        (
+            "[model.tilt]\nangle = 0.2\n",
+            "model.tilt.angle = 0.2: expected",
+        ),
+        (
+            "[model]\nsensor_gains = [{ channel = \"upper_tipp\", gain = 1.1 }]\n",
+            "model.sensor_gains[0].channel = \"upper_tipp\": expected a DAQ channel name",
+        ),
+        (
+            "[model.clearance]\noffset = 0.5\n",
+            "model.clearance.offset = 0.5: expected",
+        ),
+        (
+            "[model.wear]\ncoefficient = -1.0\n",
+            "model.wear.coefficient = -1: expected",
+        ),
+        ("[model]\nmode = []\n", "unknown field `mode`"),
+    ] {
+        let text = format!("{DEFAULT_RIG_TOML}\n{table}");
+        let msg = RigConfig::from_str(&text, "rig.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            msg.contains("rig.toml") && msg.contains(expect),
+            "{table}\n-> {msg}"
+        );
+    }
+}

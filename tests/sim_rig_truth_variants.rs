@@ -137,6 +137,10 @@ fn variants_off_or_neutral_give_the_same_bits() {
         "no contact: the check would miss the contact solver"
     );
     let neutral = TruthVariants {
+        // A neutral modal correction is not bit-neutral (Hz -> rad/s); the unit tests of
+        // physics::modal cover it.
+        modes: Vec::new(),
+        clearance: Some(Default::default()),
         clamp_friction: Some(ClampFrictionSpec {
             stiffness_fraction: 0.0,
             half_slip_tip_amplitude: 1e-5,

@@ -61,6 +61,7 @@ pub(crate) fn run(a: DemoArgs) -> anyhow::Result<()> {
             json: Some(&a.out.join("stepped-sine.json")),
             figures: Some(&a.out.join("figures")),
             quiet: a.quiet,
+            model: &cfg.model,
         },
     )?;
 

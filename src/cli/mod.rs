@@ -129,3 +129,13 @@ pub(crate) fn cache_dir() -> PathBuf {
     }
     PathBuf::from(".rigtwin-cache")
 }
+
+/// One line naming the `[model]` extensions that are on, with their parameters (`none` when
+/// none is), for the console of every command that runs the model.
+pub(crate) fn extensions_line(model: &crate::config::PhysicsSpec) -> String {
+    if model.any() {
+        format!("{} ({})", model.effects().join(", "), model.to_json())
+    } else {
+        "none".to_string()
+    }
+}

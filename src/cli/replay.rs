@@ -70,12 +70,12 @@ pub(crate) fn run(a: ReplayArgs) -> anyhow::Result<()> {
             (None, None) => TwinModelChoice::Logged,
         };
         let model = twin_model_source(choice, &a.file, r.rig_toml.as_deref())?;
-        let spec = model.spec;
+        let spec = model.spec.clone();
         let (rom, source) = match &model.rom {
             TwinRom::File(path) => (
                 crate::rom::file::read(path)
                     .with_context(|| format!("--rom {}", path.display()))?,
-                model.source,
+                model.source.clone(),
             ),
             TwinRom::Description(cfg) => {
                 let (rom, path, _) = models::cached_rom(cfg, a.rebuild, true)?;
@@ -83,6 +83,10 @@ pub(crate) fn run(a: ReplayArgs) -> anyhow::Result<()> {
                 (rom, source)
             }
         };
+        println!(
+            "twin model extensions: {}",
+            super::extensions_line(&model.extensions)
+        );
         let mut copy = match &a.out {
             Some(out) => {
                 let session = crate::log::read_session(&a.file)?;
@@ -100,12 +104,13 @@ pub(crate) fn run(a: ReplayArgs) -> anyhow::Result<()> {
         let stats = replay_twin(
             &r.recording,
             &mut summary,
-            &rom,
+            &model.model(&rom),
             &spec,
             rom.meta.beam_length,
             sink,
         )
         .with_context(|| format!("twin replay of {}", a.file.display()))?;
+        summary.twin_model = Some(model.extensions.clone());
         println!(
             "twin: {source}: {} blocks, {} steps compared, {} contact-solver failures, {:.3} s \
              per rig second",

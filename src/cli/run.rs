@@ -156,6 +156,12 @@ pub(crate) fn run_session_on(
     let live = session.foxglove.map(start_live_view).transpose()?;
     let runtime = crate::session::runtime()?;
     let (model, model_path, _) = models::cached_rom(cfg, session.rebuild, session.quiet)?;
+    if session.twin {
+        println!(
+            "twin model extensions: {}",
+            super::extensions_line(&cfg.model)
+        );
+    }
     let mut metadata = BackendMetadata::default();
     metadata
         .session

@@ -8,6 +8,7 @@ use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+use crate::config::PhysicsSpec;
 use crate::contact::SweepMethod;
 use crate::plan::Plan;
 use crate::report::stepped::stepped_sine_figures;
@@ -202,15 +203,19 @@ pub(crate) fn run(a: SimulateArgs) -> anyhow::Result<()> {
     }
 }
 
-/// Loads the ROM from a file, or builds/caches it from a rig description (default: embedded).
-pub(crate) fn load_rom(source: &RomSource, quiet: bool) -> anyhow::Result<(Rom, String)> {
+/// Loads the ROM from a file, or builds/caches it from a rig description (default: embedded),
+/// with the description's `[model]` extensions (none with a ROM file).
+pub(crate) fn load_rom(
+    source: &RomSource,
+    quiet: bool,
+) -> anyhow::Result<(Rom, String, PhysicsSpec)> {
     if let Some(p) = &source.rom {
         let rom = crate::rom::file::read(p).context("reading the ROM")?;
-        return Ok((rom, p.display().to_string()));
+        return Ok((rom, p.display().to_string(), PhysicsSpec::default()));
     }
     let cfg = super::models::load_config(source.config.as_deref())?;
     let (rom, path, _) = super::models::cached_rom(&cfg, false, quiet)?;
-    Ok((rom, path.display().to_string()))
+    Ok((rom, path.display().to_string(), cfg.model))
 }
 
 /// The JSON of `rigtwin simulate`.
@@ -219,6 +224,8 @@ struct SimulateReport<'a> {
     plan: Option<&'a str>,
     plan_source: &'a str,
     rom: RomSummary,
+    /// The `[model]` extensions the ROM ran with (`{}`: none).
+    model: &'a PhysicsSpec,
     integrator: &'a IntegratorParameters,
     jobs: usize,
     tests: &'a [TestResult],
@@ -266,6 +273,8 @@ pub(crate) struct PlanOutputs<'a> {
     pub figures: Option<&'a Path>,
     /// No progress display.
     pub quiet: bool,
+    /// The `[model]` extensions (valid).
+    pub model: &'a PhysicsSpec,
 }
 
 /// Runs a plan and writes what was asked for. Returns the results (for `demo`).
@@ -281,14 +290,19 @@ pub(crate) fn run_plan_to_outputs(
         json,
         figures,
         quiet,
+        model,
     } = *out;
     let jobs = jobs
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
         .max(1);
     let opts = SteppedSineOptions {
         integrator: params,
+        model: model.clone(),
         ..Default::default()
     };
+    if !quiet {
+        eprintln!("model extensions: {}", super::extensions_line(model));
+    }
     let multi = MultiProgress::with_draw_target(if quiet {
         ProgressDrawTarget::hidden()
     } else {
@@ -375,6 +389,7 @@ pub(crate) fn run_plan_to_outputs(
             plan: plan.name.as_deref(),
             plan_source: &plan.source,
             rom: RomSummary::new(rom, rom_path),
+            model,
             integrator: &opts.integrator,
             jobs: workers,
             tests: &results,
@@ -399,7 +414,7 @@ fn stepped_sine(a: RunArgs) -> anyhow::Result<()> {
         bail!("--plan PLAN is required (e.g. rig-config/plans/paper-table2.toml)");
     };
     let plan = Plan::from_path(plan_path)?;
-    let (rom, rom_path) = load_rom(&a.source, a.quiet)?;
+    let (rom, rom_path, model) = load_rom(&a.source, a.quiet)?;
     run_plan_to_outputs(
         &rom,
         &rom_path,
@@ -410,6 +425,7 @@ fn stepped_sine(a: RunArgs) -> anyhow::Result<()> {
             json: a.json.as_deref(),
             figures: a.figures.as_deref(),
             quiet: a.quiet,
+            model: &model,
         },
     )?;
     Ok(())
@@ -429,7 +445,7 @@ fn convergence(a: ConvergenceArgs) -> anyhow::Result<()> {
     if a.periods == 0 {
         bail!("--periods must be at least 1");
     }
-    let (rom, _) = load_rom(&a.source, a.quiet)?;
+    let (rom, _, _) = load_rom(&a.source, a.quiet)?;
     let setup = ConvergenceSetup {
         omega_ratio: a.omega,
         level: a.level,

@@ -1,7 +1,8 @@
 //! The rig description (`rig-config/*.toml`): geometry, materials, interface layers,
 //! sensors, contact patch, modal damping, mesh resolution and reduction settings (the model,
 //! [`RigModel`]: [`schema`], [`damping`]), and the rig service's tables ([`control`],
-//! [`twin`], and the simulated rig's [`shaker`], [`daq`], [`truth`] with its [`variants`]),
+//! [`twin`], and the simulated rig's [`shaker`], [`daq`], [`truth`] with its hidden
+//! physics, and the model's declared extensions `[model]` (both [`physics`]),
 //! parsed with serde, validated (`validate`) and hashed for ROM provenance. Errors
 //! ([`ConfigError`]) name the file, the line:column or key path, the bad value and what was
 //! expected; a service spec checked on its own returns a [`SpecError`].
@@ -15,12 +16,12 @@ pub mod damping;
 pub mod daq;
 pub mod error;
 pub mod model;
+pub mod physics;
 pub mod schema;
 pub mod shaker;
 pub mod truth;
 pub mod twin;
 mod validate;
-pub mod variants;
 
 use std::path::Path;
 
@@ -31,6 +32,10 @@ pub use damping::{DampingSpec, ModalDamping};
 pub use daq::{ChannelNoise, ChannelRanges, ContactCircuitSpec, DaqSpec, FIXED_CHANNEL_NAMES};
 pub use error::{ConfigError, SpecError};
 pub use model::RigModel;
+pub use physics::{
+    Beam, ClampFrictionSpec, ClearanceSpec, ModalCorrectionSpec, ModelExtensions, PhysicsSpec,
+    SensorGainSpec, TestClearanceSpec, TiltSpec, TruthVariants, WearSpec,
+};
 pub use schema::{
     BeamMesh, BeamSpec, BlockMesh, ClampSpec, ContactSpec, ElementKind, LayerSpec, Layers,
     LowerProbeSpec, MaterialSpec, Materials, MeshSpec, Mount, Parts, ProbeMesh, ProbeSeat,
@@ -39,7 +44,6 @@ pub use schema::{
 pub use shaker::ShakerSpec;
 pub use truth::TruthSpec;
 pub use twin::{AfterGap, TwinSpec};
-pub use variants::{Beam, ClampFrictionSpec, SensorGainSpec, TiltSpec, TruthVariants, WearSpec};
 
 /// Text of the embedded default rig description.
 pub const DEFAULT_RIG_TOML: &str = include_str!("../../rig-config/two-beam.toml");
@@ -100,6 +104,45 @@ pub struct RigConfig {
     /// `[twin]`: the live twin's step, input queue and gap handling. Not hashed.
     #[serde(default, skip_serializing)]
     pub twin: TwinSpec,
+    /// `[model]`: the model's extensions, the physics the nominal ROM leaves out, declared
+    /// (see [`physics`]). Used by `simulate`, the twin of `run` and `replay`, and `diagnose`.
+    /// Not part of the ROM's identity: not hashed.
+    #[serde(default, skip_serializing)]
+    pub model: ModelExtensions,
+}
+
+/// The rig description `text` with its `[model]` table replaced by `model` (removed when no
+/// extension is on), for a program that writes a fitted model out (`diagnose
+/// --write-config`). The other tables are kept as parsed (comments and key order are not):
+/// reading the result gives the same description with `model` as its `[model]`.
+pub fn with_model(
+    text: &str,
+    source_name: &str,
+    model: &PhysicsSpec,
+) -> Result<String, ConfigError> {
+    let mut table: toml::Table = toml::from_str(text).map_err(|e| {
+        let (line, column) = e
+            .span()
+            .map_or((0, 0), |s| error::line_column(text, s.start));
+        ConfigError::Syntax {
+            file: source_name.to_string(),
+            line,
+            column,
+            message: e.message().trim().to_string(),
+        }
+    })?;
+    table.remove("model");
+    if model.any() {
+        let value = toml::Value::try_from(model).map_err(|e| ConfigError::Service {
+            file: source_name.to_string(),
+            message: format!("model: cannot write the extensions as TOML: {e}"),
+        })?;
+        table.insert("model".to_string(), value);
+    }
+    toml::to_string(&table).map_err(|e| ConfigError::Service {
+        file: source_name.to_string(),
+        message: format!("cannot write the rig description as TOML: {e}"),
+    })
 }
 
 impl RigConfig {

@@ -1,5 +1,5 @@
 //! The simulated rig's truth model (`[truth]`): which ROM stands for the real rig, its time
-//! step, and the physics the twin does not know (`[truth.variants]`, see [`super::variants`]).
+//! step, and the physics the twin does not know (`[truth.variants]`, see [`super::physics`]).
 //! Every field states its unit and default; [`TruthSpec::validate`] names the key of a bad
 //! value. Not part of the model: not hashed. The truth model itself lives in
 //! `rig::sim::truth`.
@@ -8,7 +8,7 @@ use serde::{Deserialize, Serialize};
 
 use super::daq::DaqSpec;
 use super::error::{check, positive, SpecError};
-use super::variants::TruthVariants;
+use super::physics::TruthVariants;
 
 /// The truth model (TOML `[truth]`): which ROM stands for the real rig and its time step.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -91,7 +91,7 @@ impl TruthSpec {
             "truth.min_steps_per_reference_period",
             t.min_steps_per_reference_period,
         )?;
-        t.variants.validate(daq)
+        t.variants.validate("truth.variants", daq)
     }
 }
 

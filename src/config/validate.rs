@@ -75,7 +75,7 @@ pub(super) fn model(cfg: &RigModel) -> Result<(), ConfigError> {
 }
 
 /// Validates the rig-service tables of a description: `[control]`, `[safety]`, `[twin]`,
-/// then the simulated rig's `[shaker]`, `[daq]` and `[truth]`.
+/// then the simulated rig's `[shaker]`, `[daq]` and `[truth]`, and the model's `[model]`.
 pub(super) fn service(cfg: &RigConfig) -> Result<(), ConfigError> {
     let service = |message: String| ConfigError::Service {
         file: cfg.source.clone(),
@@ -92,7 +92,10 @@ pub(super) fn service(cfg: &RigConfig) -> Result<(), ConfigError> {
     let sim = |e: super::SpecError| service(format!("simulated rig spec: {e}"));
     cfg.shaker.validate().map_err(sim)?;
     cfg.daq.validate().map_err(sim)?;
-    cfg.truth.validate(&cfg.daq).map_err(sim)
+    cfg.truth.validate(&cfg.daq).map_err(sim)?;
+    cfg.model
+        .validate("model", &cfg.daq)
+        .map_err(|e| service(e.to_string()))
 }
 
 fn materials(c: &Check, cfg: &RigModel) -> Result<(), ConfigError> {

@@ -6,11 +6,12 @@
 
 use std::path::Path;
 
-use crate::config::RigConfig;
+use crate::config::{ContactCircuitSpec, PhysicsSpec, RigConfig};
 use crate::control::{summarize, EventKind, SessionEvent, StepInfo};
 use crate::log::{read_session, LogReadError, SessionRead};
 use crate::rig::{DaqBlock, DaqLayout};
-use crate::twin::TwinSpec;
+use crate::rom::Rom;
+use crate::twin::{TwinModel, TwinSpec};
 
 use super::summary::SessionSummary;
 use super::topics::{
@@ -243,6 +244,25 @@ pub struct TwinModelSource {
     pub spec: TwinSpec,
     /// Where the model came from, for messages and the log copy's metadata.
     pub source: String,
+    /// The `[model]` extensions of the description the model comes from (`--rom`: the
+    /// logged description's; none without one).
+    pub extensions: PhysicsSpec,
+    /// Its contact circuit (`--rom` without a logged description: the default).
+    pub circuit: ContactCircuitSpec,
+    /// Its contact-voltage threshold, V.
+    pub contact_threshold_v: f64,
+}
+
+impl TwinModelSource {
+    /// The twin's model with ROM `rom` (the one [`TwinModelSource::rom`] names).
+    pub fn model<'a>(&self, rom: &'a Rom) -> TwinModel<'a> {
+        TwinModel {
+            rom,
+            extensions: self.extensions.clone(),
+            circuit: self.circuit.clone(),
+            contact_threshold_v: self.contact_threshold_v,
+        }
+    }
 }
 
 /// Errors of choosing the replayed twin's model.
@@ -275,29 +295,45 @@ pub fn twin_model_source(
             .map(|text| RigConfig::from_str(text, LOGGED))
             .transpose()
     };
-    match choice {
-        TwinModelChoice::Rom(path) => Ok(TwinModelSource {
-            spec: logged()?.map(|c| c.twin).unwrap_or_default(),
-            rom: TwinRom::File(path.to_path_buf()),
-            source: path.display().to_string(),
-        }),
+    // The extensions and the contact observation of a description (the defaults without one).
+    let observed = |cfg: Option<&RigConfig>| match cfg {
+        Some(c) => (
+            c.model.clone(),
+            c.daq.contact_circuit.clone(),
+            c.control.contact_threshold_v,
+        ),
+        None => (
+            PhysicsSpec::default(),
+            ContactCircuitSpec::default(),
+            crate::config::ControlSpec::default().contact_threshold_v,
+        ),
+    };
+    let (cfg, rom, source) = match choice {
+        TwinModelChoice::Rom(path) => (
+            logged()?,
+            TwinRom::File(path.to_path_buf()),
+            path.display().to_string(),
+        ),
         TwinModelChoice::Config(path) => {
             let cfg = RigConfig::from_path(path)?;
-            Ok(TwinModelSource {
-                spec: cfg.twin.clone(),
-                rom: TwinRom::Description(Box::new(cfg)),
-                source: path.display().to_string(),
-            })
+            let rom = TwinRom::Description(Box::new(cfg.clone()));
+            (Some(cfg), rom, path.display().to_string())
         }
         TwinModelChoice::Logged => {
             let cfg = logged()?.ok_or_else(|| TwinModelError::NoRigDescription {
                 log: log.display().to_string(),
             })?;
-            Ok(TwinModelSource {
-                spec: cfg.twin.clone(),
-                rom: TwinRom::Description(Box::new(cfg)),
-                source: "the rig description in the log".to_string(),
-            })
+            let rom = TwinRom::Description(Box::new(cfg.clone()));
+            (Some(cfg), rom, "the rig description in the log".to_string())
         }
-    }
+    };
+    let (extensions, circuit, contact_threshold_v) = observed(cfg.as_ref());
+    Ok(TwinModelSource {
+        spec: cfg.map(|c| c.twin).unwrap_or_default(),
+        rom,
+        source,
+        extensions,
+        circuit,
+        contact_threshold_v,
+    })
 }

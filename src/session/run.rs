@@ -15,7 +15,7 @@ use crate::log::{Attachment, LogError, LogOptions, MetadataRecord, SessionLog};
 use crate::plan::Plan;
 use crate::rig::{LinkCounters, RigBackend};
 use crate::rom::Rom;
-use crate::twin::{Twin, TwinError, TwinTask};
+use crate::twin::{ClearanceSchedule, Twin, TwinError, TwinModel, TwinTask, TwinWindows};
 
 use super::live::{LiveRecorder, LiveStats, LiveView};
 use super::mcap::McapRecorder;
@@ -130,6 +130,8 @@ fn log_records(r: &SessionRequest<'_>) -> (Vec<MetadataRecord>, Vec<Attachment>)
     let mut session_meta = r.backend_metadata.session.clone();
     session_meta.insert("plan".to_string(), plan.name.clone().unwrap_or_default());
     session_meta.insert("plan_source".to_string(), plan.source.clone());
+    // The model's declared extensions (`[model]`, also in the rig.toml attachment), parsed.
+    session_meta.insert("model_extensions".to_string(), r.cfg.model.to_json());
     session_meta.insert(
         "omega_ref_rad_s".to_string(),
         format!("{:e}", model.omega_ref()),
@@ -201,10 +203,21 @@ pub fn run<B: RigBackend>(
     let (live_recorder, live_view) = request.live.unzip();
     let twin_recorder = if request.twin {
         let layout = backend.layout().clone();
-        let engine = Twin::new(request.model, &cfg.twin, &layout, cfg.contact.clearance)?;
+        let model = TwinModel::of_config(request.model, cfg);
+        let engine = Twin::new(&model, &cfg.twin, &layout, cfg.contact.clearance)?;
+        let o = engine.observation();
+        let windows = TwinWindows::new(o.upper, o.lower);
+        let clearances = ClearanceSchedule::new(l, cfg.model.clearance.as_ref());
         let (task, rx) = TwinTask::spawn(engine, &cfg.twin)?;
-        let recorder = TwinRecorder::new(task, rx, l, layout.dt(), Some(handle.clone()))
-            .map_err(RunError::TwinLog)?;
+        let recorder = TwinRecorder::new(
+            task,
+            rx,
+            clearances,
+            windows,
+            layout.dt(),
+            Some(handle.clone()),
+        )
+        .map_err(RunError::TwinLog)?;
         Some(match &live_recorder {
             Some(live) => recorder.with_live(live.clone()),
             None => recorder,
@@ -230,6 +243,7 @@ pub fn run<B: RigBackend>(
     let twin = recorder.1.take().map(TwinRecorder::finish);
     if let Some(t) = &twin {
         summary.attach_twin(t.comparisons.iter().cloned());
+        summary.twin_model = Some(cfg.model.clone());
     }
     let messages = recorder.0 .0.messages();
     drop(recorder);

@@ -51,6 +51,9 @@ pub struct SessionSummary {
     pub rig_seconds: f64,
     /// The tests that started, with their finished steps.
     pub tests: Vec<TestSummary>,
+    /// The `[model]` extensions the twin ran with (`{}`: none), when a twin ran.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub twin_model: Option<crate::config::PhysicsSpec>,
 }
 
 impl SessionSummary {

@@ -70,12 +70,14 @@ pub struct TwinOutcome {
 }
 
 impl TwinRecorder {
-    /// The live twin on `task` (its output `rx`), for a stream of `dt` s samples and a rig of
-    /// beam length `beam_length` m; logging to `log` if given.
+    /// The live twin on `task` (its output `rx`), for a stream of `dt` s samples, with the
+    /// twin's clearance per test from `clearances` and its record windows observed as `out`
+    /// sets up (see [`crate::twin::observe`]); logging to `log` if given.
     pub fn new(
         task: TwinTask,
         rx: TwinReceiver,
-        beam_length: f64,
+        clearances: ClearanceSchedule,
+        out: TwinWindows,
         dt: f64,
         log: Option<LogHandle>,
     ) -> Result<TwinRecorder, LogError> {
@@ -92,9 +94,9 @@ impl TwinRecorder {
             task,
             rx,
             dt,
-            clearances: ClearanceSchedule::new(beam_length),
+            clearances,
             windows: VecDeque::new(),
-            out: TwinWindows::default(),
+            out,
             results: Vec::new(),
             logs,
             live: None,

@@ -18,11 +18,10 @@ use crate::log::{
     log_time_ns, Attachment, LogChannel, LogError, LogHandle, LogJoin, LogOptions, LogStats,
     MetadataRecord, SessionLog, SessionRead, RIGTWIN_METADATA,
 };
-use crate::rom::Rom;
 use crate::signal::SignalError;
 use crate::twin::{
-    ClearanceSchedule, Completed, Twin, TwinBlock, TwinComparison, TwinError, TwinSamples,
-    TwinSpec, TwinWindows,
+    ClearanceSchedule, Completed, Twin, TwinBlock, TwinComparison, TwinError, TwinModel,
+    TwinSamples, TwinSpec, TwinWindows,
 };
 
 use super::replay::Recording;
@@ -107,22 +106,26 @@ impl TwinSink for () {
     }
 }
 
-/// Runs the twin (ROM `rom`, settings `spec`, beam length `beam_length` m for the plan's
-/// clearances) over the recording `rec` and writes each step's comparison into `summary`
+/// Runs the twin (`model`: ROM, `[model]` extensions, contact observation; settings `spec`;
+/// beam length `beam_length` m for the plan's clearances) over the recording `rec` and writes each step's comparison into `summary`
 /// (`tests[].steps[].twin`, in the order of the recording's record windows; `summary` is the
 /// replayed summary of the same recording). Every output block and comparison also goes to
 /// `sink`.
 pub fn replay_twin(
     rec: &Recording,
     summary: &mut SessionSummary,
-    rom: &Rom,
+    model: &TwinModel<'_>,
     spec: &TwinSpec,
     beam_length: f64,
     sink: &mut dyn TwinSink,
 ) -> Result<TwinReplayStats, TwinReplayError> {
     let wall = std::time::Instant::now();
-    let mut clearances = ClearanceSchedule::of_events(beam_length, &rec.events);
-    let mut twin = Twin::new(rom, spec, &rec.layout, clearances.first().unwrap_or(0.0))?;
+    let mut clearances = ClearanceSchedule::of_events(
+        beam_length,
+        model.extensions.clearance.as_ref(),
+        &rec.events,
+    );
+    let mut twin = Twin::new(model, spec, &rec.layout, clearances.first().unwrap_or(0.0))?;
     let dt = rec.layout.dt();
     // The measured step summaries are in record-window order.
     let mut pending: VecDeque<(StepInfo, StepSummary)> = rec
@@ -131,7 +134,8 @@ pub fn replay_twin(
         .zip(summary.steps().map(|s| s.measured.clone()))
         .collect();
     let mut results: Vec<Option<TwinComparison>> = Vec::new();
-    let mut out = TwinWindows::default();
+    let o = twin.observation();
+    let mut out = TwinWindows::new(o.upper, o.lower);
     let mut stats = TwinReplayStats::default();
     let take = |done: Vec<Completed>,
                 results: &mut Vec<Option<TwinComparison>>,

@@ -1,7 +1,7 @@
 //! Time integration of the ROM: the leapfrog integrator with an implicit contact boundary
 //! ([`integrator`]), base excitation ([`excitation`]), energy terms ([`energy`]), per-step
 //! outputs and sinks ([`output`]), the driven ROM (base acceleration in, named sensor outputs
-//! out: [`driven`]), the virtual stepped sine ([`stepped`]), the convergence studies
+//! out: [`driven`]), the physics effects that act during the integration ([`effects`]), the virtual stepped sine ([`stepped`]), the convergence studies
 //! ([`convergence`]) and the error type ([`error`]).
 //!
 //! Numerics only: no I/O, no clock, no threads inside a run; the hot loop does not allocate.
@@ -14,6 +14,7 @@
 
 pub mod convergence;
 pub mod driven;
+pub mod effects;
 pub mod energy;
 pub mod error;
 pub mod excitation;

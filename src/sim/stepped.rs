@@ -14,6 +14,7 @@
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Mutex;
 
+use crate::config::PhysicsSpec;
 use crate::contact::{ContactProblem, ContactSolution};
 use crate::plan::{per_l_to_metres, Plan, TestSpec};
 use crate::rom::Rom;
@@ -23,6 +24,7 @@ use super::driven::{
     DrivenError, DrivenRom, MissingOutput, SensorSink, SensorStep, BEAM_SENSORS, LOWER_TIP,
     UPPER_TIP,
 };
+use super::effects::{self, Effects};
 use super::error::SimError;
 use super::excitation::{continuous_phase, Excitation};
 use super::integrator::{
@@ -52,6 +54,12 @@ pub struct SteppedSineOptions {
     /// Progress granularity: a [`TestProgress`] callback at least every this many excitation
     /// periods (>= 1).
     pub progress_periods: u32,
+    /// The model's extensions (`[model]`, valid): modal corrections, clamp friction, clearance
+    /// per test, wear (within a test: every test runs from rest), tilt. Sensor gains are an
+    /// observation of a rig's channels and do not apply to the ROM's own outputs. Frequencies
+    /// stay in units of the nominal ROM's omega_2 (a plan means the same Hz whatever the
+    /// model). Default: none.
+    pub model: PhysicsSpec,
 }
 
 impl Default for SteppedSineOptions {
@@ -62,6 +70,7 @@ impl Default for SteppedSineOptions {
             trace_at: Some(1.0),
             capture: None,
             progress_periods: 10,
+            model: PhysicsSpec::default(),
         }
     }
 }
@@ -201,6 +210,9 @@ pub enum SteppedSineError {
         /// What is wrong.
         detail: String,
     },
+    /// A `[model]` extension does not fit the ROM (names the key).
+    #[error("model: {0}")]
+    Model(#[from] crate::physics::PhysicsError),
     /// The integrator rejected its setup.
     #[error("test {name}: {source}")]
     Sim {
@@ -274,10 +286,13 @@ pub fn check_plan(
             name: "(all)".into(),
             source,
         })?;
-    let limits = stability_limits(rom).map_err(|source| SteppedSineError::Sim {
+    let model = effects::prepare(rom, &opts.model, "model")?;
+    let limits = stability_limits(&model).map_err(|source| SteppedSineError::Sim {
         name: "(all)".into(),
         source,
     })?;
+    // The limits count steps per period of the model's omega_2; plans count in the nominal's.
+    let scale = rom.omega_ref() / model.omega_ref();
     let needs_closed = opts.integrator.coupling == super::Coupling::Explicit
         && opts.integrator.enforce_closed_bound;
     let (steps_needed_ref, which) = if needs_closed {
@@ -291,7 +306,7 @@ pub fn check_plan(
     for (i, t) in plan.tests.iter().enumerate() {
         let fastest = t.omega_start.max(t.omega_end);
         // Steps per excitation period needed at Omega = r omega_2: steps_needed_ref * r.
-        let needed = steps_needed_ref * fastest;
+        let needed = steps_needed_ref * fastest * scale;
         if !(f64::from(t.steps_per_period) > needed) {
             return Err(SteppedSineError::Test {
                 source_name: plan.source.clone(),
@@ -344,8 +359,10 @@ impl SensorSink<2> for Recorder<'_> {
 /// Runs `periods` excitation periods in chunks of at most `chunk` periods, reporting after
 /// each chunk through `on_chunk(periods in the chunk)`. Stops early when the state becomes
 /// non-finite. Returns the time steps done and the stop, if any.
+#[allow(clippy::too_many_arguments)] // the run's parts, passed through
 fn run_periods<S: SensorSink<2>>(
     rom: &mut Tips,
+    effects: &mut Effects,
     exc: &Excitation,
     periods: u64,
     steps_per_period: u64,
@@ -356,7 +373,7 @@ fn run_periods<S: SensorSink<2>>(
     let (mut left, mut steps) = (periods, 0);
     while left > 0 {
         let p = left.min(chunk);
-        let rep = rom.run(exc, p * steps_per_period, sink)?;
+        let rep = effects.run(rom, exc, p * steps_per_period, sink)?;
         steps += rep.steps;
         left -= p;
         on_chunk(p);
@@ -394,7 +411,8 @@ pub fn run_test(
     };
     let w2 = rom.omega_ref();
     let q = per_l_to_metres(spec.level, l);
-    let clearance = spec.clearance_m(l);
+    let clearance = opts.model.test_clearance(&spec.name, spec.clearance_m(l));
+    let model = effects::prepare(rom, &opts.model, "model")?;
     let ratios = spec.omega_ratios();
     let spp = f64::from(spec.steps_per_period);
     let chunk = u64::from(opts.progress_periods.max(1));
@@ -405,11 +423,12 @@ pub fn run_test(
         steps: spp,
         omega: ratios[0] * w2,
     };
-    let mut driven = Tips::new(rom, TIPS, params).map_err(|e| match e {
+    let mut driven = Tips::new(&model, TIPS, params).map_err(|e| match e {
         DrivenError::Output(missing) => missing_output(missing),
         DrivenError::Sim(source) => sim_err(source),
     })?;
-    driven.set_clearance(clearance).map_err(sim_err)?;
+    let mut effects = Effects::new(&model, &opts.model, "model", clearance)?;
+    effects.attach(&mut driven).map_err(sim_err)?;
 
     let mut result = TestResult {
         spec: spec.clone(),
@@ -459,6 +478,7 @@ pub fn run_test(
         // Settle.
         let (steps, mut stop) = run_periods(
             &mut driven,
+            &mut effects,
             &exc,
             u64::from(spec.settle_periods),
             spp_steps,
@@ -509,6 +529,7 @@ pub fn run_test(
         if stop.is_none() {
             let (steps, rec_stop) = run_periods(
                 &mut driven,
+                &mut effects,
                 &exc,
                 u64::from(spec.record_periods),
                 spp_steps,

@@ -1,11 +1,12 @@
 //! The clearance the twin runs with, test by test: each test's clearance (its `test_start`
-//! event's, in units of l) applies from the first DAQ block that starts at or after the
+//! event's, in units of l, or what the model's `[model.clearance]` makes of it) applies from the first DAQ block that starts at or after the
 //! event's sample. In the live session the event is logged after the block that ended the
 //! previous test, and the simulated rig changes its clearance from the next block, so the live
 //! twin and a replay cut at the same place: both use this one schedule.
 
 use std::collections::VecDeque;
 
+use crate::config::ClearanceSpec;
 use crate::control::{EventKind, SessionEvent};
 use crate::plan::per_l_to_metres;
 
@@ -14,15 +15,19 @@ use crate::plan::per_l_to_metres;
 pub struct ClearanceSchedule {
     /// Beam length l, m (the unit of the events' clearances).
     beam_length: f64,
+    /// The model's clearance per test (`[model.clearance]`), if declared.
+    model: Option<ClearanceSpec>,
     /// (sample of the `test_start` event, clearance in metres), in event order.
     pending: VecDeque<(u64, f64)>,
 }
 
 impl ClearanceSchedule {
-    /// An empty schedule for a rig of beam length `beam_length` m.
-    pub fn new(beam_length: f64) -> ClearanceSchedule {
+    /// An empty schedule for a rig of beam length `beam_length` m and the model's clearance
+    /// per test `model` (`[model.clearance]`; `None`: the plan's).
+    pub fn new(beam_length: f64, model: Option<&ClearanceSpec>) -> ClearanceSchedule {
         ClearanceSchedule {
             beam_length,
+            model: model.cloned(),
             pending: VecDeque::new(),
         }
     }
@@ -30,9 +35,10 @@ impl ClearanceSchedule {
     /// The schedule of a recorded session's events.
     pub fn of_events<'a>(
         beam_length: f64,
+        model: Option<&ClearanceSpec>,
         events: impl IntoIterator<Item = &'a SessionEvent>,
     ) -> ClearanceSchedule {
-        let mut s = ClearanceSchedule::new(beam_length);
+        let mut s = ClearanceSchedule::new(beam_length, model);
         for e in events {
             s.on_event(e);
         }
@@ -41,9 +47,16 @@ impl ClearanceSchedule {
 
     /// Takes a session event: a `test_start` schedules its test's clearance.
     pub fn on_event(&mut self, event: &SessionEvent) {
-        if let EventKind::TestStart { clearance, .. } = &event.kind {
-            self.pending
-                .push_back((event.sample, per_l_to_metres(*clearance, self.beam_length)));
+        if let EventKind::TestStart {
+            test, clearance, ..
+        } = &event.kind
+        {
+            let plan_m = per_l_to_metres(*clearance, self.beam_length);
+            let c = match &self.model {
+                Some(m) => m.of_test(test, plan_m),
+                None => plan_m,
+            };
+            self.pending.push_back((event.sample, c));
         }
     }
 
@@ -85,12 +98,29 @@ mod tests {
     #[test]
     fn clearances_apply_from_the_first_block_at_or_after_their_event() {
         let events = [test_start(0, 2e-3), test_start(100, 3e-3)];
-        let mut s = ClearanceSchedule::of_events(0.5, &events);
+        let mut s = ClearanceSchedule::of_events(0.5, None, &events);
         assert_eq!(s.first(), Some(1e-3));
         assert_eq!(s.next_due(0), Some(1e-3));
         assert_eq!(s.next_due(0), None);
         assert_eq!(s.next_due(99), None);
         assert_eq!(s.next_due(128), Some(1.5e-3));
         assert_eq!(s.next_due(256), None);
+        // The model's clearance per test.
+        let model = ClearanceSpec {
+            offset: 1e-4,
+            tests: vec![crate::config::TestClearanceSpec {
+                test: "other".into(),
+                clearance: 5e-3,
+            }],
+        };
+        let mut s = ClearanceSchedule::of_events(0.5, Some(&model), &events);
+        assert_eq!(s.next_due(0), Some(1e-3 + 1e-4));
+        let mut events = events;
+        if let EventKind::TestStart { test, .. } = &mut events[1].kind {
+            *test = "other".into();
+        }
+        let mut s = ClearanceSchedule::of_events(0.5, Some(&model), &events);
+        assert_eq!(s.next_due(0), Some(1e-3 + 1e-4));
+        assert_eq!(s.next_due(100), Some(5e-3));
     }
 }

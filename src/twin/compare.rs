@@ -10,10 +10,13 @@ use std::collections::VecDeque;
 use serde::{Deserialize, Serialize};
 
 use crate::control::{StepInfo, StepSummary};
-use crate::signal::{spectrum_distance_db, StepMetrics, StepRecord};
+use crate::signal::{
+    integrate_periodic, spectrum_distance_db, PeriodGrid, SignalError, StepMetrics, StepRecord,
+};
 // The lower and upper tip's indices in the twin's sensors (`TWIN_SENSORS`).
 use crate::sim::driven::{LOWER_TIP, UPPER_TIP};
 
+use super::observe::TipObservation;
 use super::TwinBlock;
 
 /// The twin over one record window, against the measurement.
@@ -40,9 +43,12 @@ pub struct TwinComparison {
 }
 
 /// The twin's output samples from `first` on, to cut record windows from.
-#[derive(Debug, Default)]
+#[derive(Debug)]
 pub struct TwinWindows {
+    /// How the step summary sees the upper and lower tip (sensor sensitivities).
+    observe: [TipObservation; 2],
     first: u64,
+    base: VecDeque<f64>,
     upper: VecDeque<f64>,
     lower: VecDeque<f64>,
     contact: VecDeque<bool>,
@@ -51,7 +57,29 @@ pub struct TwinWindows {
     gaps: Vec<(u64, u64)>,
 }
 
+impl Default for TwinWindows {
+    /// Windows for nominal sensors.
+    fn default() -> Self {
+        TwinWindows::new(TipObservation::IDENTITY, TipObservation::IDENTITY)
+    }
+}
+
 impl TwinWindows {
+    /// Windows whose upper and lower tip velocities the step summary sees through `upper` and
+    /// `lower` (see [`super::observe`]).
+    pub fn new(upper: TipObservation, lower: TipObservation) -> TwinWindows {
+        TwinWindows {
+            observe: [upper, lower],
+            first: 0,
+            base: VecDeque::new(),
+            upper: VecDeque::new(),
+            lower: VecDeque::new(),
+            contact: VecDeque::new(),
+            normal: VecDeque::new(),
+            gaps: Vec::new(),
+        }
+    }
+
     /// Appends a twin output block (blocks in sample order).
     pub fn push(&mut self, b: &TwinBlock) {
         if let Some(g) = &b.gap {
@@ -65,12 +93,14 @@ impl TwinWindows {
                 // Samples the twin never produced: pad so indices stay aligned, and mark them.
                 self.gaps.push((end, b.first_sample));
                 let pad = (b.first_sample - end) as usize;
+                self.base.extend(std::iter::repeat_n(f64::NAN, pad));
                 self.upper.extend(std::iter::repeat_n(f64::NAN, pad));
                 self.lower.extend(std::iter::repeat_n(f64::NAN, pad));
                 self.contact.extend(std::iter::repeat_n(false, pad));
                 self.normal.extend(std::iter::repeat_n(f64::NAN, pad));
             }
         }
+        self.base.extend(&b.base_acceleration);
         self.upper.extend(b.sensor(UPPER_TIP));
         self.lower.extend(b.sensor(LOWER_TIP));
         self.contact.extend(&b.contact);
@@ -85,6 +115,7 @@ impl TwinWindows {
     /// Drops the samples before `sample`.
     pub fn trim(&mut self, sample: u64) {
         let n = (sample.saturating_sub(self.first) as usize).min(self.upper.len());
+        self.base.drain(..n);
         self.upper.drain(..n);
         self.lower.drain(..n);
         self.contact.drain(..n);
@@ -110,8 +141,20 @@ impl TwinWindows {
             return None;
         }
         let range = (from - self.first) as usize..(to - self.first) as usize;
-        let upper: Vec<f64> = self.upper.range(range.clone()).copied().collect();
-        let lower: Vec<f64> = self.lower.range(range.clone()).copied().collect();
+        let mut upper: Vec<f64> = self.upper.range(range.clone()).copied().collect();
+        let mut lower: Vec<f64> = self.lower.range(range.clone()).copied().collect();
+        if !self.observe.iter().all(TipObservation::is_identity) {
+            let base: Vec<f64> = self.base.range(range.clone()).copied().collect();
+            if let Err(e) = observe_tips(
+                &self.observe,
+                &base,
+                dt,
+                info.omega,
+                [&mut upper, &mut lower],
+            ) {
+                return Some(Err(e));
+            }
+        }
         let contact: Vec<bool> = self.contact.range(range.clone()).copied().collect();
         let normal: Vec<f64> = self.normal.range(range).copied().collect();
         let metrics = StepRecord {
@@ -165,6 +208,25 @@ impl TwinWindows {
         self.trim(keep);
         done
     }
+}
+
+/// Applies the tip observations to the window's relative velocities, with the base velocity
+/// integrated from `base` (m/s^2) over whole periods like the step summary does.
+fn observe_tips(
+    observe: &[TipObservation; 2],
+    base: &[f64],
+    dt: f64,
+    omega: f64,
+    tips: [&mut Vec<f64>; 2],
+) -> Result<(), SignalError> {
+    let grid = PeriodGrid::new(base.len(), dt, omega)?;
+    let v_base = integrate_periodic(base, dt, &grid)?;
+    for (o, v) in observe.iter().zip(tips) {
+        for (x, vb) in v.iter_mut().zip(&v_base) {
+            *x = o.gain * *x + o.base_weight * vb;
+        }
+    }
+    Ok(())
 }
 
 fn compare(twin: StepMetrics, measured: &StepMetrics) -> TwinComparison {

@@ -15,6 +15,13 @@
 //! interval ending at `t_i`, one twin step later). Sample `i` of a [`TwinBlock`] is sample `i`
 //! of the input block.
 //!
+//! Model extensions and observation. The twin ROM carries the `[model]` extensions
+//! ([`crate::sim::effects`]: modal corrections, clamp friction, clearance per test, wear,
+//! tilt), and its prediction passes through the rig's channels ([`super::observe`]): the
+//! measured base acceleration without the platform accelerometers' declared sensitivity
+//! errors, and the contact state through the contact-resistance circuit and threshold per
+//! sample.
+//!
 //! Start and gaps. The twin starts at rest. For the first sample of the stream, and the first
 //! sample after a gap, there is no previous sample: the base acceleration is held at that
 //! sample over its `N` steps. After a gap (a block whose first sample does not follow the
@@ -22,13 +29,16 @@
 //! the gap in the block's output. A block that starts before the end of the last one is
 //! rejected (the state is left as it was).
 
+use crate::physics::contact_detection::SampleDetector;
 use crate::rig::daq::{DaqBlock, DaqLayout};
-use crate::rom::Rom;
 use crate::sim::driven::{DrivenError, DrivenRom, SensorStep};
+use crate::sim::effects::{self, Effects};
 use crate::sim::{StabilityLimits, TimeStep};
 
 use super::error::{BlockError, TwinError};
 use super::input::{InputMap, TwinInput};
+use super::model::TwinModel;
+use super::observe::Observation;
 use super::output::{TwinBlock, TwinGap, TWIN_SENSORS};
 use super::spec::{AfterGap, TwinSpec};
 
@@ -49,10 +59,9 @@ pub struct TwinCounters {
     pub restarts: u64,
 }
 
-/// The contact of one sample: what its twin steps' contact adds up to.
+/// The contact of one sample: what its twin steps' contact forces add up to.
 #[derive(Clone, Copy, Debug, Default)]
 struct SampleContact {
-    closed: bool,
     normal: f64,
     tangential: f64,
 }
@@ -62,7 +71,6 @@ impl SampleContact {
     #[inline]
     fn add(&mut self, step: &SensorStep<4>) {
         if step.contact.any_closed {
-            self.closed = true;
             self.normal += step.contact.normal_force;
             self.tangential += step.contact.tangential_force;
         }
@@ -75,6 +83,13 @@ pub struct Twin {
     /// The twin ROM driven by the measured base acceleration, read at [`TWIN_SENSORS`] (its
     /// last step's relative velocities stand at the half step before the next sample).
     rom: DrivenRom<4>,
+    /// The `[model]` extensions acting during the integration (clamp friction, wear) and the
+    /// clearance they act on.
+    effects: Effects,
+    /// The contact state as the contact channel detects it.
+    detector: SampleDetector,
+    /// How the prediction is observed through the rig's channels.
+    observation: Observation,
     map: InputMap,
     after_gap: AfterGap,
     steps_per_sample: u32,
@@ -89,24 +104,33 @@ pub struct Twin {
 }
 
 impl Twin {
-    /// The twin for ROM `rom`, settings `spec`, the DAQ stream `layout` and clearance
-    /// `clearance_m` (m), at rest. Checks the spec, the layout (platform accelerometers), the
-    /// ROM (the beam sensor outputs [`TWIN_SENSORS`], sizes and values) and the twin step
-    /// against the ROM's open stability limit; errors name the key or what is missing.
+    /// The twin of `model` (ROM, `[model]` extensions, contact observation), settings `spec`,
+    /// the DAQ stream `layout` and clearance `clearance_m` (m), at rest. Checks the spec, the
+    /// layout (platform accelerometers; the channels the extensions name), the ROM (the beam
+    /// sensor outputs [`TWIN_SENSORS`], sizes and values; the modes and outputs the extensions
+    /// need) and the twin step against the (corrected) ROM's open stability limit; errors name
+    /// the key or what is missing.
     pub fn new(
-        rom: &Rom,
+        model: &TwinModel<'_>,
         spec: &TwinSpec,
         layout: &DaqLayout,
         clearance_m: f64,
     ) -> Result<Twin, TwinError> {
         spec.validate()?;
-        let map = InputMap::new(layout)?;
+        let observation = Observation::new(
+            layout,
+            &model.extensions,
+            &model.circuit,
+            model.contact_threshold_v,
+        )?;
+        let map = InputMap::with_gains(layout, &observation.platform_gains)?;
         if !clearance_m.is_finite() {
             return Err(TwinError::Clearance(clearance_m));
         }
+        let model_rom = &*effects::prepare(model.rom, &model.extensions, "model")?;
         // A provisional step far inside any stability limit lets the integrator check the ROM
         // and compute its limits; the twin step follows from them.
-        let mut rom = DrivenRom::provisional(rom, TWIN_SENSORS).map_err(|e| match e {
+        let mut rom = DrivenRom::provisional(model_rom, TWIN_SENSORS).map_err(|e| match e {
             DrivenError::Output(missing) => TwinError::Rom(missing),
             DrivenError::Sim(e) => e.into(),
         })?;
@@ -136,10 +160,16 @@ impl Twin {
             });
         }
         rom.set_time_step(TimeStep::Dt { dt })?;
-        rom.set_clearance(clearance_m)?;
+        let effects = Effects::new(model_rom, &model.extensions, "model", clearance_m)?;
+        effects.attach(&mut rom)?;
+        let detector =
+            SampleDetector::new(&observation.circuit, dt, observation.contact_threshold_v);
         let weights = (1..=n).map(|k| f64::from(k) / f64::from(n)).collect();
         Ok(Twin {
             rom,
+            effects,
+            detector,
+            observation,
             map,
             after_gap: spec.after_gap,
             steps_per_sample: n,
@@ -149,6 +179,11 @@ impl Twin {
             last_seq: 0,
             counters: TwinCounters::default(),
         })
+    }
+
+    /// How the prediction is observed through the rig's channels.
+    pub fn observation(&self) -> &Observation {
+        &self.observation
     }
 
     /// The twin step, s.
@@ -199,7 +234,7 @@ impl Twin {
         if !clearance_m.is_finite() {
             return Err(TwinError::Clearance(clearance_m));
         }
-        self.rom.set_clearance(clearance_m)?;
+        self.effects.set_clearance(&mut self.rom, clearance_m)?;
         Ok(())
     }
 
@@ -217,6 +252,8 @@ impl Twin {
     /// the counters are kept.
     pub fn reset(&mut self) {
         self.rom.reset();
+        self.effects.reset_state();
+        self.detector.reset();
         self.last_accel = None;
         self.next_sample = None;
     }
@@ -269,6 +306,8 @@ impl Twin {
             self.last_accel = None;
             if g.restarted {
                 self.rom.reset();
+                self.effects.reset_state();
+                self.detector.reset();
             }
         }
 
@@ -278,6 +317,7 @@ impl Twin {
             time: input.time,
             len,
             velocity: vec![0.0; 4 * len],
+            base_acceleration: input.base_acceleration.clone(),
             contact: vec![false; len],
             normal_force: vec![0.0; len],
             tangential_force: vec![0.0; len],
@@ -297,13 +337,19 @@ impl Twin {
                     before = self.rom.last().velocity;
                 }
                 let a = (1.0 - w) * a_prev + w * a_i;
-                let report = self.rom.step(a)?;
-                contact.add(self.rom.last());
+                let load = self.effects.loads(self.rom.state().eta());
+                let report = self.rom.step_loaded(a, load)?;
+                self.effects.after_step(&mut self.rom);
+                let last = self.rom.last();
+                contact.add(last);
+                self.detector.step(last.contact.any_closed);
                 let c = report.counters;
                 failures += (c.max_iterations + c.diverged) as u32;
                 if report.stop.is_some() {
                     // NOTE: non-finite state: data, not an error. Restart at rest and go on.
                     self.rom.reset();
+                    self.effects.reset_state();
+                    self.detector.reset();
                     before = [0.0; 4];
                     contact = SampleContact::default();
                     self.counters.restarts += 1;
@@ -314,7 +360,7 @@ impl Twin {
             for (s, (&b, &v)) in before.iter().zip(after).enumerate() {
                 out.velocity[s * len + i] = 0.5 * (b + v);
             }
-            out.contact[i] = contact.closed;
+            out.contact[i] = self.detector.sample();
             out.normal_force[i] = contact.normal * inv_n;
             out.tangential_force[i] = contact.tangential * inv_n;
             out.solver_failures[i] = failures;

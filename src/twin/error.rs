@@ -14,6 +14,10 @@ pub enum TwinError {
     /// A `[twin]` value out of range.
     #[error("twin spec: {0}")]
     Spec(#[from] SpecError),
+    /// A `[model]` extension that does not fit the twin ROM or the DAQ channels (names the
+    /// key).
+    #[error("model: {0}")]
+    Model(#[from] crate::physics::PhysicsError),
     /// The twin step the `[twin]` table gives is beyond the twin ROM's stability limit.
     #[error(
         "twin spec: {key} = {value}: the twin step 1 / ({sample_rate} Hz x {steps_per_sample}) \

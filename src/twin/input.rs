@@ -49,11 +49,21 @@ impl InputMap {
     /// The map for a layout. Fails when the layout has no platform accelerometer, a platform
     /// channel with a non-finite scale, or a sample rate that is not a finite number > 0.
     pub fn new(layout: &DaqLayout) -> Result<InputMap, TwinError> {
+        InputMap::with_gains(layout, &[])
+    }
+
+    /// [`InputMap::new`] with the platform accelerometers' sensitivities (true over nominal,
+    /// `(channel index, gain)`; 1 for a channel not listed) divided out of their scales, so
+    /// the base acceleration is the true one (see [`super::observe`]).
+    pub fn with_gains(layout: &DaqLayout, gains: &[(usize, f64)]) -> Result<InputMap, TwinError> {
         let fs = layout.sample_rate;
         if !(fs.is_finite() && fs > 0.0) {
             return Err(LayoutError::SampleRate(fs).into());
         }
-        let platform = platform_accelerometers(layout);
+        let platform: Vec<(usize, f64)> = platform_accelerometers(layout)
+            .into_iter()
+            .map(|(k, scale)| (k, scale / crate::physics::sensor_gain::gain_of(gains, k)))
+            .collect();
         if platform.is_empty() {
             return Err(LayoutError::NoPlatform {
                 channels: layout.channels.iter().map(|c| c.name.clone()).collect(),

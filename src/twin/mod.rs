@@ -10,6 +10,10 @@
 //!   blocks the producer, with lag and skipped blocks in its status.
 //! - [`output`]: the logged types ([`TwinBlock`], [`TwinSamples`], [`TwinStatus`],
 //!   [`TwinEvent`]).
+//! - [`model`]: what the twin models ([`TwinModel`]: ROM, `[model]` extensions, contact
+//!   observation).
+//! - [`observe`]: how the prediction becomes what the rig's channels record (sensor
+//!   sensitivities, contact detection through the circuit and threshold).
 //! - [`compare`]: the per-step comparison with the measurement ([`TwinComparison`]) over the
 //!   record windows cut from the twin's output ([`TwinWindows`]).
 //! - [`clearance`]: the twin's clearance test by test ([`ClearanceSchedule`]), one rule for
@@ -28,6 +32,8 @@ pub mod compare;
 pub mod engine;
 pub mod error;
 pub mod input;
+pub mod model;
+pub mod observe;
 pub mod output;
 pub mod spec;
 pub mod task;
@@ -37,6 +43,8 @@ pub use compare::{Completed, TwinComparison, TwinWindows};
 pub use engine::{Twin, TwinCounters};
 pub use error::{BlockError, LayoutError, TaskError, TwinError};
 pub use input::{InputMap, TwinInput};
+pub use model::TwinModel;
+pub use observe::{Observation, TipObservation};
 pub use output::{TwinBlock, TwinEvent, TwinGap, TwinSamples, TwinStatus, TwinTrace, TWIN_SENSORS};
 pub use spec::{AfterGap, TwinSpec};
 pub use task::{Pushed, TwinReceiver, TwinTask};

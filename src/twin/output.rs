@@ -46,7 +46,12 @@ pub struct TwinBlock {
     /// tip, upper mid), channel-major: `velocity[k * len + i]` is sample `i` of sensor `k`,
     /// m/s.
     pub velocity: Vec<f64>,
-    /// Whether any contact pair was closed in a twin step of the sample.
+    /// The base acceleration the twin was driven with at each sample (the measured one
+    /// without the declared platform sensitivity errors), m/s^2.
+    pub base_acceleration: Vec<f64>,
+    /// Whether the contact channel would detect contact at the sample: the twin's contact
+    /// state through the contact-resistance circuit, a minimum-hold over the sample interval
+    /// and the threshold ([`super::observe`]).
     pub contact: Vec<bool>,
     /// Mean over the sample interval of the integrated normal contact force
     /// `sum_k lambda_n,k` (the impulse over the interval divided by its length), N.
@@ -245,6 +250,9 @@ pub struct TwinStatus {
 }
 
 /// A message from the twin task.
+// NOTE: a block message (its arrays are on the heap) is a few hundred bytes on the stack, once
+// per DAQ block (tens per second): boxing it would buy nothing.
+#[allow(clippy::large_enum_variant)]
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(tag = "kind", rename_all = "snake_case")]
 pub enum TwinEvent {

@@ -102,7 +102,7 @@ fn sine_response_matches_the_single_mode_frf() {
     let rom = stub_rom(&[f0], zeta, beta, 1.0);
     let lay = layout();
     let spec = TwinSpec::default();
-    let mut twin = Twin::new(&rom, &spec, &lay, 1.0).unwrap();
+    let mut twin = Twin::new(&TwinModel::nominal(&rom), &spec, &lay, 1.0).unwrap();
     // 1000 x 50 / 10240 = 4.88 -> 5 steps per sample.
     assert_eq!(twin.steps_per_sample(), 5);
     for f in [35.0, 50.0, 80.0] {
@@ -138,7 +138,13 @@ fn held_contact_carries_the_static_force() {
     let (f0, beta, clearance, a) = (50.0, 0.5, 1e-3, -400.0);
     let rom = stub_rom(&[f0], 0.02, beta, clearance);
     let lay = layout();
-    let mut twin = Twin::new(&rom, &TwinSpec::default(), &lay, clearance).unwrap();
+    let mut twin = Twin::new(
+        &TwinModel::nominal(&rom),
+        &TwinSpec::default(),
+        &lay,
+        clearance,
+    )
+    .unwrap();
     let n_blocks = (2.0 * FS / BLOCK as f64) as u64;
     let out: Vec<TwinBlock> = (0..n_blocks)
         .map(|s| twin.push_block(&block(&lay, s, &|_| a)).unwrap())
@@ -164,7 +170,7 @@ fn output_sample_i_belongs_to_input_sample_i() {
     // sample 300 exactly, and starts moving at it (the steps before it ramp in).
     let rom = stub_rom(&[50.0], 0.01, 0.5, 1.0);
     let lay = layout();
-    let mut twin = Twin::new(&rom, &TwinSpec::default(), &lay, 1.0).unwrap();
+    let mut twin = Twin::new(&TwinModel::nominal(&rom), &TwinSpec::default(), &lay, 1.0).unwrap();
     let step = |t: f64| if t >= 300.0 / FS - 1e-12 { 10.0 } else { 0.0 };
     let b0 = twin.push_block(&block(&lay, 0, &step)).unwrap();
     let b1 = twin.push_block(&block(&lay, 1, &step)).unwrap();
@@ -188,7 +194,8 @@ fn same_blocks_give_the_same_bits_with_impacts() {
     let a = sine(5.0, 50.0);
     let blocks: Vec<DaqBlock> = (0..80).map(|s| block(&lay, s, &a)).collect();
     let run = || {
-        let mut twin = Twin::new(&rom, &TwinSpec::default(), &lay, 2e-4).unwrap();
+        let mut twin =
+            Twin::new(&TwinModel::nominal(&rom), &TwinSpec::default(), &lay, 2e-4).unwrap();
         let out: Vec<TwinBlock> = blocks.iter().map(|b| twin.push_block(b).unwrap()).collect();
         (out, twin.counters())
     };
@@ -227,7 +234,7 @@ fn gaps_are_reported_and_out_of_order_blocks_rejected() {
             after_gap,
             ..TwinSpec::default()
         };
-        let mut twin = Twin::new(&rom, &spec, &lay, 1.0).unwrap();
+        let mut twin = Twin::new(&TwinModel::nominal(&rom), &spec, &lay, 1.0).unwrap();
         for s in 0..20 {
             assert_eq!(twin.push_block(&block(&lay, s, &a)).unwrap().gap, None);
         }
@@ -272,7 +279,7 @@ fn bad_input_gives_clear_errors() {
     no_platform
         .channels
         .retain(|c| c.kind != ChannelKind::PlatformAcceleration);
-    let msg = Twin::new(&rom, &spec, &no_platform, 1.0)
+    let msg = Twin::new(&TwinModel::nominal(&rom), &spec, &no_platform, 1.0)
         .unwrap_err()
         .to_string();
     assert!(
@@ -281,7 +288,7 @@ fn bad_input_gives_clear_errors() {
     );
 
     // A block of the wrong shape.
-    let mut twin = Twin::new(&rom, &spec, &lay, 1.0).unwrap();
+    let mut twin = Twin::new(&TwinModel::nominal(&rom), &spec, &lay, 1.0).unwrap();
     let mut b = block(&lay, 0, &|_| 0.0);
     b.counts.pop();
     let msg = twin.push_block(&b).unwrap_err().to_string();
@@ -308,7 +315,9 @@ fn bad_input_gives_clear_errors() {
         steps_per_sample: Some(1),
         ..TwinSpec::default()
     };
-    let msg = Twin::new(&stiff, &one, &lay, 1.0).unwrap_err().to_string();
+    let msg = Twin::new(&TwinModel::nominal(&stiff), &one, &lay, 1.0)
+        .unwrap_err()
+        .to_string();
     println!("{msg}");
     assert!(
         msg.contains("twin.steps_per_sample = 1")
@@ -320,7 +329,7 @@ fn bad_input_gives_clear_errors() {
         steps_per_reference_period: 100.0,
         ..TwinSpec::default()
     };
-    let msg = Twin::new(&stiff, &coarse, &lay, 1.0)
+    let msg = Twin::new(&TwinModel::nominal(&stiff), &coarse, &lay, 1.0)
         .unwrap_err()
         .to_string();
     assert!(
@@ -331,14 +340,16 @@ fn bad_input_gives_clear_errors() {
         steps_per_sample: Some(2),
         ..TwinSpec::default()
     };
-    assert!(Twin::new(&stiff, &two, &lay, 1.0).is_ok());
+    assert!(Twin::new(&TwinModel::nominal(&stiff), &two, &lay, 1.0).is_ok());
 
     // A ROM without the beam sensors, a bad clearance.
     let mut blind = rom.clone();
     blind.outputs.retain(|o| o.name != "upper_tip");
-    let msg = Twin::new(&blind, &spec, &lay, 1.0).unwrap_err().to_string();
+    let msg = Twin::new(&TwinModel::nominal(&blind), &spec, &lay, 1.0)
+        .unwrap_err()
+        .to_string();
     assert!(msg.contains("no output \"upper_tip\""), "{msg}");
-    assert!(Twin::new(&rom, &spec, &lay, f64::NAN).is_err());
+    assert!(Twin::new(&TwinModel::nominal(&rom), &spec, &lay, f64::NAN).is_err());
     assert!(twin.set_clearance(f64::INFINITY).is_err());
 }
 
@@ -360,12 +371,15 @@ fn task_output_equals_the_sync_core() {
     let lay = layout();
     let a = sine(5.0, 50.0);
     let blocks: Vec<DaqBlock> = (0..40).map(|s| block(&lay, s, &a)).collect();
-    let mut twin = Twin::new(&rom, &TwinSpec::default(), &lay, 2e-4).unwrap();
+    let mut twin = Twin::new(&TwinModel::nominal(&rom), &TwinSpec::default(), &lay, 2e-4).unwrap();
     let sync: Vec<TwinBlock> = blocks.iter().map(|b| twin.push_block(b).unwrap()).collect();
 
     let spec = TwinSpec::default();
-    let (mut task, mut rx) =
-        TwinTask::spawn(Twin::new(&rom, &spec, &lay, 2e-4).unwrap(), &spec).unwrap();
+    let (mut task, mut rx) = TwinTask::spawn(
+        Twin::new(&TwinModel::nominal(&rom), &spec, &lay, 2e-4).unwrap(),
+        &spec,
+    )
+    .unwrap();
     for b in &blocks {
         assert_eq!(task.push(b).unwrap(), Pushed::Queued);
     }
@@ -386,7 +400,7 @@ fn task_clearance_applies_from_the_next_block() {
     let lay = layout();
     let a = sine(5.0, 50.0);
     let blocks: Vec<DaqBlock> = (0..30).map(|s| block(&lay, s, &a)).collect();
-    let mut twin = Twin::new(&rom, &TwinSpec::default(), &lay, 1.0).unwrap();
+    let mut twin = Twin::new(&TwinModel::nominal(&rom), &TwinSpec::default(), &lay, 1.0).unwrap();
     let mut sync = Vec::new();
     let spec = TwinSpec::default();
     let (mut task, mut rx) = TwinTask::spawn(twin.clone(), &spec).unwrap();
@@ -417,8 +431,11 @@ fn throttled_task_falls_behind_without_blocking_the_producer() {
         throttle: 4.0,
         ..TwinSpec::default()
     };
-    let (mut task, mut rx) =
-        TwinTask::spawn(Twin::new(&rom, &spec, &lay, 1.0).unwrap(), &spec).unwrap();
+    let (mut task, mut rx) = TwinTask::spawn(
+        Twin::new(&TwinModel::nominal(&rom), &spec, &lay, 1.0).unwrap(),
+        &spec,
+    )
+    .unwrap();
     let blocks: Vec<DaqBlock> = (0..60).map(|s| block(&lay, s, &a)).collect();
 
     // A burst of 40 blocks (1 s of data): a blocking producer would wait about 4 s.
@@ -490,8 +507,11 @@ fn abort_discards_the_queue_and_drop_joins() {
         throttle: 2.0,
         ..TwinSpec::default()
     };
-    let (mut task, _rx) =
-        TwinTask::spawn(Twin::new(&rom, &spec, &lay, 1.0).unwrap(), &spec).unwrap();
+    let (mut task, _rx) = TwinTask::spawn(
+        Twin::new(&TwinModel::nominal(&rom), &spec, &lay, 1.0).unwrap(),
+        &spec,
+    )
+    .unwrap();
     for s in 0..8 {
         task.push(&block(&lay, s, &|_| 0.0)).unwrap();
     }
@@ -503,8 +523,11 @@ fn abort_discards_the_queue_and_drop_joins() {
     assert!(!status.running);
 
     // Wrong shapes and order are refused on the producer side.
-    let (mut task, _rx) =
-        TwinTask::spawn(Twin::new(&rom, &spec, &lay, 1.0).unwrap(), &spec).unwrap();
+    let (mut task, _rx) = TwinTask::spawn(
+        Twin::new(&TwinModel::nominal(&rom), &spec, &lay, 1.0).unwrap(),
+        &spec,
+    )
+    .unwrap();
     let mut b = block(&lay, 0, &|_| 0.0);
     task.push(&b).unwrap();
     let msg = task.push(&b).unwrap_err().to_string();
@@ -522,7 +545,7 @@ fn task_status_counts_only_its_own_work() {
     let rom = stub_rom(&[50.0], 0.01, 0.5, 1.0);
     let lay = layout();
     let a = sine(2.0, 50.0);
-    let mut twin = Twin::new(&rom, &TwinSpec::default(), &lay, 1.0).unwrap();
+    let mut twin = Twin::new(&TwinModel::nominal(&rom), &TwinSpec::default(), &lay, 1.0).unwrap();
     for s in 0..5 {
         twin.push_block(&block(&lay, s, &a)).unwrap();
     }
@@ -545,7 +568,7 @@ fn outputs_round_trip_through_json_and_have_schemas() {
     let rom = stub_rom(&[50.0], 0.01, 0.5, 1.0);
     let lay = layout();
     let a = sine(2.0, 50.0);
-    let mut twin = Twin::new(&rom, &TwinSpec::default(), &lay, 1.0).unwrap();
+    let mut twin = Twin::new(&TwinModel::nominal(&rom), &TwinSpec::default(), &lay, 1.0).unwrap();
     twin.push_block(&block(&lay, 0, &a)).unwrap();
     let b = twin.push_block(&block(&lay, 2, &a)).unwrap();
     assert!(b.gap.is_some());
@@ -600,6 +623,7 @@ fn marked_block(first_sample: u64, len: usize) -> TwinBlock {
         velocity: (0..4)
             .flat_map(|k| (0..len).map(move |i| v(k, i)))
             .collect(),
+        base_acceleration: (0..len).map(|i| v(30, i)).collect(),
         contact: (0..len)
             .map(|i| (first_sample + i as u64) % 2 == 1)
             .collect(),

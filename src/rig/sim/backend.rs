@@ -45,6 +45,8 @@ pub struct SimBackend {
     status: RigStatus,
     /// Beam length, m: the unit of a test's clearance.
     beam_length: f64,
+    /// The hidden clearance per test (`[truth.variants.clearance]`), if any.
+    hidden_clearance: crate::physics::PhysicsSpec,
     stalled: bool,
 }
 
@@ -53,6 +55,10 @@ impl SimBackend {
     pub fn new(rig: SimRig, beam_length: f64, realtime: bool) -> SimBackend {
         SimBackend {
             layout: rig.layout().clone(),
+            hidden_clearance: crate::physics::PhysicsSpec {
+                clearance: rig.variants().clearance.clone(),
+                ..Default::default()
+            },
             rig: Some(rig),
             pending: None,
             ready: None,
@@ -138,10 +144,12 @@ impl RigBackend for SimBackend {
     }
 
     async fn begin_test(&mut self, test: &TestSpec) -> Result<(), RigError> {
-        // Applies from the next block computed (the one after the block in flight).
+        // Applies from the next block computed (the one after the block in flight). A hidden
+        // clearance variant changes the plan's clearance.
+        let plan_m = test.clearance_m(self.beam_length);
         self.faults.push(InjectedFault::ClearanceChange {
             at_s: 0.0,
-            clearance_m: test.clearance_m(self.beam_length),
+            clearance_m: self.hidden_clearance.test_clearance(&test.name, plan_m),
         });
         Ok(())
     }

@@ -56,6 +56,9 @@ pub enum SimRigError {
     /// The truth ROM lacks something the simulated rig needs.
     #[error("simulated rig truth ROM: {0}")]
     Rom(String),
+    /// A hidden effect does not fit the truth ROM or the DAQ channels (names the key).
+    #[error("simulated rig truth ROM: {0}")]
+    Physics(#[from] crate::physics::PhysicsError),
     /// The integrator rejected the truth ROM or its time step.
     #[error("simulated rig truth model: {0}")]
     Sim(#[from] SimError),
@@ -247,7 +250,11 @@ impl SimRig {
             Ok(dt)
         })?;
         let layout = crate::rig::channels::layout(&spec.daq);
-        let gains = variants::sensor_gain::resolve(&hidden.sensor_gains, &layout)?;
+        let gains = crate::physics::sensor_gain::resolve(
+            &hidden.sensor_gains,
+            layout.channels.iter().map(|c| c.name.as_str()),
+            "truth.variants",
+        )?;
         let sensors = Sensors::new(
             spec.daq.platform_accelerometers.len(),
             truth_model.dt(),
@@ -439,7 +446,7 @@ impl SimRig {
                 }
                 closed_steps += u32::from(v.any_closed);
                 self.sensors.read(&v, &mut self.values);
-                variants::sensor_gain::apply(&self.gains, &mut self.values);
+                crate::physics::sensor_gain::apply(&self.gains, &mut self.values);
                 self.daq.filter(&self.values, sub == 0);
                 if sub == 0 {
                     at_sample = Some(v);

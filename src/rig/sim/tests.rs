@@ -371,7 +371,8 @@ fn truth_variants_check_the_rom_and_name_bad_input() {
         .unwrap_err()
         .to_string();
     assert!(
-        msg.contains("truth.variants.clamp_friction") && msg.contains("no mode labelled 1FL"),
+        msg.contains("truth.variants.clamp_friction.beams = \"1FL\"")
+            && msg.contains("no mode with that label"),
         "{msg}"
     );
     let rig = SimRig::new(&rom, &clamp(vec![Beam::Upper]), 1.0).unwrap();

@@ -19,20 +19,20 @@
 // the truncated modal reaction but taken from the previous step (`lambda` of this step is only
 // known after the modal step): a one-step lag on a term that is nearly zero.
 //
-// NOTE (truth variants): the clamp joint's modal load `f_load` (see `variants::iwan`) is
-// evaluated at `eta^j` before the step and enters both the modal step and `F_i` above, so the
-// base sees the modal acceleration the integrator applies. Wear moves the clearance after a
-// step (from that step's dissipated contact work); a tilt sets per-pair gap offsets once.
-// With every variant off the step does exactly what it did without them.
+// NOTE (truth variants): the effects are the model's ([`crate::sim::effects`]): modal
+// corrections change the truth ROM before anything is computed from it; the clamp joint's
+// modal load `f_load` (see `physics::iwan`) is evaluated at `eta^j` before the step and enters
+// both the modal step and `F_i` above, so the base sees the modal acceleration the integrator
+// applies. Wear moves the clearance after a step (from that step's dissipated contact work); a
+// tilt sets per-pair gap offsets once. With every variant off the step does exactly what it
+// did without them.
 
 use crate::rom::Rom;
 use crate::sim::driven::{DrivenError, DrivenRom};
+use crate::sim::effects::{self, Effects};
 use crate::sim::{StabilityLimits, State, TimeStep};
 
 use super::shaker::Shaker;
-use super::variants::iwan::ClampJoint;
-use super::variants::tilt;
-use super::variants::wear::Wear;
 use super::variants::TruthVariants;
 use super::{ShakerSpec, SimRigError};
 
@@ -84,12 +84,9 @@ pub struct Truth {
     steps: u64,
     failure: Option<String>,
     solver_failures: u64,
-    /// Clearance set at start or by [`Truth::set_clearance`], m (wear grows on top of it).
-    nominal_clearance: f64,
-    /// Variant: friction in the clamping joint.
-    joint: Option<ClampJoint>,
-    /// Variant: clearance growth from wear.
-    wear: Option<Wear>,
+    /// The hidden physics acting during the integration (clamp friction, wear) and the
+    /// clearance they act on.
+    effects: Effects,
 }
 
 /// The ROM's stability limits with the base attached: the open bound becomes a bound on the
@@ -136,6 +133,8 @@ impl Truth {
         variants: &TruthVariants,
         choose_dt: impl FnOnce(&StabilityLimits) -> Result<f64, SimRigError>,
     ) -> Result<Truth, SimRigError> {
+        // Hidden modal corrections change the truth ROM itself.
+        let rom = &*effects::prepare(rom, variants, "truth.variants")?;
         // A provisional step far inside any stability limit lets the integrator check the ROM
         // and compute its limits; the real step follows from them.
         let mut driven = DrivenRom::provisional(rom, BEAM_SENSORS).map_err(|e| match e {
@@ -158,20 +157,8 @@ impl Truth {
         let limits = coupled_limits(driven.limits(), shaker, modal_mass);
         let dt = choose_dt(&limits)?;
         driven.set_time_step(TimeStep::Dt { dt })?;
-        driven.set_clearance(clearance_m)?;
-        if let Some(t) = &variants.tilt {
-            let offsets = tilt::gap_offsets(&rom.pair_position, &rom.pair_area, t);
-            driven.set_gap_offsets(Some(&offsets))?;
-        }
-        let joint = variants
-            .clamp_friction
-            .as_ref()
-            .map(|c| ClampJoint::new(rom, c))
-            .transpose()?;
-        let wear = variants
-            .wear
-            .as_ref()
-            .map(|w| Wear::new(w.coefficient, w.max_growth));
+        let effects = Effects::new(rom, variants, "truth.variants", clearance_m)?;
+        effects.attach(&mut driven)?;
 
         let m = rom.n_modes();
         let damping: Vec<f64> = (0..m)
@@ -206,9 +193,7 @@ impl Truth {
             steps: 0,
             failure: None,
             solver_failures: 0,
-            nominal_clearance: clearance_m,
-            joint,
-            wear,
+            effects,
         })
     }
 
@@ -232,10 +217,7 @@ impl Truth {
         let (u, clipped) = self.shaker.amplifier(drive_v);
 
         // Clamp joint (variant): its modal load at eta^j.
-        let load: &[(usize, f64)] = match &mut self.joint {
-            Some(j) => j.update(self.rom.state().eta()),
-            None => &[],
-        };
+        let load = self.effects.loads(self.rom.state().eta());
 
         // Base acceleration from the base equation (see the module docs).
         let state = self.rom.state();
@@ -287,15 +269,8 @@ impl Truth {
         if !self.shaker.is_finite() {
             return self.fail(time, "the shaker state");
         }
+        self.effects.after_step(&mut self.rom);
         let after = *self.rom.last();
-        if let Some(w) = &mut self.wear {
-            // Cumulative contact work on the modes and boundary energy after the step, J.
-            let (work, boundary) = (after.energy.accounts.contact_work, after.energy.boundary);
-            if let Some(growth) = w.update(work, boundary) {
-                // Finite: the nominal clearance is finite and the growth is capped or finite.
-                let _ = self.rom.set_clearance(self.nominal_clearance + growth);
-            }
-        }
         self.last = StepValues {
             time,
             base_acceleration: a_b,
@@ -349,27 +324,19 @@ impl Truth {
 
     /// Changes the nominal clearance (finite, m); wear grown so far stays on top of it.
     pub fn set_clearance(&mut self, clearance_m: f64) -> Result<(), SimRigError> {
-        let growth = self.wear.as_ref().map_or(0.0, Wear::growth);
-        let effective = if growth > 0.0 {
-            clearance_m + growth
-        } else {
-            clearance_m
-        };
-        self.rom.set_clearance(effective)?;
-        self.nominal_clearance = clearance_m;
-        Ok(())
+        Ok(self.effects.set_clearance(&mut self.rom, clearance_m)?)
     }
 
     /// Wear (variant): the dissipated contact work `W` (J) and the clearance growth (m) so
     /// far; `None` when the variant is off.
     pub fn wear(&self) -> Option<(f64, f64)> {
-        self.wear.as_ref().map(|w| (w.work(), w.growth()))
+        self.effects.wear()
     }
 
     /// Clamp friction (variant): energy dissipated in the joints so far, J; `None` when the
     /// variant is off.
     pub fn joint_dissipation(&self) -> Option<f64> {
-        self.joint.as_ref().map(ClampJoint::dissipated)
+        self.effects.joint_dissipation()
     }
 
     /// The integrator (gap offsets, clearance, limits), for tests and diagnostics.

@@ -30,8 +30,7 @@
 
 use crate::rom::Rom;
 
-use super::super::SimRigError;
-use super::ClampFrictionSpec;
+use super::{ClampFrictionSpec, PhysicsError};
 
 /// An Iwan element with uniformly distributed slip deflections (see the module docs).
 #[derive(Clone, Debug, PartialEq)]
@@ -99,6 +98,12 @@ impl Iwan {
         self.dissipated
     }
 
+    /// Back to rest: every slider stuck where it started (the dissipated energy is kept).
+    pub fn reset(&mut self) {
+        self.s.fill(0.0);
+        self.sum_s = 0.0;
+    }
+
     /// Number of sliders currently not at rest relative to where they started (slipped at
     /// least once).
     pub fn slipped(&self) -> usize {
@@ -119,19 +124,18 @@ pub struct ClampJoint {
 
 impl ClampJoint {
     /// The joints of `spec` (valid) on `rom`: finds each beam's first bending mode by label
-    /// (1FL, 1FU) and its tip output.
-    pub fn new(rom: &Rom, spec: &ClampFrictionSpec) -> Result<ClampJoint, SimRigError> {
+    /// (1FL, 1FU) and its tip output. Errors name the key `<prefix>.clamp_friction.beams`.
+    pub fn new(
+        rom: &Rom,
+        spec: &ClampFrictionSpec,
+        prefix: &str,
+    ) -> Result<ClampJoint, PhysicsError> {
+        let key = format!("{prefix}.clamp_friction.beams");
         let mut modes = Vec::new();
         let mut elements = Vec::new();
         for &beam in &spec.beams {
             let label = beam.first_bending_label();
-            let i = rom.labels.iter().position(|l| l == label).ok_or_else(|| {
-                SimRigError::Rom(format!(
-                    "truth.variants.clamp_friction: the truth ROM has no mode labelled {label} \
-                     (labels: {}); drop {beam:?} from beams or use a ROM of the rig",
-                    rom.labels.join(", ")
-                ))
-            })?;
+            let i = super::modal::mode_index(rom, label, &key)?;
             let tip = beam.tip_output();
             let c = rom
                 .outputs
@@ -140,10 +144,12 @@ impl ClampJoint {
                 .and_then(|o| o.c_eta.get(i).copied())
                 .unwrap_or(0.0);
             if !(c.is_finite() && c != 0.0) {
-                return Err(SimRigError::Rom(format!(
-                    "truth.variants.clamp_friction: mode {label} does not move the output \
-                     {tip:?} (participation {c}): cannot convert the slip amplitude"
-                )));
+                return Err(PhysicsError::NoParticipation {
+                    key,
+                    label: label.to_owned(),
+                    output: tip.to_owned(),
+                    participation: c,
+                });
             }
             let max_slip = 2.0 * spec.half_slip_tip_amplitude / c.abs();
             let k_j = spec.stiffness_fraction * rom.omega[i] * rom.omega[i];
@@ -171,6 +177,12 @@ impl ClampJoint {
             l.1 = e.update(eta[i]);
         }
         &self.load
+    }
+
+    /// Back to rest: every slider of every joint stuck at zero displacement, no load.
+    pub fn reset(&mut self) {
+        self.elements.iter_mut().for_each(Iwan::reset);
+        self.load.iter_mut().for_each(|l| l.1 = 0.0);
     }
 
     /// The load of the last update.

@@ -1,23 +1,19 @@
 //! Truth variants: physics of the simulated rig that the twin does not know, each off by
-//! default and switched on in `[truth.variants]` (the parameters and their checks:
-//! [`crate::config::variants`], re-exported here):
+//! default and switched on in `[truth.variants]`. The parameters and their checks are
+//! [`crate::config::physics`] (the same schema as the model's `[model]`), the physics
+//! [`crate::physics`]: one implementation for the truth and the model.
 //!
-//! - clamp friction: an Iwan element on the first bending mode of each beam ([`iwan`]):
-//!   amplitude-dependent softening and damping.
-//! - wear: the clearance grows with the contact's dissipated work (Archard-like, [`wear`]).
-//! - tilt: the protrusion's contact face is tilted about an axis in the contact plane, giving
-//!   every pair its own initial gap ([`tilt`]).
-//! - sensor gains: per-channel sensitivity errors applied before the ADC while the DAQ layout
-//!   keeps the nominal sensitivity ([`sensor_gain`]).
+//! - `modes`: the truth ROM's natural frequencies and damping ratios differ from the nominal.
+//! - `clamp_friction`: an Iwan element on the first bending mode of each beam.
+//! - `clearance`: each test's clearance differs from the plan's.
+//! - `wear`: the clearance grows with the contact's dissipated work.
+//! - `tilt`: every pair gets its own initial gap.
+//! - `sensor_gains`: per-channel sensitivity errors applied before the ADC while the DAQ
+//!   layout keeps the nominal sensitivity.
 
-pub mod iwan;
-pub mod sensor_gain;
-pub mod tilt;
-pub mod wear;
-
-pub use crate::config::variants::{
-    Beam, ClampFrictionSpec, SensorGainSpec, TiltSpec, TruthVariants, WearSpec, MAX_SLIDERS,
-    MAX_TILT,
+pub use crate::physics::{
+    Beam, ClampFrictionSpec, ClearanceSpec, ModalCorrectionSpec, SensorGainSpec, TiltSpec,
+    TruthVariants, WearSpec, MAX_SLIDERS, MAX_TILT,
 };
 
 #[cfg(test)]

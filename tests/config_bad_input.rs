@@ -460,11 +460,32 @@ fn documented_truth_variants_examples_are_valid() {
         PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("rig-config/README.md"),
     )
     .unwrap();
-    let block = readme
+    let blocks: Vec<&str> = readme
         .split("```toml\n")
-        .nth(1)
-        .and_then(|b| b.split("```").next())
-        .expect("a toml block in rig-config/README.md");
+        .skip(1)
+        .filter_map(|b| b.split("```").next())
+        .collect();
+    let block = blocks
+        .iter()
+        .find(|b| b.starts_with("[truth.variants]"))
+        .expect("a [truth.variants] toml block in rig-config/README.md");
+    // The `[model]` example is valid and switches on every extension.
+    let model_block = blocks
+        .iter()
+        .find(|b| b.starts_with("[model]"))
+        .expect("a [model] toml block in rig-config/README.md");
+    let cfg = parse(&format!("{}\n{model_block}", &text[..start])).unwrap();
+    assert_eq!(
+        cfg.model.effects(),
+        [
+            "modes",
+            "clamp_friction",
+            "clearance",
+            "wear",
+            "tilt",
+            "sensor_gains"
+        ]
+    );
     let from_readme = SimRigSpec::from_config(&parse(&with_variants(block)).unwrap())
         .truth
         .variants;

@@ -7,6 +7,8 @@
 //! plus the change of the sensor's relative velocity over the half steps around `t^j`;
 //! velocities average the half-step velocities around `t^j`.
 
+use crate::physics::contact_detection::ContactCircuit;
+
 use super::spec::ContactCircuitSpec;
 use super::truth::{StepValues, BEAM_SENSORS, UPPER_TIP};
 
@@ -15,11 +17,8 @@ use super::truth::{StepValues, BEAM_SENSORS, UPPER_TIP};
 pub struct Sensors {
     n_platform: usize,
     dt: f64,
-    open_v: f64,
-    closed_v: f64,
-    /// `exp(-dt / tau)` of the contact circuit.
-    decay: f64,
-    contact_v: f64,
+    /// The contact-resistance circuit, stepped with the truth.
+    circuit: ContactCircuit,
 }
 
 impl Sensors {
@@ -29,10 +28,7 @@ impl Sensors {
         Sensors {
             n_platform,
             dt,
-            open_v: circuit.open_voltage,
-            closed_v: circuit.closed_voltage,
-            decay: (-dt / circuit.time_constant).exp(),
-            contact_v: circuit.open_voltage,
+            circuit: ContactCircuit::new(circuit, dt),
         }
     }
 
@@ -44,7 +40,7 @@ impl Sensors {
     /// The resting value of every channel (for settling the filters), in layout order.
     pub fn rest(&self, out: &mut [f64]) {
         out.fill(0.0);
-        out[self.n_platform + BEAM_SENSORS.len() + 1] = self.open_v;
+        out[self.n_platform + BEAM_SENSORS.len() + 1] = self.circuit.open_voltage();
     }
 
     /// Reads every channel for one truth step into `out` (length [`Sensors::n_channels`]).
@@ -66,15 +62,8 @@ impl Sensors {
                 + s.base_velocity[1]
                 + rel_before[UPPER_TIP]
                 + rel_after[UPPER_TIP]);
-        // NOTE: the RC response to a piecewise-constant target is integrated exactly, so a
-        // contact shorter than the truth step still moves the voltage by the right amount.
-        let target = if s.any_closed {
-            self.closed_v
-        } else {
-            self.open_v
-        };
-        self.contact_v = target + (self.contact_v - target) * self.decay;
-        out[k + 1] = self.contact_v;
+        // The RC response is integrated exactly (see `physics::contact_detection`).
+        out[k + 1] = self.circuit.step(s.any_closed);
         out[k + 2] = s.amplifier_output;
         out[k + 3] = s.current;
     }

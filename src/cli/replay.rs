@@ -83,9 +83,10 @@ pub(crate) fn run(a: ReplayArgs) -> anyhow::Result<()> {
                 (rom, source)
             }
         };
+        let twin_model = model.model(&rom);
         println!(
             "twin model extensions: {}",
-            super::extensions_line(&model.extensions)
+            super::extensions_line(&twin_model.extensions)
         );
         let mut copy = match &a.out {
             Some(out) => {
@@ -104,13 +105,13 @@ pub(crate) fn run(a: ReplayArgs) -> anyhow::Result<()> {
         let stats = replay_twin(
             &r.recording,
             &mut summary,
-            &model.model(&rom),
+            &twin_model,
             &spec,
             rom.meta.beam_length,
             sink,
         )
         .with_context(|| format!("twin replay of {}", a.file.display()))?;
-        summary.twin_model = Some(model.extensions.clone());
+        summary.twin_model = Some(twin_model.extensions);
         println!(
             "twin: {source}: {} blocks, {} steps compared, {} contact-solver failures, {:.3} s \
              per rig second",

@@ -108,6 +108,12 @@ impl ClearanceSpec {
     }
 }
 
+/// The clearance of test `test` whose plan clearance is `plan_m` (m) under the clearance
+/// table `spec` ([`ClearanceSpec::of_test`]; the plan's without one).
+pub fn test_clearance(spec: Option<&ClearanceSpec>, test: &str, plan_m: f64) -> f64 {
+    spec.map_or(plan_m, |c| c.of_test(test, plan_m))
+}
+
 /// One entry of `clearance.tests`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -282,10 +288,7 @@ impl PhysicsSpec {
     /// The clearance of test `test` whose plan clearance is `plan_m` (m), before wear: the
     /// test's entry of `clearance.tests`, else the plan's plus `clearance.offset`.
     pub fn test_clearance(&self, test: &str, plan_m: f64) -> f64 {
-        match &self.clearance {
-            Some(c) => c.of_test(test, plan_m),
-            None => plan_m,
-        }
+        test_clearance(self.clearance.as_ref(), test, plan_m)
     }
 
     /// Checks every field against the range in its documentation; `daq` gives the channel

@@ -52,23 +52,12 @@ pub fn apply(gains: &[(usize, f64)], values: &mut [f64]) {
 mod tests {
     use super::*;
 
-    const CHANNELS: [&str; 8] = [
-        "platform_1",
-        "platform_2",
-        "platform_3",
-        "lower_tip",
-        "lower_mid",
-        "upper_tip",
-        "upper_mid",
-        "vibrometer",
-    ];
-
-    fn names() -> impl Iterator<Item = &'static str> + Clone {
-        CHANNELS.iter().copied()
-    }
-
     #[test]
     fn resolves_names_and_scales_only_those_channels() {
+        // The default rig's channels, in layout order.
+        let daq = crate::config::DaqSpec::default();
+        let names: Vec<&str> = daq.channel_names().collect();
+        let channels = || names.iter().copied();
         let gains = resolve(
             &[
                 SensorGainSpec {
@@ -80,12 +69,12 @@ mod tests {
                     gain: 0.5,
                 },
             ],
-            names(),
+            channels(),
             "truth.variants",
         )
         .unwrap();
         assert_eq!(gains, [(5, 1.03), (1, 0.5)]);
-        let mut v: Vec<f64> = (0..CHANNELS.len()).map(|k| k as f64 + 1.0).collect();
+        let mut v: Vec<f64> = (0..names.len()).map(|k| k as f64 + 1.0).collect();
         apply(&gains, &mut v);
         assert_eq!(v[5], 6.0 * 1.03);
         assert_eq!(v[1], 1.0);
@@ -97,7 +86,7 @@ mod tests {
                 channel: "tip".into(),
                 gain: 1.0,
             }],
-            names(),
+            channels(),
             "truth.variants",
         )
         .unwrap_err()

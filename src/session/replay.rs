@@ -6,7 +6,7 @@
 
 use std::path::Path;
 
-use crate::config::{ContactCircuitSpec, PhysicsSpec, RigConfig};
+use crate::config::RigConfig;
 use crate::control::{summarize, EventKind, SessionEvent, StepInfo};
 use crate::log::{read_session, LogReadError, SessionRead};
 use crate::rig::{DaqBlock, DaqLayout};
@@ -244,24 +244,24 @@ pub struct TwinModelSource {
     pub spec: TwinSpec,
     /// Where the model came from, for messages and the log copy's metadata.
     pub source: String,
-    /// The `[model]` extensions of the description the model comes from (`--rom`: the
-    /// logged description's; none without one).
-    pub extensions: PhysicsSpec,
-    /// Its contact circuit (`--rom` without a logged description: the default).
-    pub circuit: ContactCircuitSpec,
-    /// Its contact-voltage threshold, V.
-    pub contact_threshold_v: f64,
+    /// The logged rig description, for a ROM file (`--rom`): its `[model]` and contact
+    /// observation go with the ROM.
+    logged: Option<Box<RigConfig>>,
 }
 
 impl TwinModelSource {
+    /// The rig description the model's extensions and contact observation come from (none:
+    /// a ROM file with a log that holds no description).
+    pub fn description(&self) -> Option<&RigConfig> {
+        match &self.rom {
+            TwinRom::Description(cfg) => Some(cfg),
+            TwinRom::File(_) => self.logged.as_deref(),
+        }
+    }
+
     /// The twin's model with ROM `rom` (the one [`TwinModelSource::rom`] names).
     pub fn model<'a>(&self, rom: &'a Rom) -> TwinModel<'a> {
-        TwinModel {
-            rom,
-            extensions: self.extensions.clone(),
-            circuit: self.circuit.clone(),
-            contact_threshold_v: self.contact_threshold_v,
-        }
+        TwinModel::of(rom, self.description())
     }
 }
 
@@ -295,45 +295,35 @@ pub fn twin_model_source(
             .map(|text| RigConfig::from_str(text, LOGGED))
             .transpose()
     };
-    // The extensions and the contact observation of a description (the defaults without one).
-    let observed = |cfg: Option<&RigConfig>| match cfg {
-        Some(c) => (
-            c.model.clone(),
-            c.daq.contact_circuit.clone(),
-            c.control.contact_threshold_v,
-        ),
-        None => (
-            PhysicsSpec::default(),
-            ContactCircuitSpec::default(),
-            crate::config::ControlSpec::default().contact_threshold_v,
-        ),
-    };
-    let (cfg, rom, source) = match choice {
-        TwinModelChoice::Rom(path) => (
-            logged()?,
-            TwinRom::File(path.to_path_buf()),
-            path.display().to_string(),
-        ),
+    match choice {
+        TwinModelChoice::Rom(path) => {
+            let logged = logged()?;
+            Ok(TwinModelSource {
+                spec: logged.as_ref().map(|c| c.twin.clone()).unwrap_or_default(),
+                rom: TwinRom::File(path.to_path_buf()),
+                source: path.display().to_string(),
+                logged: logged.map(Box::new),
+            })
+        }
         TwinModelChoice::Config(path) => {
             let cfg = RigConfig::from_path(path)?;
-            let rom = TwinRom::Description(Box::new(cfg.clone()));
-            (Some(cfg), rom, path.display().to_string())
+            Ok(TwinModelSource {
+                spec: cfg.twin.clone(),
+                rom: TwinRom::Description(Box::new(cfg)),
+                source: path.display().to_string(),
+                logged: None,
+            })
         }
         TwinModelChoice::Logged => {
             let cfg = logged()?.ok_or_else(|| TwinModelError::NoRigDescription {
                 log: log.display().to_string(),
             })?;
-            let rom = TwinRom::Description(Box::new(cfg.clone()));
-            (Some(cfg), rom, "the rig description in the log".to_string())
+            Ok(TwinModelSource {
+                spec: cfg.twin.clone(),
+                rom: TwinRom::Description(Box::new(cfg)),
+                source: "the rig description in the log".to_string(),
+                logged: None,
+            })
         }
-    };
-    let (extensions, circuit, contact_threshold_v) = observed(cfg.as_ref());
-    Ok(TwinModelSource {
-        spec: cfg.map(|c| c.twin).unwrap_or_default(),
-        rom,
-        source,
-        extensions,
-        circuit,
-        contact_threshold_v,
-    })
+    }
 }

@@ -6,6 +6,7 @@
 
 use std::collections::VecDeque;
 
+use crate::config::physics::test_clearance;
 use crate::config::ClearanceSpec;
 use crate::control::{EventKind, SessionEvent};
 use crate::plan::per_l_to_metres;
@@ -52,10 +53,7 @@ impl ClearanceSchedule {
         } = &event.kind
         {
             let plan_m = per_l_to_metres(*clearance, self.beam_length);
-            let c = match &self.model {
-                Some(m) => m.of_test(test, plan_m),
-                None => plan_m,
-            };
+            let c = test_clearance(self.model.as_ref(), test, plan_m);
             self.pending.push_back((event.sample, c));
         }
     }

@@ -30,6 +30,15 @@ impl<'a> TwinModel<'a> {
         }
     }
 
+    /// The model `cfg` declares for `rom` ([`TwinModel::of_config`]), or without one
+    /// [`TwinModel::nominal`].
+    pub fn of(rom: &'a Rom, cfg: Option<&RigConfig>) -> TwinModel<'a> {
+        match cfg {
+            Some(c) => TwinModel::of_config(rom, c),
+            None => TwinModel::nominal(rom),
+        }
+    }
+
     /// `rom` without extensions, observed through the default circuit and threshold of a rig
     /// description.
     pub fn nominal(rom: &'a Rom) -> TwinModel<'a> {

@@ -8,6 +8,7 @@
 //! the drive of block `k`. With `realtime`, block `k` is handed out no earlier than the wall
 //! time of its last sample; a block finished later than that counts as an overrun.
 
+use crate::config::physics::test_clearance;
 use std::time::Duration;
 
 use tokio::task::JoinHandle;
@@ -46,7 +47,7 @@ pub struct SimBackend {
     /// Beam length, m: the unit of a test's clearance.
     beam_length: f64,
     /// The hidden clearance per test (`[truth.variants.clearance]`), if any.
-    hidden_clearance: crate::physics::PhysicsSpec,
+    hidden_clearance: Option<crate::physics::ClearanceSpec>,
     stalled: bool,
 }
 
@@ -55,10 +56,7 @@ impl SimBackend {
     pub fn new(rig: SimRig, beam_length: f64, realtime: bool) -> SimBackend {
         SimBackend {
             layout: rig.layout().clone(),
-            hidden_clearance: crate::physics::PhysicsSpec {
-                clearance: rig.variants().clearance.clone(),
-                ..Default::default()
-            },
+            hidden_clearance: rig.variants().clearance.clone(),
             rig: Some(rig),
             pending: None,
             ready: None,
@@ -149,7 +147,7 @@ impl RigBackend for SimBackend {
         let plan_m = test.clearance_m(self.beam_length);
         self.faults.push(InjectedFault::ClearanceChange {
             at_s: 0.0,
-            clearance_m: self.hidden_clearance.test_clearance(&test.name, plan_m),
+            clearance_m: test_clearance(self.hidden_clearance.as_ref(), &test.name, plan_m),
         });
         Ok(())
     }

@@ -8,6 +8,7 @@ use clap::Args;
 use std::path::PathBuf;
 
 use super::models::cached_rom;
+use super::paths::Files;
 use crate::rom::info::RomInfo;
 
 /// The demo plan, embedded so that the demo runs from any folder.
@@ -28,6 +29,28 @@ pub struct DemoArgs {
 }
 
 pub(crate) fn run(a: DemoArgs) -> anyhow::Result<()> {
+    Files::new()
+        .output("--out", &a.out.join("rom-info.json"), "the ROM summary")
+        .output(
+            "--out",
+            &a.out.join("stepped-sine.json"),
+            "the stepped sine",
+        )
+        .output_folder(
+            "--out",
+            &a.out.join("figures"),
+            "the figures",
+            &["png", "svg"],
+        )
+        .output("--out", &a.out.join("session.mcap"), "the session log")
+        .output("--out", &a.out.join("session.json"), "the session summary")
+        .output_folder(
+            "--out",
+            &a.out.join("session-figures"),
+            "the session figures",
+            super::report::FOLDER_FILES,
+        )
+        .check()?;
     let cfg = crate::config::RigConfig::default_rig();
     let (rom, path, reused) = cached_rom(&cfg, a.rebuild, a.quiet)?;
     let info = RomInfo::new(&rom);

@@ -8,6 +8,7 @@ mod fe;
 mod firmware_sim;
 mod hw;
 mod models;
+mod paths;
 mod progress;
 mod replay;
 mod report;
@@ -102,7 +103,8 @@ pub fn main() -> std::process::ExitCode {
     }
 }
 
-/// Writes a value as pretty JSON to `path` (creating parent folders).
+/// Writes a value as pretty JSON to `path` (creating parent folders), through a temporary file
+/// renamed into place: an existing file is replaced whole or not at all.
 pub(crate) fn write_json<T: serde::Serialize>(
     path: &std::path::Path,
     value: &T,
@@ -112,7 +114,8 @@ pub(crate) fn write_json<T: serde::Serialize>(
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
     let text = serde_json::to_string_pretty(value)?;
-    std::fs::write(path, text + "\n").with_context(|| format!("writing {}", path.display()))
+    crate::log::write_atomically(path, (text + "\n").as_bytes())
+        .with_context(|| format!("writing {}", path.display()))
 }
 
 /// The cache folder for built ROMs: `$RIGTWIN_CACHE`, else `$XDG_CACHE_HOME/rigtwin`, else

@@ -4,6 +4,11 @@
 use clap::Args;
 use std::path::{Path, PathBuf};
 
+use super::paths::Files;
+
+/// The kinds of file `report` writes into its folder.
+pub(crate) const FOLDER_FILES: &[&str] = &["png", "svg", "json"];
+
 /// `rigtwin report`
 #[derive(Args, Debug)]
 pub struct ReportArgs {
@@ -15,6 +20,10 @@ pub struct ReportArgs {
 }
 
 pub(crate) fn run(a: ReportArgs) -> anyhow::Result<()> {
+    Files::new()
+        .input("FILE", &a.file, "the session log")
+        .output_folder("--out", &a.out, "the figures and summary", FOLDER_FILES)
+        .check()?;
     for p in figures(&a.file, &a.out)? {
         println!("{}", p.display());
     }

@@ -22,6 +22,7 @@ use crate::session::{
 };
 
 use super::models;
+use super::paths::Files;
 
 /// Which rig to run on.
 #[derive(Clone, Copy, Debug, ValueEnum, PartialEq, Eq)]
@@ -343,7 +344,32 @@ pub(crate) fn print_summary(s: &SessionSummary) {
     }
 }
 
+/// The files `run` reads and writes (checked before anything starts).
+fn files(a: &RunArgs) -> Files {
+    let mut files = Files::new()
+        .input_opt("CONFIG", a.config.as_deref(), "the rig description")
+        .input("--plan", &a.plan, "the plan")
+        .output("--out", &a.out, "the session log")
+        .output_opt("--json", a.json.as_deref(), "the session summary");
+    for (flag, tty) in [("--ldv", &a.hw.ldv), ("--amp", &a.hw.amp)] {
+        if let Some(t) = tty {
+            files = files.input(flag, Path::new(t), "a serial port");
+        }
+    }
+    if let Some(log) = &a.hw.can_log {
+        let mut decoded = log.clone().into_os_string();
+        decoded.push(".decoded.jsonl");
+        files = files.output("--can-log", log, "the CAN log").output(
+            "--can-log",
+            Path::new(&decoded),
+            "the decoded CAN log",
+        );
+    }
+    files
+}
+
 pub(crate) fn run(a: RunArgs) -> anyhow::Result<()> {
+    files(&a).check()?;
     let hw = match a.backend {
         BackendArg::Sim => {
             if a.hw.can.is_some()

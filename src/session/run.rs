@@ -10,7 +10,7 @@ use std::path::Path;
 use std::time::Instant;
 
 use crate::config::RigConfig;
-use crate::control::SessionSetup;
+use crate::control::{Procedure, SessionSetup};
 use crate::log::{Attachment, LogError, LogOptions, MetadataRecord, SessionLog};
 use crate::plan::Plan;
 use crate::rig::{LinkCounters, RigBackend};
@@ -196,12 +196,27 @@ pub fn run<B: RigBackend>(
         path: path(),
         source,
     };
+    // Everything that can refuse the session is checked before the log is created: the
+    // control setup and the twin. (The log is written under a temporary name and moves into
+    // place when the backend has started, so a later failure does not touch an older file of
+    // that name either.)
+    Procedure::new(&setup, backend.layout()).map_err(SessionError::from)?;
+    let twin_engine = if request.twin {
+        let layout = backend.layout();
+        Some(Twin::new(
+            request.model,
+            &cfg.twin,
+            layout,
+            cfg.contact.clearance,
+        )?)
+    } else {
+        None
+    };
     let (handle, join) = SessionLog::create(out, LogOptions::default(), metadata, attachments)
         .map_err(create_error)?;
     let (live_recorder, live_view) = request.live.unzip();
-    let twin_recorder = if request.twin {
+    let twin_recorder = if let Some(engine) = twin_engine {
         let layout = backend.layout().clone();
-        let engine = Twin::new(request.model, &cfg.twin, &layout, cfg.contact.clearance)?;
         let (task, rx) = TwinTask::spawn(engine, &cfg.twin)?;
         let recorder = TwinRecorder::new(task, rx, l, layout.dt(), Some(handle.clone()))
             .map_err(RunError::TwinLog)?;

@@ -209,12 +209,22 @@ impl TwinLogCopy {
         model: &str,
         dt: f64,
     ) -> Result<TwinLogCopy, TwinReplayError> {
-        if let (Ok(a), Ok(b)) = (path.canonicalize(), session.path.canonicalize()) {
-            if a == b {
-                return Err(TwinReplayError::Overwrite {
-                    path: path.display().to_string(),
-                });
-            }
+        let identity = |p: &Path| {
+            use std::os::unix::fs::MetadataExt;
+            std::fs::metadata(p).ok().map(|m| (m.dev(), m.ino()))
+        };
+        let same_path = matches!(
+            (path.canonicalize(), session.path.canonicalize()),
+            (Ok(a), Ok(b)) if a == b
+        );
+        let same_inode = matches!(
+            (identity(path), identity(&session.path)),
+            (Some(a), Some(b)) if a == b
+        );
+        if same_path || same_inode {
+            return Err(TwinReplayError::Overwrite {
+                path: path.display().to_string(),
+            });
         }
         let mut metadata: Vec<MetadataRecord> = session
             .metadata

@@ -108,7 +108,7 @@ pub(crate) fn run(a: DemoArgs) -> anyhow::Result<()> {
     let json = a.out.join("session.json");
     super::write_json(&json, &o.summary)?;
     let figures = a.out.join("session-figures");
-    let written = super::report::figures(&mcap, &figures)?;
+    let (written, _) = super::report::figures(&mcap, &figures)?;
     println!("session log: {}", mcap.display());
     println!("session summary: {}", json.display());
     println!("session figures ({}): {}", written.len(), figures.display());

@@ -61,6 +61,8 @@ pub(crate) fn run(a: ReplayArgs) -> anyhow::Result<()> {
             "note: the log was not closed ({}); replaying what it holds",
             r.note.as_deref().unwrap_or("truncated")
         );
+    } else if !r.summary.complete {
+        println!("note: the log is damaged; replaying what it holds");
     }
     let same = r.matches_logged();
     println!(

@@ -342,6 +342,12 @@ pub(crate) fn print_summary(s: &SessionSummary) {
     if let Some(r) = &s.abort_reason {
         println!("ABORTED: {r}");
     }
+    if let Some(m) = &s.missing {
+        println!("INCOMPLETE: {}", m.description);
+        for f in &m.file {
+            println!("  file: {f}");
+        }
+    }
 }
 
 /// The files `run` reads and writes (checked before anything starts).

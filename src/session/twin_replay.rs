@@ -59,6 +59,18 @@ pub enum TwinReplayError {
         /// The file asked for.
         path: String,
     },
+    /// The recording has gaps (damaged chunks of the log): the twin's state cannot be carried
+    /// across them.
+    #[error(
+        "the recording has gaps ({blocks} DAQ blocks, {seconds:.2} s of rig time lost in damaged \
+         parts of the log): the twin cannot be re-run across them; replay without --twin"
+    )]
+    Gaps {
+        /// Blocks missing.
+        blocks: u64,
+        /// Rig time missing, s.
+        seconds: f64,
+    },
     /// The source log has a channel without a schema (not a rigtwin session log).
     #[error(
         "twin log: {path}: channel {topic} has no schema; only rigtwin session logs can be copied"
@@ -120,6 +132,12 @@ pub fn replay_twin(
     beam_length: f64,
     sink: &mut dyn TwinSink,
 ) -> Result<TwinReplayStats, TwinReplayError> {
+    if !rec.gaps.is_empty() {
+        return Err(TwinReplayError::Gaps {
+            blocks: rec.gaps.iter().map(|g| g.blocks).sum(),
+            seconds: rec.gaps.iter().map(|g| g.seconds).sum(),
+        });
+    }
     let wall = std::time::Instant::now();
     let mut clearances = ClearanceSchedule::of_events(beam_length, &rec.events);
     let mut twin = Twin::new(rom, spec, &rec.layout, clearances.first().unwrap_or(0.0))?;

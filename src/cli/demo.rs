@@ -112,6 +112,9 @@ pub(crate) fn run(a: DemoArgs) -> anyhow::Result<()> {
     println!("session log: {}", mcap.display());
     println!("session summary: {}", json.display());
     println!("session figures ({}): {}", written.len(), figures.display());
+    if let Some(e) = &o.log_error {
+        anyhow::bail!("the session log could not be finished: {e}");
+    }
     if o.summary.aborted {
         anyhow::bail!(
             "the session aborted: {}",

@@ -130,6 +130,18 @@ pub fn recording(session: &SessionRead) -> Result<Recording, ReplayError> {
         .into_iter()
         .next()
     else {
+        let blocks = session.messages_on(TOPIC_DAQ).count();
+        if blocks > 0 {
+            return Err(content(
+                path,
+                format!(
+                    "the DAQ layout ({TOPIC_LAYOUT}, logged once at the start) was in a damaged \
+                     part of the file: the {blocks} DAQ blocks that remain cannot be interpreted \
+                     without it; damage: {}",
+                    session.damage.join("; ")
+                ),
+            ));
+        }
         if damaged_or_cut(session) {
             let why = session
                 .note
@@ -222,7 +234,13 @@ pub fn window_counts(rec: &Recording, info: &StepInfo) -> Option<Vec<i32>> {
 
 /// Replays the session log at `path`.
 pub fn replay(path: &Path) -> Result<Replay, ReplayError> {
-    let session = read_session(path)?;
+    replay_read(read_session(path)?)
+}
+
+/// Replays a session log already read (e.g. by [`crate::log::read_session_bytes`]).
+pub fn replay_read(session: SessionRead) -> Result<Replay, ReplayError> {
+    let path = session.path.clone();
+    let path = path.as_path();
     let rec = recording(&session)?;
     let mut summary = SessionSummary {
         blocks: rec.blocks.len() as u64,

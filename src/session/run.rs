@@ -112,6 +112,9 @@ pub struct RunOutcome {
     pub twin: Option<TwinOutcome>,
     /// The hardware links' counters (a hardware backend).
     pub link: Option<LinkCounters>,
+    /// Why the session log could not be finished (e.g. a full disk): it then holds what was
+    /// flushed before the failure, without its summary section.
+    pub log_error: Option<String>,
 }
 
 /// The async runtime a session runs on (two worker threads: the session loop and the
@@ -248,10 +251,14 @@ pub fn run<B: RigBackend>(
     }
     let messages = recorder.0 .0.messages();
     drop(recorder);
-    join.close().map_err(|source| RunError::LogClose {
-        path: path(),
-        source,
-    })?;
+    // A log that cannot be finished (a full disk) is not the end of the outcome: the summary
+    // and what the log kept are still reported.
+    let log_error = join.close().err().map(|source| {
+        error_chain(&RunError::LogClose {
+            path: path(),
+            source,
+        })
+    });
     let wall_seconds = t0.elapsed().as_secs_f64();
     let live = live_view.map(LiveView::close);
     Ok(RunOutcome {
@@ -262,7 +269,23 @@ pub fn run<B: RigBackend>(
         live,
         twin,
         link,
+        log_error,
     })
+}
+
+/// An error and its causes, `: `-separated, without a cause whose text is already said.
+fn error_chain(e: &dyn std::error::Error) -> String {
+    let mut text = e.to_string();
+    let mut cause = e.source();
+    while let Some(c) = cause {
+        let s = c.to_string();
+        if !text.contains(&s) {
+            text.push_str(": ");
+            text.push_str(&s);
+        }
+        cause = c.source();
+    }
+    text
 }
 
 /// Completes when the operator stops the session: Ctrl-C (SIGINT) or SIGTERM (`kill`,

@@ -178,8 +178,8 @@ impl Files {
             for input in &self.inputs {
                 if let Some(how) = clash(out, &input.path) {
                     bail!(
-                        "{} {} {how} {} {} ({}, an input of this command): writing it would \
-                         destroy it; name another {}",
+                        "{} {} {how} {} {} ({}, an input of this command): writing there would \
+                         overwrite it; name another {}",
                         out.named.flag,
                         out.named.path.display(),
                         input.flag,

@@ -47,6 +47,8 @@ fn child_logs_until_killed() {
         [("kind".to_string(), "sigkill test".to_string())].into(),
     )];
     let (log, join) = SessionLog::create(Path::new(&path), options, meta, vec![]).unwrap();
+    // As a session does once it starts: from here on the log is at its own name.
+    log.publish().unwrap();
     let blocks = log.channel::<Block>("/rig/daq").unwrap();
     let events = log.channel::<Event>("/control/events").unwrap();
     let start = Instant::now();

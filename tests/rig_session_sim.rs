@@ -125,6 +125,8 @@ fn session_holds_the_base_amplitude_logs_standard_mcap_and_replays_bit_for_bit()
         assert!(figs.join(f).is_file(), "{f} missing: {}", text(&o));
     }
 
+    copies_of_a_log_are_described(dir.path(), &mcap);
+
     // The official Python reader.
     let Some(python) = log_support::mcap_python_or_skip("session log in python") else {
         return;
@@ -482,6 +484,130 @@ fn a_session_killed_mid_test_leaves_a_replayable_log() {
     let o = rigtwin(&["replay", mcap.to_str().unwrap()]);
     assert!(o.status.success(), "{}", text(&o));
     assert!(text(&o).contains("not closed"), "{}", text(&o));
+    cut_log_is_described(dir.path(), &mcap);
+}
+
+/// Offsets and lengths of the top-level records of an MCAP file, up to where it is cut.
+fn records(bytes: &[u8]) -> Vec<(u8, usize, usize)> {
+    let mut out = Vec::new();
+    let mut pos = 8;
+    while pos + 9 <= bytes.len() {
+        let len = u64::from_le_bytes(bytes[pos + 1..pos + 9].try_into().unwrap());
+        let Some(end) = usize::try_from(len)
+            .ok()
+            .and_then(|l| l.checked_add(pos + 9))
+            .filter(|&e| e <= bytes.len())
+        else {
+            break;
+        };
+        out.push((bytes[pos], pos, end - pos));
+        pos = end;
+    }
+    out
+}
+
+/// Issue 17, case 7, on the log of a SIGKILLed session: the replayed summary says
+/// `"complete": false` and what is missing in rig time and steps, and `aborted` with the cut
+/// as the reason; `report` prints it.
+fn cut_log_is_described(dir: &Path, mcap: &Path) {
+    let replayed = dir.join("replayed.json");
+    let o = rigtwin(&[
+        "replay",
+        mcap.to_str().unwrap(),
+        "--json",
+        replayed.to_str().unwrap(),
+    ]);
+    assert!(text(&o).contains("INCOMPLETE"), "{}", text(&o));
+    let s = json(&replayed);
+    assert_eq!(s["complete"], false, "{s}");
+    assert_eq!(s["aborted"], true, "{s}");
+    assert!(
+        s["abort_reason"]
+            .as_str()
+            .unwrap()
+            .contains("without session_end"),
+        "{s}"
+    );
+    let m = &s["missing"];
+    assert_eq!(m["session_end"], false, "{m}");
+    assert_eq!(m["steps_planned"], 3, "{m}");
+    assert!(m["recorded_until_s"].as_f64().unwrap() > 1.0, "{m}");
+    assert!(
+        m["description"].as_str().unwrap().contains("not recorded"),
+        "{m}"
+    );
+    let figures = dir.join("figures");
+    let o = rigtwin(&[
+        "report",
+        mcap.to_str().unwrap(),
+        "--out",
+        figures.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(text(&o).contains("INCOMPLETE"), "{}", text(&o));
+}
+
+/// Issue 17, cases 7 and 8, on copies of a closed session log: cut after its first chunk
+/// (a session killed within its first seconds), `report` says no step was finished; cut before
+/// its first chunk, replay says the log holds no DAQ data; with a damaged chunk in the middle
+/// the summary loses only that chunk's blocks (in rig seconds) and the chunks after it are read.
+fn copies_of_a_log_are_described(dir: &Path, mcap: &Path) {
+    let bytes = std::fs::read(mcap).unwrap();
+    let chunks: Vec<(usize, usize)> = records(&bytes)
+        .into_iter()
+        .filter(|r| r.0 == 0x06)
+        .map(|r| (r.1, r.2))
+        .collect();
+    assert!(chunks.len() >= 3, "{} chunks", chunks.len());
+    // Cut after the first chunk (about a second of rig time): no step finished.
+    let first = dir.join("first.mcap");
+    std::fs::write(&first, &bytes[..chunks[1].0]).unwrap();
+    let o = rigtwin(&[
+        "report",
+        first.to_str().unwrap(),
+        "--out",
+        dir.join("first-figures").to_str().unwrap(),
+    ]);
+    assert!(
+        o.status.success() && text(&o).contains("no step of the session was finished"),
+        "{}",
+        text(&o)
+    );
+    // Cut before the first chunk: the first second never reached the disk.
+    let early = dir.join("early.mcap");
+    std::fs::write(&early, &bytes[..chunks[0].0 + 20]).unwrap();
+    let o = rigtwin(&["replay", early.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    assert!(
+        text(&o).contains("holds no DAQ data") && !text(&o).contains("topics: none"),
+        "{}",
+        text(&o)
+    );
+    // A damaged chunk in the middle.
+    let (at, len) = chunks[chunks.len() / 2];
+    let mut damaged = bytes.clone();
+    for b in &mut damaged[at + len / 2..at + len / 2 + 8] {
+        *b ^= 0xa5;
+    }
+    let s = json(&dir.join("summary.json"));
+    let damaged_path = dir.join("damaged.mcap");
+    std::fs::write(&damaged_path, &damaged).unwrap();
+    let replayed = dir.join("damaged.json");
+    let o = rigtwin(&[
+        "replay",
+        damaged_path.to_str().unwrap(),
+        "--json",
+        replayed.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let d = json(&replayed);
+    let m = &d["missing"];
+    assert!(m["lost_blocks"].as_u64().unwrap() > 0, "{m}");
+    assert!(m["lost_seconds"].as_f64().unwrap() > 0.1, "{m}");
+    assert_eq!(
+        d["rig_seconds"], s["rig_seconds"],
+        "the chunks after it are read"
+    );
 }
 
 /// Issue 17, cases 4 and 6: Ctrl-C (SIGINT) and SIGTERM (`kill`, `timeout`, `systemctl stop`)

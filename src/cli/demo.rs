@@ -8,6 +8,7 @@ use clap::Args;
 use std::path::PathBuf;
 
 use super::models::cached_rom;
+use super::paths::Files;
 use crate::rom::info::RomInfo;
 
 /// The demo plan, embedded so that the demo runs from any folder.
@@ -28,6 +29,28 @@ pub struct DemoArgs {
 }
 
 pub(crate) fn run(a: DemoArgs) -> anyhow::Result<()> {
+    Files::new()
+        .output("--out", &a.out.join("rom-info.json"), "the ROM summary")
+        .output(
+            "--out",
+            &a.out.join("stepped-sine.json"),
+            "the stepped sine",
+        )
+        .output_folder(
+            "--out",
+            &a.out.join("figures"),
+            "the figures",
+            &["png", "svg"],
+        )
+        .output("--out", &a.out.join("session.mcap"), "the session log")
+        .output("--out", &a.out.join("session.json"), "the session summary")
+        .output_folder(
+            "--out",
+            &a.out.join("session-figures"),
+            "the session figures",
+            super::report::FOLDER_FILES,
+        )
+        .check()?;
     let cfg = crate::config::RigConfig::default_rig();
     let (rom, path, reused) = cached_rom(&cfg, a.rebuild, a.quiet)?;
     let info = RomInfo::new(&rom);
@@ -86,10 +109,13 @@ pub(crate) fn run(a: DemoArgs) -> anyhow::Result<()> {
     let json = a.out.join("session.json");
     super::write_json(&json, &o.summary)?;
     let figures = a.out.join("session-figures");
-    let written = super::report::figures(&mcap, &figures)?;
+    let (written, _) = super::report::figures(&mcap, &figures)?;
     println!("session log: {}", mcap.display());
     println!("session summary: {}", json.display());
     println!("session figures ({}): {}", written.len(), figures.display());
+    if let Some(e) = &o.log_error {
+        anyhow::bail!("the session log could not be finished: {e}");
+    }
     if o.summary.aborted {
         anyhow::bail!(
             "the session aborted: {}",

@@ -3,6 +3,8 @@
 use clap::{Args, Subcommand};
 use std::path::PathBuf;
 
+use super::paths::Files;
+
 /// `rigtwin fe ...`
 #[derive(Subcommand, Debug)]
 pub enum FeCommand {
@@ -30,6 +32,10 @@ pub struct ExportArgs {
 pub(crate) fn run(cmd: FeCommand) -> anyhow::Result<()> {
     match cmd {
         FeCommand::ExportCalculix(a) => {
+            Files::new()
+                .input_opt("CONFIG", a.config.as_deref(), "the rig description")
+                .output_folder("--out", &a.out, "the CalculiX decks", &["inp"])
+                .check()?;
             let cfg = super::models::load_config(a.config.as_deref())?;
             let mesh = crate::fe::rig::mesh_rig(cfg.model())?;
             let files = crate::fe::calculix::export(&mesh, &a.out, &a.job, a.modes)?;

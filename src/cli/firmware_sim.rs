@@ -65,8 +65,16 @@ pub(crate) fn run(a: FirmwareSimArgs) -> anyhow::Result<()> {
         .inject
         .iter()
         .map(|s| {
-            serde_json::from_str(s)
-                .with_context(|| format!("--inject {s}: not a fault description"))
+            serde_json::from_str(s).with_context(|| {
+                format!(
+                    "--inject {s}: not a fault description (the simulated rig's {}; link \
+                         faults: drop_frame {{block, frame}}, swap_frames {{block}}, \
+                         corrupt_sample {{block}}, bad_frames {{block}}, interlock {{at_s}}, \
+                         serial_garbage {{at_s, port: ldv|amp}}, serial_silent {{at_s, port}}, \
+                         mute {{at_s}}, vanish {{at_s}})",
+                    super::run::INJECT_KINDS
+                )
+            })
         })
         .collect::<anyhow::Result<_>>()?;
     let mut truth_cfg = cfg.clone();

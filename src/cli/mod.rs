@@ -8,6 +8,7 @@ mod fe;
 mod firmware_sim;
 mod hw;
 mod models;
+mod paths;
 mod progress;
 mod replay;
 mod report;
@@ -96,13 +97,31 @@ pub fn main() -> std::process::ExitCode {
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            eprintln!("error: {}", error_chain(&e));
             std::process::ExitCode::FAILURE
         }
     }
 }
 
-/// Writes a value as pretty JSON to `path` (creating parent folders).
+/// An error and its causes, `: `-separated, leaving out a cause whose text the message already
+/// holds (many errors quote their cause), so that nothing is said twice.
+fn error_chain(e: &anyhow::Error) -> String {
+    let mut text = String::new();
+    for cause in e.chain() {
+        let s = cause.to_string();
+        if text.contains(&s) {
+            continue;
+        }
+        if !text.is_empty() {
+            text.push_str(": ");
+        }
+        text.push_str(&s);
+    }
+    text
+}
+
+/// Writes a value as pretty JSON to `path` (creating parent folders), through a temporary file
+/// renamed into place: an existing file is replaced whole or not at all.
 pub(crate) fn write_json<T: serde::Serialize>(
     path: &std::path::Path,
     value: &T,
@@ -112,7 +131,8 @@ pub(crate) fn write_json<T: serde::Serialize>(
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
     let text = serde_json::to_string_pretty(value)?;
-    std::fs::write(path, text + "\n").with_context(|| format!("writing {}", path.display()))
+    crate::log::write_atomically(path, (text + "\n").as_bytes())
+        .with_context(|| format!("writing {}", path.display()))
 }
 
 /// The cache folder for built ROMs: `$RIGTWIN_CACHE`, else `$XDG_CACHE_HOME/rigtwin`, else

@@ -10,6 +10,7 @@ use crate::session::replay::{twin_model_source, TwinModelChoice, TwinRom};
 use crate::session::twin_replay::{replay_twin, TwinLogCopy, TwinSink};
 
 use super::models;
+use super::paths::Files;
 use super::run::print_summary;
 
 /// `rigtwin replay`
@@ -43,12 +44,25 @@ pub struct ReplayArgs {
 }
 
 pub(crate) fn run(a: ReplayArgs) -> anyhow::Result<()> {
+    Files::new()
+        .input("FILE", &a.file, "the session log")
+        .input_opt("--rom", a.rom.as_deref(), "the twin's ROM")
+        .input_opt(
+            "--config",
+            a.config.as_deref(),
+            "the twin's rig description",
+        )
+        .output_opt("--out", a.out.as_deref(), "the session log copy")
+        .output_opt("--json", a.json.as_deref(), "the summary")
+        .check()?;
     let r = crate::session::replay::replay(&a.file)?;
     if !r.complete {
         println!(
             "note: the log was not closed ({}); replaying what it holds",
             r.note.as_deref().unwrap_or("truncated")
         );
+    } else if !r.summary.complete {
+        println!("note: the log is damaged; replaying what it holds");
     }
     let same = r.matches_logged();
     println!(

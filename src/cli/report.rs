@@ -4,6 +4,12 @@
 use clap::Args;
 use std::path::{Path, PathBuf};
 
+use super::paths::Files;
+use crate::session::SessionSummary;
+
+/// The kinds of file `report` writes into its folder.
+pub(crate) const FOLDER_FILES: &[&str] = &["png", "svg", "json"];
+
 /// `rigtwin report`
 #[derive(Args, Debug)]
 pub struct ReportArgs {
@@ -15,18 +21,36 @@ pub struct ReportArgs {
 }
 
 pub(crate) fn run(a: ReportArgs) -> anyhow::Result<()> {
-    for p in figures(&a.file, &a.out)? {
+    Files::new()
+        .input("FILE", &a.file, "the session log")
+        .output_folder("--out", &a.out, "the figures and summary", FOLDER_FILES)
+        .check()?;
+    let (written, summary) = figures(&a.file, &a.out)?;
+    for p in written {
         println!("{}", p.display());
+    }
+    if let Some(m) = &summary.missing {
+        println!("INCOMPLETE: {}", m.description);
+    }
+    if let Some(r) = &summary.abort_reason {
+        println!("ABORTED: {r}");
+    }
+    if summary.steps().next().is_none() {
+        println!(
+            "no step of the session was finished: there is no step to draw, only the summary \
+             ({} blocks, {:.2} s of rig time recorded)",
+            summary.blocks, summary.rig_seconds
+        );
     }
     Ok(())
 }
 
 /// Draws the figures of the session log `file` into `out` and writes the replayed summary
-/// there (`summary.json`); returns the files written.
-pub(crate) fn figures(file: &Path, out: &Path) -> anyhow::Result<Vec<PathBuf>> {
+/// there (`summary.json`); returns the files written and the summary.
+pub(crate) fn figures(file: &Path, out: &Path) -> anyhow::Result<(Vec<PathBuf>, SessionSummary)> {
     let (mut written, summary) = crate::report::session::session_figures(file, out)?;
     let json = out.join("summary.json");
     super::write_json(&json, &summary)?;
     written.push(json);
-    Ok(written)
+    Ok((written, summary))
 }

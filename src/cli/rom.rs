@@ -4,6 +4,7 @@ use anyhow::{bail, Context};
 use clap::{Args, Subcommand};
 use std::path::PathBuf;
 
+use super::paths::Files;
 use super::progress::BuildProgress;
 use crate::rom::build::{build_calculix, build_native, BuildOptions};
 use crate::rom::info::RomInfo;
@@ -79,6 +80,17 @@ pub struct InfoArgs {
 pub(crate) fn run(cmd: RomCommand) -> anyhow::Result<()> {
     match cmd {
         RomCommand::Build(a) => {
+            let mut files = Files::new()
+                .input_opt("CONFIG", a.config.as_deref(), "the rig description")
+                .output("--out", &a.out, "the ROM")
+                .output_opt("--json", a.json.as_deref(), "the ROM summary");
+            if let Some(job) = &a.calculix {
+                for ext in ["inp", "sti", "mas", "dof"] {
+                    let file = crate::fe::calculix::job_file(job, ext);
+                    files = files.input("--calculix", &file, "a CalculiX file");
+                }
+            }
+            files.check()?;
             let cfg = super::models::load_config(a.config.as_deref())?;
             let opts = BuildOptions {
                 selection: a.selection.selection()?,
@@ -100,6 +112,10 @@ pub(crate) fn run(cmd: RomCommand) -> anyhow::Result<()> {
             Ok(())
         }
         RomCommand::Info(a) => {
+            Files::new()
+                .input("FILE", &a.file, "the ROM")
+                .output_opt("--json", a.json.as_deref(), "the ROM summary")
+                .check()?;
             let rom =
                 crate::rom::file::read(&a.file).with_context(|| "reading the ROM".to_string())?;
             let info = RomInfo::new(&rom);

@@ -22,6 +22,7 @@ use crate::session::{
 };
 
 use super::models;
+use super::paths::Files;
 
 /// Which rig to run on.
 #[derive(Clone, Copy, Debug, ValueEnum, PartialEq, Eq)]
@@ -71,8 +72,10 @@ pub struct RunArgs {
     #[arg(long)]
     pub twin: bool,
     /// Inject a fault into the simulated rig, as JSON, e.g.
-    /// '{"kind":"dead_channel","at_s":3.0,"channel":"upper_tip"}' (repeatable). Kinds:
-    /// daq_stall, dead_channel, drive_saturation, clearance_change.
+    /// '{"kind":"dead_channel","at_s":3.0,"channel":"upper_tip"}' (repeatable). Kinds and
+    /// their fields (at_s: rig time, s): daq_stall {at_s}, dead_channel {at_s, channel: a
+    /// layout channel name}, drive_saturation {at_s, limit_v: the amplifier's new output
+    /// limit, V}, clearance_change {at_s, clearance_m: the new clearance, m}.
     #[arg(long)]
     pub inject: Vec<String>,
     /// Rebuild the ROMs even if cached.
@@ -82,6 +85,11 @@ pub struct RunArgs {
     #[arg(long)]
     pub quiet: bool,
 }
+
+/// The faults `--inject` takes, with their fields, for error messages.
+pub(crate) const INJECT_KINDS: &str = "kinds: daq_stall {at_s}, dead_channel {at_s, channel}, \
+     drive_saturation {at_s, limit_v}, clearance_change {at_s, clearance_m}; at_s in rig \
+     seconds, limit_v in V, clearance_m in m";
 
 /// A session to run: the rig description, the plan and what to run it with.
 pub(crate) struct SessionArgs<'a> {
@@ -347,9 +355,55 @@ pub(crate) fn print_summary(s: &SessionSummary) {
     if let Some(r) = &s.abort_reason {
         println!("ABORTED: {r}");
     }
+    if let Some(m) = &s.missing {
+        println!("INCOMPLETE: {}", m.description);
+        for f in &m.file {
+            println!("  file: {f}");
+        }
+    }
+}
+
+/// The files `run` reads and writes (checked before anything starts).
+fn files(a: &RunArgs) -> Files {
+    let mut files = Files::new()
+        .input_opt("CONFIG", a.config.as_deref(), "the rig description")
+        .input("--plan", &a.plan, "the plan")
+        .output("--out", &a.out, "the session log")
+        .output_opt("--json", a.json.as_deref(), "the session summary");
+    for (flag, tty) in [("--ldv", &a.hw.ldv), ("--amp", &a.hw.amp)] {
+        if let Some(t) = tty {
+            files = files.input(flag, Path::new(t), "a serial port");
+        }
+    }
+    if let Some(log) = &a.hw.can_log {
+        let mut decoded = log.clone().into_os_string();
+        decoded.push(".decoded.jsonl");
+        files = files.output("--can-log", log, "the CAN log").output(
+            "--can-log",
+            Path::new(&decoded),
+            "the decoded CAN log",
+        );
+    }
+    files
+}
+
+/// What a session log that could not be finished (a full disk) holds, in rig time and steps.
+fn what_the_log_kept(out: &Path) -> String {
+    match crate::session::replay::replay(out) {
+        Ok(r) => format!(
+            "the log keeps {} DAQ blocks ({:.2} s of rig time) and {} finished steps, up to its \
+             last flush; `rigtwin replay {}` reads them",
+            r.summary.blocks,
+            r.summary.rig_seconds,
+            r.summary.steps().count(),
+            out.display()
+        ),
+        Err(e) => format!("the log keeps nothing that can be replayed: {e}"),
+    }
 }
 
 pub(crate) fn run(a: RunArgs) -> anyhow::Result<()> {
+    files(&a).check()?;
     let hw = match a.backend {
         BackendArg::Sim => {
             if a.hw.can.is_some()
@@ -384,7 +438,7 @@ pub(crate) fn run(a: RunArgs) -> anyhow::Result<()> {
         .iter()
         .map(|s| {
             serde_json::from_str(s)
-                .with_context(|| format!("--inject {s}: not a fault description"))
+                .with_context(|| format!("--inject {s}: not a fault description ({INJECT_KINDS})"))
         })
         .collect::<anyhow::Result<_>>()?;
     let hw = match hw {
@@ -415,9 +469,16 @@ pub(crate) fn run(a: RunArgs) -> anyhow::Result<()> {
     )?;
     print_session(&o);
     println!("log: {}", a.out.display());
+    if let Some(e) = &o.log_error {
+        println!("log not finished: {e}");
+        println!("{}", what_the_log_kept(&a.out));
+    }
     if let Some(j) = &a.json {
         super::write_json(j, &o.summary)?;
         println!("summary: {}", j.display());
+    }
+    if let Some(e) = &o.log_error {
+        bail!("the session log could not be finished: {e}");
     }
     if o.summary.aborted {
         bail!(

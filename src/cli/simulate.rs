@@ -8,6 +8,7 @@ use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+use super::paths::Files;
 use crate::config::PhysicsSpec;
 use crate::contact::SweepMethod;
 use crate::plan::Plan;
@@ -52,6 +53,18 @@ pub struct RomSource {
     #[arg(long)]
     pub config: Option<PathBuf>,
 }
+
+impl RomSource {
+    /// The inputs these flags name.
+    fn files(&self) -> Files {
+        Files::new()
+            .input_opt("--rom", self.rom.as_deref(), "the ROM")
+            .input_opt("--config", self.config.as_deref(), "the rig description")
+    }
+}
+
+/// The kinds of file the figures folders hold.
+const FIGURE_FILES: &[&str] = &["png", "svg"];
 
 /// Contact coupling on the command line.
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -413,6 +426,17 @@ fn stepped_sine(a: RunArgs) -> anyhow::Result<()> {
     let Some(plan_path) = &a.plan else {
         bail!("--plan PLAN is required (e.g. rig-config/plans/paper-table2.toml)");
     };
+    a.source
+        .files()
+        .input("--plan", plan_path, "the plan")
+        .output_opt("--json", a.json.as_deref(), "the results")
+        .output_folder_opt(
+            "--figures",
+            a.figures.as_deref(),
+            "the figures",
+            FIGURE_FILES,
+        )
+        .check()?;
     let plan = Plan::from_path(plan_path)?;
     let (rom, rom_path, model) = load_rom(&a.source, a.quiet)?;
     run_plan_to_outputs(
@@ -432,6 +456,16 @@ fn stepped_sine(a: RunArgs) -> anyhow::Result<()> {
 }
 
 fn convergence(a: ConvergenceArgs) -> anyhow::Result<()> {
+    a.source
+        .files()
+        .output("--json", &a.json, "the study")
+        .output_folder_opt(
+            "--figures",
+            a.figures.as_deref(),
+            "the figure",
+            FIGURE_FILES,
+        )
+        .check()?;
     if !(a.omega > 0.0 && a.omega < 10.0) {
         bail!("--omega = {}: expected Omega/omega_2 in (0, 10)", a.omega);
     }

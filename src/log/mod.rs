@@ -10,6 +10,7 @@
 //!   [`LogOptions::flush_interval`], so a crash loses at most the last interval.
 //! - [`reader`]: [`read_session`] reads a file back, also one cut off by a crash.
 //! - `scan` (private): the record walk that recovers truncated files.
+//! - [`staged`]: outputs written under a temporary name and renamed into place.
 //!
 //! What goes into a session's log (its topics, the recorder, replay) is the session's
 //! (`src/session/`); this module knows MCAP, not sessions.
@@ -21,6 +22,7 @@ mod error;
 mod options;
 pub mod reader;
 mod scan;
+pub mod staged;
 mod task;
 pub mod writer;
 
@@ -33,6 +35,7 @@ pub use reader::{
     read_session, read_session_bytes, ChannelInfo, LoggedMessage, RigtwinInfo, SchemaInfo,
     SessionRead,
 };
+pub use staged::{write_atomically, Staged};
 pub use writer::{
     Attachment, LogChannel, LogHandle, LogJoin, LogProgress, LogStats, MetadataRecord, RawChannel,
     SessionLog,

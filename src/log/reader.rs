@@ -74,8 +74,12 @@ pub struct SessionRead {
     pub path: PathBuf,
     /// Whether the file was closed properly (footer and closing magic present).
     pub complete: bool,
-    /// For an incomplete file: what was lost, for people.
+    /// For an incomplete file: what was lost at its end, for people.
     pub note: Option<String>,
+    /// Damaged regions the reader skipped (chunks failing their CRC, records that do not
+    /// parse, a damaged summary), for people; empty for an intact file. What they cost is in
+    /// the data: missing sequence numbers.
+    pub damage: Vec<String>,
     /// File size, bytes.
     pub file_bytes: u64,
     /// Bytes up to the end of the last complete record, bytes.
@@ -107,20 +111,21 @@ pub fn read_session(path: impl AsRef<Path>) -> Result<SessionRead, LogReadError>
 /// Like [`read_session`] for a file already in memory; `path` names it in errors.
 pub fn read_session_bytes(path: &Path, bytes: &[u8]) -> Result<SessionRead, LogReadError> {
     let mut builder = Builder::default();
-    let end = scan(path, bytes, |offset, record| {
-        builder
-            .add(record)
-            .map_err(|(opcode, reason)| LogReadError::CorruptRecord {
-                path: path.to_path_buf(),
-                offset,
-                opcode,
-                reason,
-            })
+    let mut end = scan(path, bytes, |offset, record| {
+        if let Err((opcode, reason)) = builder.add(record) {
+            builder.damage.push(format!(
+                "byte offset {offset}: record (opcode {opcode:#04x}) ignored: {reason}"
+            ));
+        }
+        Ok(())
     })?;
+    builder.resolve_orphans();
+    end.damage.append(&mut builder.damage);
     Ok(SessionRead {
         path: path.to_path_buf(),
         complete: end.complete,
         note: end.lost,
+        damage: end.damage,
         file_bytes: bytes.len() as u64,
         valid_bytes: end.valid_bytes,
         profile: builder.profile,
@@ -144,9 +149,40 @@ struct Builder {
     messages: Vec<LoggedMessage>,
     metadata: Vec<MetadataRecord>,
     attachments: Vec<Attachment>,
+    /// Indices of messages whose channel was not yet defined where they were read (its chunk
+    /// was damaged): resolved against the summary's channels at the end.
+    orphans: Vec<usize>,
+    /// Records that did not fit (damage), for people.
+    damage: Vec<String>,
 }
 
+/// The topic of a message whose channel is not known yet.
+const NO_TOPIC: &str = "";
+
 impl Builder {
+    /// Gives orphaned messages the topic of their channel (defined later, e.g. in the
+    /// summary); drops those whose channel never appears.
+    fn resolve_orphans(&mut self) {
+        if self.orphans.is_empty() {
+            return;
+        }
+        let mut lost = 0usize;
+        for &i in &self.orphans {
+            let m = &mut self.messages[i];
+            if let Some(&c) = self.channel_index.get(&m.channel_id) {
+                m.topic = Arc::clone(&self.channels[c].1);
+            } else {
+                lost += 1;
+            }
+        }
+        if lost > 0 {
+            self.damage.push(format!(
+                "{lost} messages on channels defined nowhere in the readable file were dropped"
+            ));
+            self.messages.retain(|m| &*m.topic != NO_TOPIC);
+        }
+    }
+
     /// Takes one record; on an inconsistency its opcode and what is wrong.
     fn add(&mut self, record: Record<'static>) -> Result<(), (u8, String)> {
         use mcap::records::op;
@@ -207,18 +243,16 @@ impl Builder {
                 }
             }
             Record::Message { header, data } => {
-                let &i = self.channel_index.get(&header.channel_id).ok_or_else(|| {
-                    (
-                        op::MESSAGE,
-                        format!(
-                            "message {} refers to unknown channel {}",
-                            header.sequence, header.channel_id
-                        ),
-                    )
-                })?;
+                let topic = match self.channel_index.get(&header.channel_id) {
+                    Some(&i) => Arc::clone(&self.channels[i].1),
+                    None => {
+                        self.orphans.push(self.messages.len());
+                        NO_TOPIC.into()
+                    }
+                };
                 self.messages.push(LoggedMessage {
                     channel_id: header.channel_id,
-                    topic: Arc::clone(&self.channels[i].1),
+                    topic,
                     sequence: header.sequence,
                     log_time: header.log_time,
                     publish_time: header.publish_time,

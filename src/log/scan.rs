@@ -1,12 +1,22 @@
 //! Walks the records of an MCAP file held in memory, from the start, without needing the
-//! footer or summary: the crash-recovery core of the reader.
+//! footer or summary: the crash-recovery and salvage core of the reader.
 //!
 //! A file cut off anywhere (SIGKILL, disk full) ends in an incomplete record: the walk stops
-//! there and reports everything before it plus a description of what was lost. Damage that a
-//! crash cannot cause (bad magic, a chunk failing its CRC or decompression, a record that does
-//! not parse) is an error. Chunks are all or nothing: their records are handed on only once
-//! the whole chunk has decompressed and passed its CRC.
+//! there and reports everything before it plus a description of what was lost. Damage after
+//! writing (bit flips, a bad sector) costs only the damaged records: a chunk that fails its
+//! CRC or its decompression, or a record that does not parse, is skipped and described, and the
+//! walk goes on with the next record (after a record whose length is damaged, with the next
+//! chunk that passes its CRC), as the Python stream reader does. Damage after the data section
+//! (the summary, the footer, the closing magic) loses nothing: the walk stops there with a
+//! note. Only a file that is not MCAP at all is an error.
+//!
+//! Chunks are decompressed and checked here, not by the mcap crate, so that no length read
+//! from the file is trusted: a chunk may claim at most [`MAX_CHUNK_BYTES`] uncompressed, is
+//! decompressed to at most what it claims, checked against its CRC before a record in it is
+//! parsed, and every record inside must end inside the chunk. Chunks are all or nothing.
 
+use std::borrow::Cow;
+use std::io::Read;
 use std::path::Path;
 
 use mcap::records::{op, Record};
@@ -16,19 +26,28 @@ use super::LogReadError;
 /// Bytes of an opcode and a record length.
 const RECORD_PREFIX: usize = 9;
 
+/// The most a chunk may hold uncompressed, bytes: far above what the writer makes (its chunks
+/// are flushed every second or at `LogOptions::chunk_size_bytes`); a larger claim is damage.
+pub(super) const MAX_CHUNK_BYTES: u64 = 1 << 30;
+
 /// How the walk ended.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub(super) struct ScanEnd {
-    /// The footer and the closing magic were read.
+    /// The data section is whole: it ended with its data-end record (the writer closed the
+    /// file), whatever happened to the summary after it.
     pub(super) complete: bool,
-    /// Bytes up to the end of the last complete record (or of the closing magic).
+    /// Bytes up to the end of the last record read (or of the closing magic).
     pub(super) valid_bytes: u64,
-    /// What was lost, when not complete.
+    /// What was lost at the end of the file, when not complete.
     pub(super) lost: Option<String>,
+    /// Damaged regions that were skipped (and damage to the summary), in file order, for
+    /// people.
+    pub(super) damage: Vec<String>,
 }
 
-/// Calls `visit(offset, record)` for every record, chunk contents in place of the chunk
-/// (`offset` is then the chunk's). Stops at the first incomplete record.
+/// Calls `visit(offset, record)` for every readable record, chunk contents in place of the
+/// chunk (`offset` is then the chunk's). Skips damaged records (listed in
+/// [`ScanEnd::damage`]); stops at the first incomplete record.
 pub(super) fn scan(
     path: &Path,
     bytes: &[u8],
@@ -56,123 +75,329 @@ pub(super) fn scan(
     // A file that ends with the magic was closed; a record running past its end is damage,
     // not a cut.
     let looks_closed = len >= 2 * magic.len() && bytes.ends_with(magic);
-    let truncated = |pos: usize, what: String| ScanEnd {
-        complete: false,
-        valid_bytes: pos as u64,
-        lost: Some(format!(
-            "the file ends early: {} bytes after byte offset {pos} were lost ({what}); \
-             everything before is intact",
-            len - pos
-        )),
-    };
-    let corrupt = |pos: usize, opcode: u8, reason: String| LogReadError::CorruptRecord {
-        path: path.to_path_buf(),
-        offset: pos as u64,
-        opcode,
-        reason,
-    };
-
+    let mut damage: Vec<String> = Vec::new();
     let mut pos = magic.len();
+    let mut data_end = false;
     let mut footer_seen = false;
+    let end = |complete: bool, valid: usize, lost: Option<String>, damage: Vec<String>| ScanEnd {
+        complete,
+        valid_bytes: valid as u64,
+        lost,
+        damage,
+    };
     loop {
         let rest = &bytes[pos..];
         if footer_seen {
-            return if rest == magic {
-                Ok(ScanEnd {
-                    complete: true,
-                    valid_bytes: len as u64,
-                    lost: None,
-                })
-            } else if magic.starts_with(rest) {
-                Ok(truncated(pos, "the closing magic is cut off".into()))
-            } else {
-                Err(corrupt(
+            if rest != magic && magic.starts_with(rest) {
+                return Ok(end(
+                    false,
                     pos,
-                    rest[0],
-                    format!(
-                        "{} bytes after the footer where the closing magic belongs",
-                        rest.len()
-                    ),
-                ))
-            };
+                    Some(format!(
+                        "the file ends early: {} bytes after byte offset {pos} were lost (the \
+                         closing magic is cut off); everything before is intact",
+                        len - pos
+                    )),
+                    damage,
+                ));
+            }
+            if rest != magic {
+                damage.push(format!(
+                    "byte offset {pos}: {} bytes after the footer where the closing magic \
+                     belongs (ignored)",
+                    rest.len()
+                ));
+            }
+            return Ok(end(true, len, None, damage));
         }
         if rest.is_empty() {
+            if data_end {
+                return Ok(end(
+                    false,
+                    len,
+                    Some(format!(
+                        "the file ends at byte offset {len} inside its summary, before the \
+                         footer: the data are whole"
+                    )),
+                    damage,
+                ));
+            }
             let after = if pos == magic.len() {
                 "right after the MCAP magic"
             } else {
                 "after a complete record"
             };
-            return Ok(ScanEnd {
-                complete: false,
-                valid_bytes: len as u64,
-                lost: Some(format!(
+            return Ok(end(
+                false,
+                len,
+                Some(format!(
                     "the file ends at byte offset {len} {after}, without footer: the writer \
                      did not close it; messages after its last flush were lost"
                 )),
-            });
+                damage,
+            ));
+        }
+        let lost = |pos: usize, what: &str| {
+            Some(format!(
+                "the file ends early: {} bytes after byte offset {pos} were lost ({what}); \
+                 everything before is intact",
+                len - pos
+            ))
+        };
+        if data_end {
+            // The summary: everything in it is also in the data section; damage to it costs
+            // nothing, so the walk reads what parses and stops at the first problem.
+            match next_record(bytes, pos) {
+                Ok((record_end, Record::Footer(f))) => {
+                    footer_seen = true;
+                    visit(pos as u64, Record::Footer(f))?;
+                    pos = record_end;
+                }
+                Ok((record_end, record)) => {
+                    visit(pos as u64, record.into_owned())?;
+                    pos = record_end;
+                }
+                Err(reason) if looks_closed => {
+                    // Damaged, not cut: the writer closed the file.
+                    damage.push(format!(
+                        "byte offset {pos}: the summary section is damaged ({reason}); ignored \
+                         from there on (the data are whole)"
+                    ));
+                    return Ok(end(true, len, None, damage));
+                }
+                Err(reason) => {
+                    return Ok(end(
+                        false,
+                        pos,
+                        Some(format!(
+                            "the file ends inside its summary, before the footer ({reason}): \
+                             the data are whole"
+                        )),
+                        damage,
+                    ));
+                }
+            }
+            continue;
         }
         if rest.len() < RECORD_PREFIX {
-            return Ok(truncated(pos, "a record's opcode and length".into()));
+            return Ok(end(
+                false,
+                pos,
+                lost(pos, "a record's opcode and length"),
+                damage,
+            ));
         }
         let opcode = rest[0];
-        let mut length = [0u8; 8];
-        length.copy_from_slice(&rest[1..RECORD_PREFIX]);
-        let length = u64::from_le_bytes(length);
         if opcode == 0 && rest.iter().all(|&b| b == 0) {
-            return Ok(truncated(pos, "a zero-filled tail".into()));
+            return Ok(end(false, pos, lost(pos, "a zero-filled tail"), damage));
         }
-        let end = usize::try_from(length)
+        let length = u64::from_le_bytes(rest[1..RECORD_PREFIX].try_into().expect("8 bytes"));
+        let fits = usize::try_from(length)
             .ok()
             .and_then(|l| l.checked_add(pos + RECORD_PREFIX))
-            .filter(|&end| end <= len);
-        let Some(end) = end else {
-            if looks_closed {
-                return Err(corrupt(
-                    pos,
-                    opcode,
-                    format!("record length {length} runs past the end of the file"),
-                ));
-            }
+            .is_some_and(|e| e <= len);
+        if !fits && !looks_closed {
             let what = if opcode == op::CHUNK {
                 "an unfinished chunk".to_string()
             } else {
                 format!("a record with opcode {opcode:#04x} cut off")
             };
-            return Ok(truncated(pos, what));
+            return Ok(end(false, pos, lost(pos, &what), damage));
+        }
+        let parsed = if fits {
+            next_record(bytes, pos)
+        } else {
+            Err(format!("its length {length} runs past the end of the file"))
         };
-        let body = &bytes[pos + RECORD_PREFIX..end];
-        let record = mcap::parse_record(opcode, body)
-            .map_err(|e| corrupt(pos, opcode, format!("cannot parse it: {e}")))?;
-        match record {
-            Record::Chunk { header, data } => {
-                let inner = read_chunk(header, &data).map_err(|e| LogReadError::CorruptChunk {
-                    path: path.to_path_buf(),
-                    offset: pos as u64,
-                    reason: e.to_string(),
-                })?;
-                for record in inner {
-                    visit(pos as u64, record)?;
+        match parsed {
+            Ok((record_end, record)) if known(opcode) => {
+                match record {
+                    Record::Chunk { header, data } => match read_chunk(&header, &data) {
+                        Ok(records) => {
+                            for r in records {
+                                visit(pos as u64, r)?;
+                            }
+                        }
+                        Err(reason) => damage.push(format!(
+                            "byte offset {pos}: a chunk of {} bytes is damaged ({reason}); its \
+                             messages are lost",
+                            record_end - pos
+                        )),
+                    },
+                    Record::DataEnd(_) => {
+                        data_end = true;
+                        visit(pos as u64, record.into_owned())?;
+                    }
+                    Record::Footer(_) => {
+                        // A footer without data end: the writer closed the file.
+                        data_end = true;
+                        footer_seen = true;
+                        visit(pos as u64, record.into_owned())?;
+                    }
+                    other => visit(pos as u64, other.into_owned())?,
+                }
+                pos = record_end;
+            }
+            other => {
+                // A record that does not parse, an opcode the writer never writes, or a length
+                // past the end: skip to the next chunk that passes its CRC.
+                let reason = match other {
+                    Err(reason) => reason,
+                    Ok(_) => format!("unknown opcode {opcode:#04x}"),
+                };
+                let summary = summary_start(bytes).filter(|&s| s > pos);
+                match resync(bytes, pos + 1, summary.unwrap_or(len)) {
+                    Some(next) => {
+                        damage.push(format!(
+                            "byte offset {pos}: a damaged record ({reason}); {} bytes up to the \
+                             next intact chunk at byte offset {next} skipped",
+                            next - pos
+                        ));
+                        pos = next;
+                    }
+                    None if summary.is_some() => {
+                        let next = summary.expect("some");
+                        damage.push(format!(
+                            "byte offset {pos}: a damaged record ({reason}); {} bytes up to the \
+                             summary section at byte offset {next} (named by the footer) skipped",
+                            next - pos
+                        ));
+                        pos = next;
+                        data_end = true;
+                    }
+                    None => {
+                        damage.push(format!(
+                            "byte offset {pos}: a damaged record ({reason}); no intact chunk \
+                             after it: the last {} bytes of the file are unreadable",
+                            len - pos
+                        ));
+                        return Ok(end(
+                            false,
+                            pos,
+                            Some(format!(
+                                "the file is damaged from byte offset {pos} on ({} bytes \
+                                 unreadable, {reason}); everything before is intact",
+                                len - pos
+                            )),
+                            damage,
+                        ));
+                    }
                 }
             }
-            Record::Footer(_) => {
-                footer_seen = true;
-                visit(pos as u64, record.into_owned())?;
-            }
-            other => visit(pos as u64, other.into_owned())?,
         }
-        pos = end;
     }
 }
 
-/// Decompresses a chunk and checks its CRC; its records, or the first problem.
+/// Whether the MCAP specification defines `opcode` (the writer writes no other).
+fn known(opcode: u8) -> bool {
+    (op::HEADER..=op::DATA_END).contains(&opcode)
+}
+
+/// The record at `pos` (which must fit in `bytes`) and the offset after it, or what is wrong.
+fn next_record(bytes: &[u8], pos: usize) -> Result<(usize, Record<'_>), String> {
+    let rest = &bytes[pos..];
+    if rest.len() < RECORD_PREFIX {
+        return Err("a record's opcode and length are cut off".into());
+    }
+    let length = u64::from_le_bytes(rest[1..RECORD_PREFIX].try_into().expect("8 bytes"));
+    let end = usize::try_from(length)
+        .ok()
+        .and_then(|l| l.checked_add(pos + RECORD_PREFIX))
+        .filter(|&e| e <= bytes.len())
+        .ok_or_else(|| format!("its length {length} runs past the end of the file"))?;
+    let record = mcap::parse_record(rest[0], &bytes[pos + RECORD_PREFIX..end])
+        .map_err(|e| format!("opcode {:#04x}: {e}", rest[0]))?;
+    Ok((end, record))
+}
+
+/// Where the summary section starts, as the footer at the end of a closed file says (`None`
+/// without an intact footer, or without a summary).
+fn summary_start(bytes: &[u8]) -> Option<usize> {
+    // Footer: opcode, length 20, summary start, summary offset start, summary CRC.
+    const FOOTER: usize = RECORD_PREFIX + 20;
+    let magic = mcap::MAGIC;
+    let at = bytes.len().checked_sub(magic.len() + FOOTER)?;
+    if !bytes.ends_with(magic) || at < magic.len() {
+        return None;
+    }
+    match next_record(bytes, at) {
+        Ok((_, Record::Footer(f))) => usize::try_from(f.summary_start)
+            .ok()
+            .filter(|&s| s >= magic.len() && s < at),
+        _ => None,
+    }
+}
+
+/// The offset of the first chunk in `from..until` that parses and passes its CRC.
+fn resync(bytes: &[u8], from: usize, until: usize) -> Option<usize> {
+    (from..until.min(bytes.len().saturating_sub(RECORD_PREFIX)))
+        .filter(|&p| bytes[p] == op::CHUNK)
+        .find(|&p| match next_record(bytes, p) {
+            Ok((_, Record::Chunk { header, data })) => read_chunk(&header, &data).is_ok(),
+            _ => false,
+        })
+}
+
+/// Decompresses a chunk (to at most the size it claims), checks its size and CRC, then parses
+/// its records; its records, or what is wrong.
 fn read_chunk(
-    header: mcap::records::ChunkHeader,
+    header: &mcap::records::ChunkHeader,
     data: &[u8],
-) -> Result<Vec<Record<'static>>, mcap::McapError> {
-    // NOTE: the CRC is checked at the end of the chunk, so nothing is handed on before.
-    mcap::read::ChunkReader::new(header, data)?
-        .map(|r| r.map(Record::into_owned))
-        .collect()
+) -> Result<Vec<Record<'static>>, String> {
+    let size = header.uncompressed_size;
+    if size > MAX_CHUNK_BYTES {
+        return Err(format!(
+            "it claims {size} bytes uncompressed, more than the {MAX_CHUNK_BYTES} a chunk may \
+             hold"
+        ));
+    }
+    let raw: Cow<'_, [u8]> = match header.compression.as_str() {
+        "" => Cow::Borrowed(data),
+        "zstd" => Cow::Owned(decompress(
+            zstd::stream::read::Decoder::new(data).map_err(|e| format!("zstd: {e}"))?,
+            size,
+        )?),
+        "lz4" => Cow::Owned(decompress(
+            lz4::Decoder::new(data).map_err(|e| format!("lz4: {e}"))?,
+            size,
+        )?),
+        other => return Err(format!("unknown compression {other:?}")),
+    };
+    if raw.len() as u64 != size {
+        return Err(format!(
+            "it holds {} bytes uncompressed, its header says {size}",
+            raw.len()
+        ));
+    }
+    if header.uncompressed_crc != 0 {
+        let crc = crc32fast::hash(&raw);
+        if crc != header.uncompressed_crc {
+            return Err(format!(
+                "CRC {crc:#010x} where {:#010x} was written",
+                header.uncompressed_crc
+            ));
+        }
+    }
+    let mut records = Vec::new();
+    let mut pos = 0;
+    while pos < raw.len() {
+        let (end, record) =
+            next_record(&raw, pos).map_err(|e| format!("a record inside at {pos}: {e}"))?;
+        records.push(record.into_owned());
+        pos = end;
+    }
+    Ok(records)
+}
+
+/// Reads a decompressor to its end, at most `size + 1` bytes (one more tells a chunk that
+/// holds more than it claims).
+fn decompress(reader: impl Read, size: u64) -> Result<Vec<u8>, String> {
+    // NOTE: the capacity is not taken from the file: a damaged size must not allocate.
+    let mut out = Vec::with_capacity(usize::try_from(size).map_or(0, |s| s.min(1 << 24)));
+    reader
+        .take(size + 1)
+        .read_to_end(&mut out)
+        .map_err(|e| format!("it does not decompress: {e}"))?;
+    Ok(out)
 }
 
 /// The first bytes of a file, in hex and, when printable, as text.

@@ -170,6 +170,7 @@ fn idle_writer_flushes_within_the_interval() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("s.mcap");
     let (log, join) = SessionLog::create(&path, options(), vec![], vec![]).unwrap();
+    log.publish().unwrap();
     let ch = log.channel::<Event>("/events").unwrap();
     log.log(&ch, 5, &Event { what: "a".into() }).unwrap();
     // No further messages: the flush must come from the timeout.
@@ -207,6 +208,29 @@ fn dropping_every_handle_finishes_the_file() {
     let stats = join.close().unwrap();
     assert_eq!(stats.messages_per_topic["/events"], 1);
     assert!(read_session(&path).unwrap().complete);
+}
+
+/// Issue 17, case 3: until published (a session publishes when it starts) the log is written
+/// under a temporary name; a log dropped unpublished leaves an existing file of its name as it
+/// was and nothing else behind, a closed one replaces it.
+#[test]
+fn an_unpublished_log_leaves_the_existing_file_alone() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("s.mcap");
+    std::fs::write(&path, b"the previous session").unwrap();
+    let (log, join) = SessionLog::create(&path, options(), vec![], vec![]).unwrap();
+    let ch = log.channel::<Event>("/events").unwrap();
+    log.log(&ch, 5, &Event { what: "a".into() }).unwrap();
+    assert_ne!(log.current_path(), path);
+    assert!(log.current_path().exists());
+    drop((log, join));
+    assert_eq!(std::fs::read(&path).unwrap(), b"the previous session");
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+    let (log, join) = SessionLog::create(&path, options(), vec![], vec![]).unwrap();
+    drop(log);
+    join.close().unwrap();
+    assert!(read_session(&path).unwrap().complete);
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
 }
 
 #[test]

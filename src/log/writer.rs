@@ -5,9 +5,13 @@
 //! Messages are serialised to JSON on the caller's thread and queued on a bounded channel with
 //! `try_send`: a full queue is reported as [`LogError::Backlog`], never waited on, so the
 //! control loop cannot stall on a slow disk. The writer thread (`task.rs`) owns the file.
+//!
+//! The file is written under a temporary name beside its destination ([`Staged`]) and renamed
+//! into place by [`LogHandle::publish`] (a session does that when it starts) or by a successful
+//! [`LogJoin::close`]; a log that is never published is removed, so a session that fails before
+//! it starts leaves an existing file of that name untouched.
 
 use std::collections::{BTreeMap, HashMap};
-use std::fs::File;
 use std::io::BufWriter;
 use std::marker::PhantomData;
 use std::path::Path;
@@ -18,6 +22,7 @@ use std::thread::JoinHandle;
 
 use serde::Serialize;
 
+use super::staged::Staged;
 use super::task::{Command, Progress, ThreadShared, WriterOutcome, WriterTask};
 use super::{
     LogError, LogOptions, FORMAT_VERSION, MESSAGE_ENCODING, RIGTWIN_METADATA, SCHEMA_ENCODING,
@@ -41,7 +46,8 @@ pub type MetadataRecord = (String, BTreeMap<String, String>);
 pub struct SessionLog;
 
 impl SessionLog {
-    /// Creates (truncates) the MCAP file at `path`, writes the header, the writer's own
+    /// Creates the MCAP file for `path` (under a temporary name until published: see the
+    /// module documentation), writes the header, the writer's own
     /// "rigtwin" metadata record (crate and format version), then `metadata` and
     /// `attachments` in order, flushes them to the OS and starts the writer thread.
     ///
@@ -68,7 +74,7 @@ impl SessionLog {
             let path = path.clone();
             move |source| LogError::Mcap { path, what, source }
         };
-        let file = File::create(&path).map_err(|source| LogError::Io {
+        let (file, staged) = Staged::create(&path).map_err(|source| LogError::Io {
             path: path.clone(),
             what: "cannot create the file",
             source,
@@ -134,6 +140,7 @@ impl SessionLog {
             capacity: options.queue_capacity,
             registry: Mutex::new(Registry::default()),
             backlog_drops: AtomicU64::new(0),
+            staged: Mutex::new(staged),
         });
         let (tx, rx) = mpsc::sync_channel(shared.capacity);
         let task = WriterTask::new(writer, Arc::clone(&shared.thread), options.flush_interval);
@@ -169,9 +176,35 @@ pub(super) struct Shared {
     pub(super) registry: Mutex<Registry>,
     /// Messages dropped because the queue was full.
     pub(super) backlog_drops: AtomicU64,
+    /// The file's temporary name and destination; removed with the last reference unless
+    /// published.
+    pub(super) staged: Mutex<Staged>,
 }
 
 impl Shared {
+    /// Renames the file into place (once).
+    fn publish(&self) -> Result<(), LogError> {
+        self.staged
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .publish()
+            .map_err(|source| LogError::Io {
+                path: self.thread.path.clone(),
+                what: "cannot move the file into place",
+                source,
+            })
+    }
+
+    /// Where the file is now: the destination once published, else its temporary name.
+    fn current_path(&self) -> std::path::PathBuf {
+        let staged = self.staged.lock().unwrap_or_else(PoisonError::into_inner);
+        if staged.is_published() {
+            staged.dest().to_path_buf()
+        } else {
+            staged.temp().to_path_buf()
+        }
+    }
+
     fn closed_error(&self) -> LogError {
         LogError::Closed {
             path: self.thread.path.clone(),
@@ -283,9 +316,21 @@ pub struct LogProgress {
 }
 
 impl LogHandle {
-    /// The log file.
+    /// The log file (its destination).
     pub fn path(&self) -> &Path {
         &self.inner.shared.thread.path
+    }
+
+    /// Renames the file from its temporary name into place, replacing a file of that name;
+    /// the writer goes on writing it. From then on the log is kept whatever happens (a crash
+    /// leaves it at its own name). Later calls do nothing.
+    pub fn publish(&self) -> Result<(), LogError> {
+        self.inner.shared.publish()
+    }
+
+    /// Where the file is now: its destination once published, else its temporary name.
+    pub fn current_path(&self) -> std::path::PathBuf {
+        self.inner.shared.current_path()
     }
 
     /// Registers (or returns the existing) channel `topic` for messages of type `T`: message
@@ -518,9 +563,11 @@ pub struct LogJoin {
 
 impl LogJoin {
     /// Closes the log: later `log` calls fail with [`LogError::Closed`]; the writer thread
-    /// writes what is queued, the summary and the footer, syncs the file to disk and stops.
-    /// Waits for that (blocking: from async code call it in `spawn_blocking`). Returns the
-    /// writer's first error if it failed on the way.
+    /// writes what is queued, the summary and the footer, syncs the file to disk and stops;
+    /// then the file is renamed into place if it was not yet published. Waits for that
+    /// (blocking: from async code call it in `spawn_blocking`). Returns the writer's first
+    /// error if it failed on the way (an unpublished file is then removed with the last
+    /// handle; a published one stays, with what was written).
     pub fn close(self) -> Result<LogStats, LogError> {
         self.shared.thread.closed.store(true, Ordering::Release);
         if let Some(inner) = self.handle.upgrade() {
@@ -530,6 +577,7 @@ impl LogJoin {
         let outcome = self.thread.join().map_err(|_| LogError::WriterPanicked {
             path: self.shared.thread.path.clone(),
         })??;
+        self.shared.publish()?;
         let drops_per_topic = self
             .shared
             .registry
@@ -549,8 +597,13 @@ impl LogJoin {
         })
     }
 
-    /// The log file.
+    /// The log file (its destination).
     pub fn path(&self) -> &Path {
         &self.shared.thread.path
+    }
+
+    /// Where the file is now: its destination once published, else its temporary name.
+    pub fn current_path(&self) -> std::path::PathBuf {
+        self.shared.current_path()
     }
 }

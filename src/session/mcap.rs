@@ -97,4 +97,7 @@ impl SessionRecorder for McapRecorder {
         };
         self.put(|r| &r.steps, time, &m)
     }
+    fn started(&mut self) -> Result<(), RecordError> {
+        Ok(self.log.publish()?)
+    }
 }

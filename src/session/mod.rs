@@ -30,4 +30,4 @@ pub mod twin_replay;
 pub use recorder::{NullRecorder, RecordError, SessionRecorder, Tee};
 pub use run::{runtime, BackendMetadata, RunError, RunOutcome, SessionRequest};
 pub use runner::{run_session, SessionError, SessionProgress, STATUS_PERIOD_S};
-pub use summary::{SessionSummary, StepResult, TestSummary};
+pub use summary::{Missing, SessionSummary, StepResult, TestSummary};

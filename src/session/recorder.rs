@@ -36,6 +36,12 @@ pub trait SessionRecorder: Send {
         info: &StepInfo,
         summary: &StepSummary,
     ) -> Result<(), RecordError>;
+    /// The backend started: from here on what is recorded is worth keeping even if the
+    /// session aborts (the MCAP log moves into place, replacing an older file of its name).
+    /// Before, a failed start leaves nothing behind.
+    fn started(&mut self) -> Result<(), RecordError> {
+        Ok(())
+    }
 }
 
 /// A recorder that keeps nothing.
@@ -89,6 +95,9 @@ impl<R: SessionRecorder> SessionRecorder for Option<R> {
         self.as_mut()
             .map_or(Ok(()), |r| r.step(time, info, summary))
     }
+    fn started(&mut self) -> Result<(), RecordError> {
+        self.as_mut().map_or(Ok(()), |r| r.started())
+    }
 }
 
 /// Hands every record to two recorders, the first then the second (e.g. the MCAP log, then the
@@ -126,5 +135,9 @@ impl<A: SessionRecorder, B: SessionRecorder> SessionRecorder for Tee<A, B> {
     ) -> Result<(), RecordError> {
         let a = self.0.step(time, info, summary);
         a.and(self.1.step(time, info, summary))
+    }
+    fn started(&mut self) -> Result<(), RecordError> {
+        let a = self.0.started();
+        a.and(self.1.started())
     }
 }

@@ -1,8 +1,11 @@
 //! Replay of a recorded session: every per-step metric recomputed from the raw DAQ blocks of
 //! the log with the live session's own code ([`crate::control::summarize`]), and the session
 //! summary rebuilt from the logged events. For a session that ran to its end (or aborted
-//! cleanly) the result equals the live summary bit for bit. The twin re-run on a recording is
-//! the sibling module `twin_replay`'s.
+//! cleanly) the result equals the live summary bit for bit. A log cut off by a crash or
+//! damaged after writing replays what it holds, and the summary says what is missing
+//! ([`Missing`]: `complete` false, the rig time and steps lost; a session cut off while it ran
+//! is `aborted`, with the cut as its reason). The twin re-run on a recording is the sibling
+//! module `twin_replay`'s.
 
 use std::path::Path;
 
@@ -13,9 +16,10 @@ use crate::rig::{DaqBlock, DaqLayout};
 use crate::rom::Rom;
 use crate::twin::{TwinModel, TwinSpec};
 
-use super::summary::SessionSummary;
+use super::summary::{Missing, SessionSummary};
 use super::topics::{
-    StepMessage, RIG_ATTACHMENT, TOPIC_DAQ, TOPIC_EVENTS, TOPIC_LAYOUT, TOPIC_STEPS,
+    StepMessage, PLAN_ATTACHMENT, RIG_ATTACHMENT, TOPIC_DAQ, TOPIC_EVENTS, TOPIC_LAYOUT,
+    TOPIC_STEPS,
 };
 
 /// Errors of a replay.
@@ -58,10 +62,23 @@ pub struct Replay {
 pub struct Recording {
     /// The layout.
     pub layout: DaqLayout,
-    /// Blocks, in sequence order.
+    /// Blocks, in sequence order (with gaps where chunks of the log were damaged).
     pub blocks: Vec<DaqBlock>,
     /// Events, in order.
     pub events: Vec<SessionEvent>,
+    /// Blocks missing inside the recording, in order (empty for an intact log).
+    pub gaps: Vec<BlockGap>,
+}
+
+/// DAQ blocks missing inside a recording (damaged chunks of the log).
+#[derive(Debug, Clone, PartialEq)]
+pub struct BlockGap {
+    /// Sequence number of the first missing block.
+    pub first_seq: u64,
+    /// Missing blocks, -.
+    pub blocks: u64,
+    /// Rig time missing: from the end of the block before to the start of the block after, s.
+    pub seconds: f64,
 }
 
 impl Recording {
@@ -88,44 +105,108 @@ fn content(path: &Path, message: impl Into<String>) -> ReplayError {
     }
 }
 
+/// The messages on `topic` decoded as `T`; none when the log has no such channel (a log cut
+/// off or damaged before its first message on `topic`).
+fn decode_or_none<T: serde::de::DeserializeOwned>(
+    session: &SessionRead,
+    topic: &str,
+) -> Result<Vec<T>, ReplayError> {
+    match session.decode::<T>(topic) {
+        Ok(v) => Ok(v.into_iter().map(|(_, _, t)| t).collect()),
+        Err(LogReadError::UnknownTopic { .. }) => Ok(Vec::new()),
+        Err(e) => Err(e.into()),
+    }
+}
+
+/// Whether the reader lost or skipped anything of `session`.
+fn damaged_or_cut(session: &SessionRead) -> bool {
+    !session.complete || !session.damage.is_empty()
+}
+
 /// Decodes the layout, the DAQ blocks and the events of a session log.
 pub fn recording(session: &SessionRead) -> Result<Recording, ReplayError> {
     let path = &session.path;
     session.require_rigtwin()?;
-    let layout = session
-        .decode::<DaqLayout>(TOPIC_LAYOUT)?
+    let Some(layout) = decode_or_none::<DaqLayout>(session, TOPIC_LAYOUT)?
         .into_iter()
         .next()
-        .map(|(_, _, l)| l)
-        .ok_or_else(|| {
-            content(
-                path,
-                format!("no {TOPIC_LAYOUT} message: not a session log"),
-            )
-        })?;
-    let blocks: Vec<DaqBlock> = session
-        .decode::<DaqBlock>(TOPIC_DAQ)?
-        .into_iter()
-        .map(|(_, _, b)| b)
-        .collect();
-    for (i, b) in blocks.iter().enumerate() {
-        if b.seq != i as u64 {
+    else {
+        let blocks = session.messages_on(TOPIC_DAQ).count();
+        if blocks > 0 {
             return Err(content(
                 path,
-                format!("{TOPIC_DAQ}: block {} where {i} was due (lost data)", b.seq),
+                format!(
+                    "the DAQ layout ({TOPIC_LAYOUT}, logged once at the start) was in a damaged \
+                     part of the file: the {blocks} DAQ blocks that remain cannot be interpreted \
+                     without it; damage: {}",
+                    session.damage.join("; ")
+                ),
+            ));
+        }
+        if damaged_or_cut(session) {
+            let why = session
+                .note
+                .iter()
+                .chain(&session.damage)
+                .cloned()
+                .collect::<Vec<_>>()
+                .join("; ");
+            return Err(content(
+                path,
+                format!(
+                    "the log holds no DAQ data, nothing to replay: it was cut off or damaged \
+                     before the session's first data reached the disk (the writer flushes \
+                     once a second, so a session cut off within its first second keeps only \
+                     its header and rig description): {why}"
+                ),
+            ));
+        }
+        return Err(content(
+            path,
+            format!("no {TOPIC_LAYOUT} message: not a session log"),
+        ));
+    };
+    let blocks: Vec<DaqBlock> = decode_or_none(session, TOPIC_DAQ)?;
+    let mut gaps = Vec::new();
+    let mut next_seq = 0u64;
+    let mut last_end = 0.0;
+    for b in &blocks {
+        if b.seq < next_seq {
+            return Err(content(
+                path,
+                format!(
+                    "{TOPIC_DAQ}: block {} after block {} (out of order)",
+                    b.seq,
+                    next_seq - 1
+                ),
             ));
         }
         b.check(&layout).map_err(|e| content(path, e.to_string()))?;
+        if b.seq > next_seq {
+            if !damaged_or_cut(session) {
+                return Err(content(
+                    path,
+                    format!(
+                        "{TOPIC_DAQ}: block {} where {next_seq} was due (lost data)",
+                        b.seq
+                    ),
+                ));
+            }
+            gaps.push(BlockGap {
+                first_seq: next_seq,
+                blocks: b.seq - next_seq,
+                seconds: (b.time - last_end).max(0.0),
+            });
+        }
+        next_seq = b.seq + 1;
+        last_end = b.time + b.len as f64 / layout.sample_rate;
     }
-    let events = session
-        .decode::<SessionEvent>(TOPIC_EVENTS)?
-        .into_iter()
-        .map(|(_, _, e)| e)
-        .collect();
+    let events = decode_or_none(session, TOPIC_EVENTS)?;
     Ok(Recording {
         layout,
         blocks,
         events,
+        gaps,
     })
 }
 
@@ -154,16 +235,28 @@ pub fn window_counts(rec: &Recording, info: &StepInfo) -> Option<Vec<i32>> {
 
 /// Replays the session log at `path`.
 pub fn replay(path: &Path) -> Result<Replay, ReplayError> {
-    let session = read_session(path)?;
+    replay_read(read_session(path)?)
+}
+
+/// Replays a session log already read (e.g. by [`crate::log::read_session_bytes`]).
+pub fn replay_read(session: SessionRead) -> Result<Replay, ReplayError> {
+    let path = session.path.clone();
+    let path = path.as_path();
     let rec = recording(&session)?;
     let mut summary = SessionSummary {
         blocks: rec.blocks.len() as u64,
         rig_seconds: rec.rig_seconds(),
         ..SessionSummary::default()
     };
+    let cut = damaged_or_cut(&session);
+    let mut steps_lost = Vec::new();
     for e in &rec.events {
         summary.apply_event(e);
         if let EventKind::RecordEnd { info } = &e.kind {
+            if cut && window_counts(&rec, info).is_none() {
+                steps_lost.push(format!("{} step {}", info.test, info.step + 1));
+                continue;
+            }
             let counts = window_counts(&rec, info).ok_or_else(|| {
                 content(
                     path,
@@ -181,14 +274,11 @@ pub fn replay(path: &Path) -> Result<Replay, ReplayError> {
             summary.push_step(&info.test, s);
         }
     }
-    let logged_steps = session
-        .decode::<StepMessage>(TOPIC_STEPS)?
-        .into_iter()
-        .map(|(_, _, m)| m)
-        .collect();
+    let logged_steps = decode_or_none(&session, TOPIC_STEPS)?;
     let rig_toml = session
         .attachment(RIG_ATTACHMENT)
         .map(|a| String::from_utf8_lossy(&a.data).into_owned());
+    mark_missing(&mut summary, &session, &rec, steps_lost);
     Ok(Replay {
         summary,
         logged_steps,
@@ -198,6 +288,104 @@ pub fn replay(path: &Path) -> Result<Replay, ReplayError> {
         rig_toml,
         recording: rec,
     })
+}
+
+/// Marks `summary` incomplete with what is missing when the log was cut off or damaged, or the
+/// session did not log its end; a session cut off while it ran is marked aborted.
+fn mark_missing(
+    summary: &mut SessionSummary,
+    session: &SessionRead,
+    rec: &Recording,
+    steps_lost: Vec<String>,
+) {
+    let session_end = rec
+        .events
+        .iter()
+        .any(|e| matches!(e.kind, EventKind::SessionEnd { .. }));
+    if session_end && !damaged_or_cut(session) && rec.gaps.is_empty() {
+        return;
+    }
+    let steps_planned = session.attachment(PLAN_ATTACHMENT).and_then(|a| {
+        let text = String::from_utf8_lossy(&a.data);
+        crate::plan::Plan::from_str(&text, "plan.toml (attached to the log)")
+            .ok()
+            .map(|p| p.tests.iter().map(|t| t.steps as usize).sum::<usize>())
+    });
+    let steps_finished = summary.steps().count();
+    let recorded_until_s = rec.rig_seconds();
+    let lost_blocks: u64 = rec.gaps.iter().map(|g| g.blocks).sum();
+    let lost_seconds: f64 = rec.gaps.iter().map(|g| g.seconds).sum();
+    let mut parts = Vec::new();
+    if !session_end {
+        // Where the session was when the log ends: the last step started.
+        let at = rec
+            .events
+            .iter()
+            .rev()
+            .find_map(|e| match &e.kind {
+                EventKind::StepStart { test, step, .. } => {
+                    Some(format!(" in step {} of test {test}", step + 1))
+                }
+                _ => None,
+            })
+            .unwrap_or_default();
+        let not_recorded = match steps_planned {
+            Some(n) => format!(
+                "; {steps_finished} of {n} planned steps finished, {} not recorded",
+                n.saturating_sub(steps_finished)
+            ),
+            None => format!("; {steps_finished} steps finished"),
+        };
+        parts.push(format!(
+            "the session was cut off (killed, crashed or out of disk space): the log ends at \
+             rig time {recorded_until_s:.2} s{at} without session_end{not_recorded}"
+        ));
+    } else if !session.complete {
+        parts.push(
+            "the session ended, but its log was not closed (the summary section is missing)"
+                .to_string(),
+        );
+    }
+    if lost_blocks > 0 {
+        parts.push(format!(
+            "{lost_blocks} DAQ blocks ({lost_seconds:.2} s of rig time) lost in damaged parts \
+             of the file"
+        ));
+    }
+    if !steps_lost.is_empty() {
+        parts.push(format!(
+            "{} steps lost with them ({})",
+            steps_lost.len(),
+            steps_lost.join(", ")
+        ));
+    }
+    if parts.is_empty() {
+        parts.push("the file was damaged, but no DAQ data were lost".to_string());
+    }
+    if !session_end && !summary.aborted {
+        summary.aborted = true;
+        summary.abort_reason = Some(format!(
+            "the log ends at rig time {recorded_until_s:.2} s without session_end: the session \
+             was cut off (killed, crashed or out of disk space)"
+        ));
+    }
+    summary.complete = false;
+    summary.missing = Some(Missing {
+        description: parts.join("; "),
+        session_end,
+        recorded_until_s,
+        lost_blocks,
+        lost_seconds,
+        steps_planned,
+        steps_finished,
+        steps_lost,
+        file: session
+            .note
+            .iter()
+            .chain(&session.damage)
+            .cloned()
+            .collect(),
+    });
 }
 
 impl Replay {

@@ -10,7 +10,7 @@ use std::path::Path;
 use std::time::Instant;
 
 use crate::config::RigConfig;
-use crate::control::SessionSetup;
+use crate::control::{Procedure, SessionSetup};
 use crate::log::{Attachment, LogError, LogOptions, MetadataRecord, SessionLog};
 use crate::plan::Plan;
 use crate::rig::{LinkCounters, RigBackend};
@@ -112,6 +112,9 @@ pub struct RunOutcome {
     pub twin: Option<TwinOutcome>,
     /// The hardware links' counters (a hardware backend).
     pub link: Option<LinkCounters>,
+    /// Why the session log could not be finished (e.g. a full disk): it then holds what was
+    /// flushed before the failure, without its summary section.
+    pub log_error: Option<String>,
 }
 
 /// The async runtime a session runs on (two worker threads: the session loop and the
@@ -198,13 +201,27 @@ pub fn run<B: RigBackend>(
         path: path(),
         source,
     };
+    // Everything that can refuse the session is checked before the log is created: the
+    // control setup and the twin. (The log is written under a temporary name and moves into
+    // place when the backend has started, so a later failure does not touch an older file of
+    // that name either.)
+    Procedure::new(&setup, backend.layout()).map_err(SessionError::from)?;
+    let twin_engine = if request.twin {
+        let model = TwinModel::of_config(request.model, cfg);
+        Some(Twin::new(
+            &model,
+            &cfg.twin,
+            backend.layout(),
+            cfg.contact.clearance,
+        )?)
+    } else {
+        None
+    };
     let (handle, join) = SessionLog::create(out, LogOptions::default(), metadata, attachments)
         .map_err(create_error)?;
     let (live_recorder, live_view) = request.live.unzip();
-    let twin_recorder = if request.twin {
+    let twin_recorder = if let Some(engine) = twin_engine {
         let layout = backend.layout().clone();
-        let model = TwinModel::of_config(request.model, cfg);
-        let engine = Twin::new(&model, &cfg.twin, &layout, cfg.contact.clearance)?;
         let o = engine.observation();
         let windows = TwinWindows::new(o.upper, o.lower);
         let clearances = ClearanceSchedule::new(l, cfg.model.clearance.as_ref());
@@ -247,10 +264,14 @@ pub fn run<B: RigBackend>(
     }
     let messages = recorder.0 .0.messages();
     drop(recorder);
-    join.close().map_err(|source| RunError::LogClose {
-        path: path(),
-        source,
-    })?;
+    // A log that cannot be finished (a full disk) is not the end of the outcome: the summary
+    // and what the log kept are still reported.
+    let log_error = join.close().err().map(|source| {
+        error_chain(&RunError::LogClose {
+            path: path(),
+            source,
+        })
+    });
     let wall_seconds = t0.elapsed().as_secs_f64();
     let live = live_view.map(LiveView::close);
     Ok(RunOutcome {
@@ -261,7 +282,23 @@ pub fn run<B: RigBackend>(
         live,
         twin,
         link,
+        log_error,
     })
+}
+
+/// An error and its causes, `: `-separated, without a cause whose text is already said.
+fn error_chain(e: &dyn std::error::Error) -> String {
+    let mut text = e.to_string();
+    let mut cause = e.source();
+    while let Some(c) = cause {
+        let s = c.to_string();
+        if !text.contains(&s) {
+            text.push_str(": ");
+            text.push_str(&s);
+        }
+        cause = c.source();
+    }
+    text
 }
 
 /// Completes when the operator stops the session: Ctrl-C (SIGINT) or SIGTERM (`kill`,

@@ -142,6 +142,9 @@ pub async fn run_session<B: RigBackend, R: SessionRecorder>(
     let mut drive_on = false;
     let start = procedure.start(0.0, 0);
     let abort: Option<AbortReason> = 'session: {
+        if let Err(e) = run.recorder.started() {
+            break 'session Some(log_abort(e));
+        }
         if let Err(e) = run.outcome(&start) {
             break 'session Some(e);
         }

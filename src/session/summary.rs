@@ -35,12 +35,45 @@ pub struct TestSummary {
     pub steps: Vec<StepResult>,
 }
 
+/// What a replayed session log lacks (issue 17, case 7): a log cut off by a crash (SIGKILL,
+/// power, a full disk) or damaged after writing. Losses are given in rig time and steps; the
+/// bytes are in `file`.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Missing {
+    /// What is missing, in words.
+    pub description: String,
+    /// Whether the session logged its end (`session_end`): false for a session cut off while
+    /// it ran.
+    pub session_end: bool,
+    /// Rig time where the recording ends (the end of the last DAQ block kept), s.
+    pub recorded_until_s: f64,
+    /// DAQ blocks lost inside the recording (damaged chunks), -.
+    pub lost_blocks: u64,
+    /// Rig time lost inside the recording (damaged chunks), s.
+    pub lost_seconds: f64,
+    /// Steps the plan holds (when the log holds the plan), -.
+    pub steps_planned: Option<usize>,
+    /// Steps finished in the recording (with a summary), -.
+    pub steps_finished: usize,
+    /// Steps whose record window was (partly) lost in damaged chunks: `TEST step K`.
+    pub steps_lost: Vec<String>,
+    /// What the reader says about the file: how it ends (bytes lost) and damage it skipped.
+    pub file: Vec<String>,
+}
+
 /// The summary of a session: reproducible from the log alone (`rigtwin replay`), so nothing
 /// here depends on the wall clock.
-#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct SessionSummary {
     /// Plan name.
     pub plan: String,
+    /// Whether the summary covers the whole session: false for a replayed log that was cut
+    /// off or damaged (then `missing` says what is missing). Written only when false.
+    #[serde(default = "yes", skip_serializing_if = "is_true")]
+    pub complete: bool,
+    /// What a replayed log lacks (with `complete` false).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub missing: Option<Missing>,
     /// Whether the session was aborted.
     pub aborted: bool,
     /// Why, as text.
@@ -54,6 +87,30 @@ pub struct SessionSummary {
     /// The `[model]` extensions the twin ran with (`{}`: none), when a twin ran.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub twin_model: Option<crate::config::PhysicsSpec>,
+}
+
+fn yes() -> bool {
+    true
+}
+
+fn is_true(b: &bool) -> bool {
+    *b
+}
+
+impl Default for SessionSummary {
+    fn default() -> Self {
+        SessionSummary {
+            plan: String::new(),
+            complete: true,
+            missing: None,
+            aborted: false,
+            abort_reason: None,
+            blocks: 0,
+            rig_seconds: 0.0,
+            tests: Vec::new(),
+            twin_model: None,
+        }
+    }
 }
 
 impl SessionSummary {

@@ -58,6 +58,18 @@ pub enum TwinReplayError {
         /// The file asked for.
         path: String,
     },
+    /// The recording has gaps (damaged chunks of the log): the twin's state cannot be carried
+    /// across them.
+    #[error(
+        "the recording has gaps ({blocks} DAQ blocks, {seconds:.2} s of rig time lost in damaged \
+         parts of the log): the twin cannot be re-run across them; replay without --twin"
+    )]
+    Gaps {
+        /// Blocks missing.
+        blocks: u64,
+        /// Rig time missing, s.
+        seconds: f64,
+    },
     /// The source log has a channel without a schema (not a rigtwin session log).
     #[error(
         "twin log: {path}: channel {topic} has no schema; only rigtwin session logs can be copied"
@@ -119,6 +131,12 @@ pub fn replay_twin(
     beam_length: f64,
     sink: &mut dyn TwinSink,
 ) -> Result<TwinReplayStats, TwinReplayError> {
+    if !rec.gaps.is_empty() {
+        return Err(TwinReplayError::Gaps {
+            blocks: rec.gaps.iter().map(|g| g.blocks).sum(),
+            seconds: rec.gaps.iter().map(|g| g.seconds).sum(),
+        });
+    }
     let wall = std::time::Instant::now();
     let mut clearances = ClearanceSchedule::of_events(
         beam_length,
@@ -213,12 +231,22 @@ impl TwinLogCopy {
         model: &str,
         dt: f64,
     ) -> Result<TwinLogCopy, TwinReplayError> {
-        if let (Ok(a), Ok(b)) = (path.canonicalize(), session.path.canonicalize()) {
-            if a == b {
-                return Err(TwinReplayError::Overwrite {
-                    path: path.display().to_string(),
-                });
-            }
+        let identity = |p: &Path| {
+            use std::os::unix::fs::MetadataExt;
+            std::fs::metadata(p).ok().map(|m| (m.dev(), m.ino()))
+        };
+        let same_path = matches!(
+            (path.canonicalize(), session.path.canonicalize()),
+            (Ok(a), Ok(b)) if a == b
+        );
+        let same_inode = matches!(
+            (identity(path), identity(&session.path)),
+            (Some(a), Some(b)) if a == b
+        );
+        if same_path || same_inode {
+            return Err(TwinReplayError::Overwrite {
+                path: path.display().to_string(),
+            });
         }
         let mut metadata: Vec<MetadataRecord> = session
             .metadata

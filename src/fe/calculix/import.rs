@@ -56,6 +56,19 @@ pub fn import(job_path: &Path) -> Result<FeModel, CalculixError> {
     build(&inp, &deck, &dof_lines, k, m)
 }
 
+/// The file `JOB.ext` of the job `job_path` (`dir/JOB` or `dir/JOB.inp`): the files
+/// [`import`] reads are `inp`, `sti`, `mas` and `dof`.
+pub fn job_file(job_path: &Path, ext: &str) -> PathBuf {
+    let (inp, stem) = job_paths(job_path);
+    if ext == "inp" {
+        return inp;
+    }
+    let mut s = stem.into_os_string();
+    s.push(".");
+    s.push(ext);
+    PathBuf::from(s)
+}
+
 /// (`dir/JOB.inp`, `dir/JOB`) from either form.
 fn job_paths(job_path: &Path) -> (PathBuf, PathBuf) {
     let is_inp = job_path

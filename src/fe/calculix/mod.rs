@@ -125,7 +125,7 @@ use std::path::PathBuf;
 
 pub use condense::{condense_internal_dofs, CondenseError};
 pub use export::{export, ExportedFiles};
-pub use import::import;
+pub use import::{import, job_file};
 pub use run::{
     ccx_available, ccx_command, ccx_required, read_dat_frequencies, run_ccx, CcxRun, CCX_ENV,
 };

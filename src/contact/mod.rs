@@ -16,6 +16,7 @@
 //! `u = M r + q`, `r in K = {||r_t|| <= mu r_n}`, with `M = W`, `q = c`, `r = lambda`, `u = gamma`.
 
 mod kernels;
+mod newton;
 pub mod problem_io;
 pub mod projection;
 pub mod solver;
@@ -23,7 +24,8 @@ pub mod solver;
 pub use problem_io::{read_problems, write_problem, ContactIoError, ContactRecord};
 pub use projection::{project_pair, PairState};
 pub use solver::{
-    ContactParameters, ContactSolver, SolveStats, SolveStatus, StepRule, SweepMethod,
+    ContactParameters, ContactSolver, NewtonUse, SolvePath, SolveStats, SolveStatus, StepRule,
+    SweepMethod,
 };
 
 /// Why a contact problem or solver input was rejected.

@@ -319,7 +319,8 @@ impl Newton {
                 lam[b + 1] - inp.eps[b + 1] * y[b + 1],
                 lam[b + 2] - inp.eps[b + 2] * y[b + 2],
             ];
-            let class = if !(x[0] > 0.0) {
+            // A NaN trial point counts as open (the merit is NaN and the attempt stops).
+            let class = if x[0].is_nan() || x[0] <= 0.0 {
                 Class::Open
             } else {
                 let nt = x[1].hypot(x[2]);
@@ -502,9 +503,9 @@ impl Newton {
                         );
                         let own = self.offset[i];
                         self.mat[row * q + own] -= inp.mu_act[p] * t[al];
-                        for be in 0..2 {
+                        for (be, &qb) in qm[al].iter().enumerate() {
                             let ident = if al == be { 1.0 } else { 0.0 };
-                            self.mat[row * q + own + 1 + be] += ident - r * qm[al][be];
+                            self.mat[row * q + own + 1 + be] += ident - r * qb;
                         }
                     }
                 }

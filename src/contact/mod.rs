@@ -1,6 +1,8 @@
 //! Implicit frictional contact: the admissible set and its projection ([`projection`]), the
 //! augmented-Lagrangian solver with projected Jacobi (accelerated Jacobi, Gauss-Seidel) sweeps
-//! ([`solver`]) on dense kernels with a fixed evaluation order (`kernels`), and the exchange
+//! ([`solver`]) on dense kernels with a fixed evaluation order (`kernels`), the semismooth
+//! Newton solve on the Alart–Curnier function for large, held contact (`newton`, chosen per
+//! solve by [`NewtonUse`], reported in [`SolveStats::path`]), and the exchange
 //! file for contact problems ([`problem_io`]) used by the Siconos cross-check
 //! (`tests/siconos/solve_fc3d.py`) and to capture problems from simulations
 //! ([`ContactSolver::last_active_problem`] + [`write_problem`]).

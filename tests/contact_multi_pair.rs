@@ -8,8 +8,8 @@ mod contact_support;
 
 use contact_support::{apply, dense_solve, law_violation, physical_problem, random_spd_problem};
 use rigtwin::contact::{
-    solve_problem, ContactError, ContactParameters, ContactProblem, ContactSolver, PairState,
-    SolveStatus, StepRule, SweepMethod,
+    solve_problem, ContactError, ContactParameters, ContactProblem, ContactSolver, NewtonUse,
+    PairState, SolveStatus, StepRule, SweepMethod,
 };
 
 fn tight(method: SweepMethod, step_rule: StepRule) -> ContactParameters {
@@ -18,6 +18,8 @@ fn tight(method: SweepMethod, step_rule: StepRule) -> ContactParameters {
         step_rule,
         tolerance: 1e-14,
         max_iterations: 200_000,
+        // The sweep methods themselves are under test here (Newton: contact_newton_*.rs).
+        newton: NewtonUse::Never,
         ..ContactParameters::default()
     }
 }
@@ -234,6 +236,7 @@ fn warm_start_from_the_solution_converges_in_one_sweep_and_reuses_the_block() {
     let params = ContactParameters {
         tolerance: 1e-12,
         max_iterations: 100_000,
+        newton: NewtonUse::Never,
         ..ContactParameters::default()
     };
     let mut solver = ContactSolver::new(&problem.w, &problem.mu, params).unwrap();
@@ -267,6 +270,7 @@ fn non_convergence_is_reported_not_hidden() {
     let problem = physical_problem(3, 60);
     let params = ContactParameters {
         max_iterations: 3,
+        newton: NewtonUse::Never,
         ..ContactParameters::default()
     };
     let (sol, stats) = solve_problem(&problem, &params, None).unwrap();
@@ -285,6 +289,7 @@ fn unstable_step_rule_is_reported_as_data() {
     let params = ContactParameters {
         step_rule: StepRule::Diagonal,
         max_iterations: 20_000,
+        newton: NewtonUse::Never,
         ..ContactParameters::default()
     };
     let (sol, stats) = solve_problem(&problem, &params, None).unwrap();

@@ -5,7 +5,7 @@
 mod contact_support;
 
 use contact_support::{dense_solve, law_violation};
-use rigtwin::contact::{solve_problem, ContactParameters, ContactProblem, SweepMethod};
+use rigtwin::contact::{solve_problem, ContactParameters, ContactProblem, NewtonUse, SweepMethod};
 
 const ALL_METHODS: [SweepMethod; 3] = [
     SweepMethod::Jacobi,
@@ -18,6 +18,7 @@ fn params(method: SweepMethod) -> ContactParameters {
         method,
         tolerance: 1e-14,
         max_iterations: 100_000,
+        newton: NewtonUse::Never,
         ..ContactParameters::default()
     }
 }

@@ -10,7 +10,7 @@ use std::time::Instant;
 
 use contact_support::{physical_problem, rng};
 use rand::Rng;
-use rigtwin::contact::{ContactParameters, ContactSolver, StepRule, SweepMethod};
+use rigtwin::contact::{ContactParameters, ContactSolver, NewtonUse, StepRule, SweepMethod};
 
 const METHODS: [(&str, SweepMethod, StepRule); 4] = [
     ("Jacobi/auto", SweepMethod::Jacobi, StepRule::Auto),
@@ -157,6 +157,7 @@ fn contact_solver_timing() {
             let params = ContactParameters {
                 method,
                 step_rule,
+                newton: NewtonUse::Never,
                 ..ContactParameters::default()
             };
             // Cold: fresh solver each time (includes gathering W and step sizes), best of 5.

@@ -319,3 +319,23 @@ fn validate_rechecks_a_plan_built_in_code() {
     p.tests[0].direction = Direction::Up;
     assert_eq!(p.validate().unwrap_err().key(), Some("direction"));
 }
+
+#[test]
+fn touching_and_small_preload_clearances_are_accepted_larger_overlaps_are_not() {
+    // Issue 16: held contact runs as a session: the probes touching (0) and a bounded
+    // pre-load (negative, at most 1e-4 l) are valid clearances.
+    for ok in ["0.0", "-5.0e-6", "-1.0e-4", "0.1"] {
+        let plan = parse(&edit("clearance = 2.78e-3", &format!("clearance = {ok}")))
+            .unwrap_or_else(|e| panic!("clearance {ok}: {e}"));
+        assert_eq!(plan.tests[0].clearance, ok.parse::<f64>().unwrap());
+    }
+    for bad in ["-1.1e-4", "-0.01", "0.11", "nan"] {
+        let err = parse(&edit("clearance = 2.78e-3", &format!("clearance = {bad}")))
+            .expect_err(bad)
+            .to_string();
+        assert!(
+            err.contains("clearance") && err.contains("pre-load") && err.contains("bad.toml"),
+            "{bad}: {err}"
+        );
+    }
+}

@@ -1,5 +1,5 @@
-//! Guards the test plans shipped in `rig-config/plans/`: the reference's Table 2 and the demo
-//! plan parse to the expected tests and step frequencies.
+//! Guards the test plans shipped in `rig-config/plans/`: the reference's Table 2, the demo
+//! plan and the held-contact plan parse to the expected tests and step frequencies.
 
 use std::path::PathBuf;
 
@@ -79,4 +79,27 @@ fn demo_is_a_short_down_up_pair_at_the_high_level() {
         assert!((a - b).abs() < 1e-12, "{a} vs {b}");
     }
     assert_eq!(p.test("high-up"), Some(up));
+}
+
+#[test]
+fn held_contact_plan_has_touching_small_clearance_and_preload_tests() {
+    let p = plan("held-contact.toml");
+    let got: Vec<(&str, f64, u32)> = p
+        .tests
+        .iter()
+        .map(|t| (t.name.as_str(), t.clearance, t.steps))
+        .collect();
+    assert_eq!(
+        got,
+        vec![
+            ("touching", 0.0, 5),
+            ("small-clearance", 1e-5, 5),
+            ("preload", -1e-5, 3)
+        ]
+    );
+    for t in &p.tests {
+        assert_eq!(t.level, 0.5e-5);
+        assert_eq!(t.direction, Direction::Up);
+        assert_eq!(t.omega_start, 0.98);
+    }
 }

@@ -130,11 +130,16 @@ fn high_level_has_an_impact_band_a_jump_and_modulation() {
         !jump.is_empty(),
         "no jump: stepping up has no impacts above the down band's edge {hi}"
     );
+    // NOTE: the jump shows in the RMS of one beam or the other: on the impacting branch the
+    // upper beam's RMS can come close to the non-impacting one while the lower beam's, driven
+    // through the contact, differs by a factor (e.g. at 1.02 up: upper 25.9 vs 26.9, lower
+    // 23.2 vs 5.1, issue 16's contact solve). Which beam shows it is chaotic-sensitive.
     for &w in &jump {
         let (u, d) = (at(up, w).metrics.rms_upper, at(down, w).metrics.rms_upper);
+        let (ul, dl) = (at(up, w).metrics.rms_lower, at(down, w).metrics.rms_lower);
         assert!(
-            (u - d).abs() > 0.05 * d,
-            "at {w} up and down RMS agree ({u} vs {d})"
+            (u - d).abs() > 0.05 * d || (ul - dl).abs() > 0.05 * dl,
+            "at {w} up and down RMS agree (upper {u} vs {d}, lower {ul} vs {dl})"
         );
     }
     println!("down band {lo:.3} .. {hi:.3}; up keeps impacting at {jump:?}");

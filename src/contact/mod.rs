@@ -1,6 +1,8 @@
 //! Implicit frictional contact: the admissible set and its projection ([`projection`]), the
 //! augmented-Lagrangian solver with projected Jacobi (accelerated Jacobi, Gauss-Seidel) sweeps
-//! ([`solver`]) on dense kernels with a fixed evaluation order (`kernels`), and the exchange
+//! ([`solver`]) on dense kernels with a fixed evaluation order (`kernels`), the semismooth
+//! Newton solve on the Alart–Curnier function for large, held contact (`newton`, chosen per
+//! solve by [`NewtonUse`], reported in [`SolveStats::path`]), and the exchange
 //! file for contact problems ([`problem_io`]) used by the Siconos cross-check
 //! (`tests/siconos/solve_fc3d.py`) and to capture problems from simulations
 //! ([`ContactSolver::last_active_problem`] + [`write_problem`]).
@@ -16,6 +18,7 @@
 //! `u = M r + q`, `r in K = {||r_t|| <= mu r_n}`, with `M = W`, `q = c`, `r = lambda`, `u = gamma`.
 
 mod kernels;
+mod newton;
 pub mod problem_io;
 pub mod projection;
 pub mod solver;
@@ -23,7 +26,8 @@ pub mod solver;
 pub use problem_io::{read_problems, write_problem, ContactIoError, ContactRecord};
 pub use projection::{project_pair, PairState};
 pub use solver::{
-    ContactParameters, ContactSolver, SolveStats, SolveStatus, StepRule, SweepMethod,
+    ContactParameters, ContactSolver, NewtonUse, SolvePath, SolveStats, SolveStatus, StepRule,
+    SweepMethod,
 };
 
 /// Why a contact problem or solver input was rejected.

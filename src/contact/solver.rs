@@ -18,6 +18,7 @@
 //! (sizes, non-finite numbers) is a [`ContactError`].
 
 use super::kernels::{axpy, gauss_seidel_sweep, matvec};
+use super::newton::{Newton, NewtonInput};
 use super::projection::{project_pair, PairState};
 use super::{check_vector, validate_matrix, ContactError, ContactProblem, ContactSolution};
 
@@ -86,6 +87,67 @@ pub struct ContactParameters {
     /// A pair whose predicted normal gap (m) is larger than this is predicted open and left out
     /// of the sweep, m. Default 0.0.
     pub open_gap_margin: f64,
+    /// When the semismooth Newton solve (`newton.rs`) is used beside the sweeps. Default
+    /// [`NewtonUse::Auto`].
+    pub newton: NewtonUse,
+    /// [`NewtonUse::Auto`]: a solve with at least this many active pairs is *large* and
+    /// switches to Newton after [`ContactParameters::newton_after_sweeps_large`] sweeps, -.
+    /// Default 96 (half the default rig's patch).
+    pub newton_min_pairs: usize,
+    /// [`NewtonUse::Auto`]: a solve below `newton_min_pairs` still sweeping after this many
+    /// sweeps switches to Newton from the last sweep's iterate, -. Default 100 (impacts
+    /// converge in about 30).
+    pub newton_after_sweeps: usize,
+    /// [`NewtonUse::Auto`]: the same for large solves, -; 0 (the default): Newton from the
+    /// warm start.
+    // NOTE: the touching probes' large solves need hundreds to thousands of sweeps, and even
+    // 40 sweeps first (about 1 ms on 192 pairs) would cost a third of the Newton solve. The
+    // price of Newton first: a large impact (100+ pairs at the high level, stepping up past
+    // the band) is now solved by Newton, equal to the sweeps' answer within the tolerance but
+    // not bit for bit, so such vibro-impact trajectories differ from the sweeps-only ones
+    // after it (chaotic sensitivity; the pinned demo outputs were rewritten for issue 16).
+    pub newton_after_sweeps_large: usize,
+    /// Iteration limit of one Newton attempt; an attempt that does not converge hands its
+    /// best iterate back to the sweeps, which continue up to `max_iterations`. Default 30.
+    pub newton_max_iterations: usize,
+}
+
+/// When the contact solve uses the semismooth Newton method (Alart–Curnier, `newton.rs`)
+/// beside the projected sweeps. Both solve the same law to the same tolerance.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum NewtonUse {
+    /// Sweeps only (the behaviour before issue 16).
+    Never,
+    /// Chosen per solve: sweeps first, then Newton from their iterate when they have not
+    /// converged after [`ContactParameters::newton_after_sweeps_large`] sweeps (large active
+    /// sets, [`ContactParameters::newton_min_pairs`]) or
+    /// [`ContactParameters::newton_after_sweeps`] (small ones); sweeps finish a Newton attempt
+    /// that fails.
+    // NOTE: a Gauss-Seidel sweep costs O(m^2) and impacts converge in tens of them; a Newton
+    // step costs a dense factorisation O(min(q, k)^3) (see `newton.rs`), which pays only when
+    // many pairs are closed and the sweeps crawl (held contact: hundreds to thousands of
+    // sweeps). BENCHMARKS.md (issue 16) has the measurements behind the defaults.
+    #[default]
+    Auto,
+    /// Newton first for every solve with an active pair (sweeps only as the fallback).
+    Always,
+}
+
+/// Which method produced the forces of a solve.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SolvePath {
+    /// Projected sweeps only (also: no active pair).
+    #[default]
+    Sweeps,
+    /// Newton from the warm start.
+    Newton,
+    /// Sweeps first; Newton from their iterate finished the solve.
+    SweepsThenNewton,
+    /// A Newton attempt did not converge; the sweeps finished (or ran out) from its best
+    /// iterate.
+    NewtonFallback,
 }
 
 impl Default for ContactParameters {
@@ -97,6 +159,11 @@ impl Default for ContactParameters {
             tolerance: 1e-8,
             max_iterations: 2000,
             open_gap_margin: 0.0,
+            newton: NewtonUse::Auto,
+            newton_min_pairs: 96,
+            newton_after_sweeps: 100,
+            newton_after_sweeps_large: 0,
+            newton_max_iterations: 30,
         }
     }
 }
@@ -121,6 +188,13 @@ impl ContactParameters {
         if self.max_iterations == 0 {
             return Err(ContactError::InvalidParameter {
                 field: "max_iterations",
+                value: 0.0,
+                expected: "at least 1",
+            });
+        }
+        if self.newton_max_iterations == 0 {
+            return Err(ContactError::InvalidParameter {
+                field: "newton_max_iterations",
                 value: 0.0,
                 expected: "at least 1",
             });
@@ -158,6 +232,12 @@ pub struct SolveStats {
     pub converged: bool,
     /// Sweeps done.
     pub iterations: usize,
+    /// Newton iterations done (each one dense linear solve).
+    pub newton_iterations: usize,
+    /// LU factorisations of the Newton iterations (the others reused a kept one).
+    pub factorisations: usize,
+    /// Which method produced the forces.
+    pub path: SolvePath,
     /// Relative change of `lambda` in the last sweep, -. For the accelerated sweep: the
     /// change from the extrapolated point (its fixed-point residual).
     pub relative_change: f64,
@@ -178,6 +258,12 @@ pub struct SolveStats {
     pub slip: usize,
     /// Whether the active set differed from the previous solve (W block regathered).
     pub active_set_changed: bool,
+}
+
+/// What the sweeps of one solve did.
+struct SweepRun {
+    status: SolveStatus,
+    relative_change: f64,
 }
 
 /// Reusable contact solver: the Delassus matrix, friction coefficients, parameters and a
@@ -208,6 +294,8 @@ pub struct ContactSolver {
     prev: Vec<f64>,
     ext: Vec<f64>,
     states: Vec<PairState>,
+    /// Workspace of the semismooth Newton solve.
+    newton: Newton,
 }
 
 impl ContactSolver {
@@ -242,6 +330,7 @@ impl ContactSolver {
             prev: vec![0.0; dim],
             ext: vec![0.0; dim],
             states: vec![PairState::Open; n],
+            newton: Newton::new(n),
         })
     }
 
@@ -260,6 +349,7 @@ impl ContactSolver {
         params.validate()?;
         self.params = params;
         self.block_valid = false;
+        self.newton.invalidate();
         Ok(())
     }
 
@@ -360,37 +450,64 @@ impl ContactSolver {
             self.c_act[3 * slot..3 * slot + 3].copy_from_slice(&c[3 * p..3 * p + 3]);
         }
 
-        // 2. Sweeps.
+        // 2. Sweeps and/or Newton (see `NewtonUse`).
         let mut status = SolveStatus::Converged;
         let mut iterations = 0;
         let mut relative_change = 0.0;
+        let (mut newton_iterations, mut factorisations) = (0, 0);
+        let mut path = SolvePath::Sweeps;
         if m > 0 {
-            status = SolveStatus::MaxIterations;
-            let tol2 = self.params.tolerance * self.params.tolerance;
-            let mut momentum = 1.0;
-            self.ext[..m].copy_from_slice(&self.lam[..m]);
-            while iterations < self.params.max_iterations {
-                iterations += 1;
-                let (d2, n2) = match self.params.method {
-                    SweepMethod::Jacobi => self.jacobi_sweep(m),
-                    SweepMethod::AcceleratedJacobi => self.accelerated_sweep(m, &mut momentum),
-                    SweepMethod::GaussSeidel => gauss_seidel_sweep(
-                        &self.w_act[..m * m],
-                        &self.c_act[..m],
-                        &self.eps[..m],
-                        &self.mu_act[..m / 3],
-                        &mut self.lam[..m],
-                    ),
-                };
-                if !(d2.is_finite() && n2.is_finite()) {
-                    status = SolveStatus::Diverged;
-                    relative_change = f64::NAN;
-                    break;
+            let newton = self.params.newton;
+            let newton_first = match newton {
+                NewtonUse::Never => false,
+                NewtonUse::Always => true,
+                NewtonUse::Auto => {
+                    na >= self.params.newton_min_pairs && self.params.newton_after_sweeps_large == 0
                 }
-                relative_change = if d2 == 0.0 { 0.0 } else { (d2 / n2).sqrt() };
-                if d2 <= tol2 * n2 {
-                    status = SolveStatus::Converged;
-                    break;
+            };
+            let mut newton_left = newton != NewtonUse::Never;
+            let mut done = false;
+            if newton_first {
+                newton_left = false;
+                let o = self.run_newton();
+                newton_iterations += o.iterations;
+                factorisations += o.factorisations;
+                if o.converged {
+                    relative_change = o.relative_change;
+                    path = SolvePath::Newton;
+                    done = true;
+                } else {
+                    path = SolvePath::NewtonFallback;
+                }
+            }
+            if !done {
+                let budget = if newton_left {
+                    let after = if na >= self.params.newton_min_pairs {
+                        self.params.newton_after_sweeps_large
+                    } else {
+                        self.params.newton_after_sweeps
+                    };
+                    after.min(self.params.max_iterations)
+                } else {
+                    self.params.max_iterations
+                };
+                let run = self.run_sweeps(m, budget, &mut iterations);
+                status = run.status;
+                relative_change = run.relative_change;
+                if status == SolveStatus::MaxIterations && newton_left {
+                    let o = self.run_newton();
+                    newton_iterations += o.iterations;
+                    factorisations += o.factorisations;
+                    if o.converged {
+                        status = SolveStatus::Converged;
+                        relative_change = o.relative_change;
+                        path = SolvePath::SweepsThenNewton;
+                    } else {
+                        path = SolvePath::NewtonFallback;
+                        let run = self.run_sweeps(m, self.params.max_iterations, &mut iterations);
+                        status = run.status;
+                        relative_change = run.relative_change;
+                    }
                 }
             }
         }
@@ -461,6 +578,9 @@ impl ContactSolver {
             status,
             converged: status == SolveStatus::Converged,
             iterations,
+            newton_iterations,
+            factorisations,
+            path,
             relative_change,
             residual,
             relative_residual,
@@ -471,6 +591,58 @@ impl ContactSolver {
             slip,
             active_set_changed,
         })
+    }
+
+    /// Sweeps from the current iterate until converged or `*iterations` reaches `until`.
+    fn run_sweeps(&mut self, m: usize, until: usize, iterations: &mut usize) -> SweepRun {
+        let tol2 = self.params.tolerance * self.params.tolerance;
+        let mut momentum = 1.0;
+        self.ext[..m].copy_from_slice(&self.lam[..m]);
+        let mut run = SweepRun {
+            status: SolveStatus::MaxIterations,
+            relative_change: 0.0,
+        };
+        while *iterations < until {
+            *iterations += 1;
+            let (d2, n2) = match self.params.method {
+                SweepMethod::Jacobi => self.jacobi_sweep(m),
+                SweepMethod::AcceleratedJacobi => self.accelerated_sweep(m, &mut momentum),
+                SweepMethod::GaussSeidel => gauss_seidel_sweep(
+                    &self.w_act[..m * m],
+                    &self.c_act[..m],
+                    &self.eps[..m],
+                    &self.mu_act[..m / 3],
+                    &mut self.lam[..m],
+                ),
+            };
+            if !(d2.is_finite() && n2.is_finite()) {
+                run.status = SolveStatus::Diverged;
+                run.relative_change = f64::NAN;
+                break;
+            }
+            run.relative_change = if d2 == 0.0 { 0.0 } else { (d2 / n2).sqrt() };
+            if d2 <= tol2 * n2 {
+                run.status = SolveStatus::Converged;
+                break;
+            }
+        }
+        run
+    }
+
+    /// One Newton attempt from the current iterate (`lam` of the active pairs).
+    fn run_newton(&mut self) -> super::newton::NewtonOutcome {
+        let m = 3 * self.active.len();
+        let input = NewtonInput {
+            w: &self.w,
+            active: &self.active,
+            w_act: &self.w_act[..m * m],
+            c_act: &self.c_act[..m],
+            mu_act: &self.mu_act[..m / 3],
+            eps: &self.eps[..m],
+            tolerance: self.params.tolerance,
+            max_iterations: self.params.newton_max_iterations,
+        };
+        self.newton.solve(&input, &mut self.lam, &mut self.y)
     }
 
     /// One projected Jacobi sweep: `y = W lambda + c` from the previous iterate, then every pair

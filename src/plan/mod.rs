@@ -78,7 +78,9 @@ pub struct TestSpec {
     /// Stepping direction; consistent with `omega_start`/`omega_end`.
     pub direction: Direction,
     /// Clearance between the probes before the test, divided by l (the model's clearance; on
-    /// the rig, the estimated one). In (0, 0.1].
+    /// the rig, the estimated one). In [-1e-4, 0.1]: 0 means the probes touch at rest (held
+    /// contact), a negative value a pre-load, the faces overlapping by |clearance| from the
+    /// start (bounded; see `validate::CLEARANCE_PRELOAD_MAX` for what the model does with it).
     pub clearance: f64,
     /// First excitation frequency, Omega / omega_2 (omega_2: the ROM's 1FU circular frequency).
     /// In (0, 10).

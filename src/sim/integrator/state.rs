@@ -19,6 +19,20 @@ pub struct SolverCounters {
     pub diverged: u64,
     /// Largest relative natural-map residual of a solve, -.
     pub worst_relative_residual: f64,
+    /// Solves in which the semismooth Newton method ran ([`crate::contact::SolvePath`]; the
+    /// rest swept only). Left out of serialised counters when zero, as are the two below.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub newton_solves: u64,
+    /// Total Newton iterations (one dense linear solve each).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub newton_iterations: u64,
+    /// Newton attempts that did not converge and were finished by the sweeps.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub newton_fallbacks: u64,
+}
+
+fn is_zero(v: &u64) -> bool {
+    *v == 0
 }
 
 impl SolverCounters {
@@ -32,6 +46,9 @@ impl SolverCounters {
             max_iterations: self.max_iterations - before.max_iterations,
             diverged: self.diverged - before.diverged,
             worst_relative_residual: self.worst_relative_residual,
+            newton_solves: self.newton_solves - before.newton_solves,
+            newton_iterations: self.newton_iterations - before.newton_iterations,
+            newton_fallbacks: self.newton_fallbacks - before.newton_fallbacks,
         }
     }
 }

@@ -17,7 +17,7 @@
 // Friction stays on the velocity level. Consequently handing extra (open) pairs to the
 // solver does not change the result, which is what makes the open-prediction margin safe.
 
-use crate::contact::{ContactSolver, PairState, SolveStats, SolveStatus};
+use crate::contact::{ContactSolver, PairState, SolvePath, SolveStats, SolveStatus};
 
 use super::super::super::error::SimError;
 use super::super::kernels::dot;
@@ -120,6 +120,13 @@ fn count(c: &mut SolverCounters, stats: &SolveStats) {
         SolveStatus::Converged => {}
         SolveStatus::MaxIterations => c.max_iterations += 1,
         SolveStatus::Diverged => c.diverged += 1,
+    }
+    if stats.newton_iterations > 0 {
+        c.newton_solves += 1;
+        c.newton_iterations += stats.newton_iterations as u64;
+    }
+    if stats.path == SolvePath::NewtonFallback {
+        c.newton_fallbacks += 1;
     }
     if stats.relative_residual > c.worst_relative_residual {
         c.worst_relative_residual = stats.relative_residual;

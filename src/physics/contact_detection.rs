@@ -108,6 +108,22 @@ impl SampleDetector {
         self.circuit.reset();
         self.lowest = f64::INFINITY;
     }
+
+    /// The circuit's voltage between two sample periods (all the detector carries from one
+    /// sample to the next), V.
+    pub fn voltage(&self) -> f64 {
+        self.circuit.voltage
+    }
+
+    /// Restores [`SampleDetector::voltage`] at the start of a sample period; `false` (nothing
+    /// changed) when it is not finite.
+    pub fn set_voltage(&mut self, voltage: f64) -> bool {
+        if voltage.is_finite() {
+            self.circuit.voltage = voltage;
+            self.lowest = f64::INFINITY;
+        }
+        voltage.is_finite()
+    }
 }
 
 #[cfg(test)]

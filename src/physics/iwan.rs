@@ -109,6 +109,38 @@ impl Iwan {
     pub fn slipped(&self) -> usize {
         self.s.iter().filter(|&&s| s != 0.0).count()
     }
+
+    /// The sliders' state (for a warm start).
+    pub fn state(&self) -> IwanState {
+        IwanState {
+            slider: self.s.clone(),
+            dissipated: self.dissipated,
+        }
+    }
+
+    /// Restores a state of an element like this one; `false` (nothing changed) when the slider
+    /// count differs or a value is not finite.
+    pub fn set_state(&mut self, state: &IwanState) -> bool {
+        let fits = state.slider.len() == self.s.len()
+            && state.slider.iter().all(|s| s.is_finite())
+            && state.dissipated.is_finite();
+        if fits {
+            self.s.copy_from_slice(&state.slider);
+            // The same sum, in the same order, as `update` forms it.
+            self.sum_s = self.s.iter().fold(0.0, |a, &s| a + s);
+            self.dissipated = state.dissipated;
+        }
+        fits
+    }
+}
+
+/// The state of an [`Iwan`] element: its sliders' positions and the energy dissipated so far.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct IwanState {
+    /// Slider positions, in the element's coordinate.
+    pub slider: Vec<f64>,
+    /// Energy dissipated so far, J.
+    pub dissipated: f64,
 }
 
 /// The clamping joints of the listed beams: one Iwan element per beam on the modal coordinate
@@ -193,6 +225,31 @@ impl ClampJoint {
     /// Energy dissipated in the joints since the start, J.
     pub fn dissipated(&self) -> f64 {
         self.elements.iter().map(Iwan::dissipated).sum()
+    }
+
+    /// The elements' states, one per beam in the order of the spec (for a warm start).
+    pub fn state(&self) -> Vec<IwanState> {
+        self.elements.iter().map(Iwan::state).collect()
+    }
+
+    /// Restores [`ClampJoint::state`] of a joint like this one; `false` (nothing changed) when
+    /// it does not fit.
+    pub fn set_state(&mut self, state: &[IwanState]) -> bool {
+        let fits = state.len() == self.elements.len()
+            && self
+                .elements
+                .iter()
+                .zip(state)
+                .all(|(e, s)| e.s.len() == s.slider.len())
+            && state
+                .iter()
+                .all(|s| s.slider.iter().all(|x| x.is_finite()) && s.dissipated.is_finite());
+        if fits {
+            for (e, s) in self.elements.iter_mut().zip(state) {
+                e.set_state(s);
+            }
+        }
+        fits
     }
 }
 

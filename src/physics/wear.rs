@@ -51,6 +51,17 @@ impl Wear {
         }
     }
 
+    /// Restores `W` (J) and the growth (m) of an earlier [`Wear::work`] and [`Wear::growth`];
+    /// `false` (nothing changed) when either is negative or not finite.
+    pub fn set_state(&mut self, work: f64, growth: f64) -> bool {
+        let fits = work.is_finite() && growth.is_finite() && work >= 0.0 && growth >= 0.0;
+        if fits {
+            self.work = work;
+            self.growth = growth;
+        }
+        fits
+    }
+
     /// `W`, J.
     pub fn work(&self) -> f64 {
         self.work

@@ -256,6 +256,32 @@ impl<const N: usize> DrivenRom<N> {
         &self.last
     }
 
+    /// Restores a state captured from a ROM like this one (e.g. [`DrivenRom::state`] of an
+    /// earlier run, read back from a log), with the sensor velocities of its last step
+    /// `last_velocity` (the other last-step values start at zero): the run continues from
+    /// there as it did after the capture, bit for bit. Fails, changing nothing, on a state that
+    /// does not fit the ROM.
+    pub fn set_state(
+        &mut self,
+        state: State,
+        last_velocity: [f64; N],
+    ) -> Result<(), crate::sim::StateMismatch> {
+        state.check(self.integrator.n_modes(), self.integrator.n_pairs())?;
+        if let Some(k) = last_velocity.iter().position(|v| !v.is_finite()) {
+            return Err(crate::sim::StateMismatch::NonFinite {
+                field: "last_velocity",
+                index: k,
+            });
+        }
+        self.state = state;
+        self.last = SensorStep {
+            velocity: last_velocity,
+            time: self.state.time(),
+            ..SensorStep::default()
+        };
+        Ok(())
+    }
+
     /// Back to rest at time 0, the last sensor values zero.
     pub fn reset(&mut self) {
         self.state = self.integrator.state_at_rest();

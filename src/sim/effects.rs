@@ -47,6 +47,33 @@ pub struct Effects {
     nominal_clearance: f64,
 }
 
+/// What evolves in [`Effects`] (see [`Effects::state`]).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct EffectsState {
+    /// The clamp joints' elements, one per beam (`None`: no clamp friction).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub joint: Option<Vec<crate::physics::iwan::IwanState>>,
+    /// The wear so far (`None`: no wear).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub wear: Option<WearState>,
+    /// The clearance set at start or by [`Effects::set_clearance`], m (wear grows on top).
+    pub nominal_clearance: f64,
+}
+
+/// The wear so far.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct WearState {
+    /// `W`: the running maximum of the dissipated contact work, J.
+    pub work: f64,
+    /// Clearance growth, m.
+    pub growth: f64,
+}
+
+/// An [`EffectsState`] that does not fit the effects it is restored into.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("effects state does not fit: {0}")]
+pub struct EffectsStateMismatch(pub &'static str);
+
 impl Effects {
     /// The effects of `spec` (valid) on the prepared ROM `rom` (see [`prepare`]) at clearance
     /// `clearance_m` (m), at rest. Keys in errors are `<prefix>.<...>`.
@@ -192,6 +219,59 @@ impl Effects {
     /// when the effect is off.
     pub fn wear(&self) -> Option<(f64, f64)> {
         self.wear.as_ref().map(|w| (w.work(), w.growth()))
+    }
+
+    /// What evolves in the effects (the joints' sliders, the wear so far) and the nominal
+    /// clearance, for a warm start ([`Effects::set_state`]).
+    pub fn state(&self) -> EffectsState {
+        EffectsState {
+            joint: self.joint.as_ref().map(ClampJoint::state),
+            wear: self.wear.as_ref().map(|w| WearState {
+                work: w.work(),
+                growth: w.growth(),
+            }),
+            nominal_clearance: self.nominal_clearance,
+        }
+    }
+
+    /// Restores [`Effects::state`] of effects like these (the same effects on, the same joint
+    /// sizes) and sets the clearance it implies on `rom`. Fails, changing nothing, when it
+    /// does not fit.
+    pub fn set_state<const N: usize>(
+        &mut self,
+        rom: &mut DrivenRom<N>,
+        state: &EffectsState,
+    ) -> Result<(), EffectsStateMismatch> {
+        let mismatch = |what: &'static str| Err(EffectsStateMismatch(what));
+        if state.joint.is_some() != self.joint.is_some() {
+            return mismatch("clamp friction on in one and off in the other");
+        }
+        if state.wear.is_some() != self.wear.is_some() {
+            return mismatch("wear on in one and off in the other");
+        }
+        if !state.nominal_clearance.is_finite() {
+            return mismatch("the clearance is not finite");
+        }
+        let mut next = self.clone();
+        if let (Some(j), Some(s)) = (&mut next.joint, &state.joint) {
+            if !j.set_state(s) {
+                return mismatch("the clamp joints' sliders do not fit");
+            }
+        }
+        if let (Some(w), Some(s)) = (&mut next.wear, &state.wear) {
+            if !w.set_state(s.work, s.growth) {
+                return mismatch("the wear state is negative or not finite");
+            }
+        }
+        next.nominal_clearance = state.nominal_clearance;
+        if rom
+            .set_clearance(next.effective_clearance(next.nominal_clearance))
+            .is_err()
+        {
+            return mismatch("the clearance is out of range");
+        }
+        *self = next;
+        Ok(())
     }
 
     /// Clamp friction: energy dissipated in the joints so far, J; `None` when the effect is

@@ -28,6 +28,6 @@ pub use error::SimError;
 pub use excitation::{continuous_phase, Excitation};
 pub use integrator::{
     stability_limits, Coupling, Integrator, IntegratorParameters, RunReport, RunStop,
-    SolverCounters, StabilityLimits, State, TimeStep,
+    SolverCounters, StabilityLimits, State, StateMismatch, TimeStep,
 };
 pub use output::{ContactSummary, NullSink, StepOutput, StepSink, TraceRecorder};

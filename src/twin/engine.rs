@@ -41,6 +41,7 @@ use super::model::TwinModel;
 use super::observe::Observation;
 use super::output::{TwinBlock, TwinGap, TWIN_SENSORS};
 use super::spec::{AfterGap, TwinSpec};
+use super::state::{StateError, TwinState};
 
 /// Cumulative counters of a [`Twin`].
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -91,6 +92,8 @@ pub struct Twin {
     /// How the prediction is observed through the rig's channels.
     observation: Observation,
     map: InputMap,
+    /// The model's identity in warm-start states ([`TwinState::model`]).
+    identity: String,
     after_gap: AfterGap,
     steps_per_sample: u32,
     /// `k / N` for `k = 1..=N`.
@@ -165,12 +168,20 @@ impl Twin {
         let detector =
             SampleDetector::new(&observation.circuit, dt, observation.contact_threshold_v);
         let weights = (1..=n).map(|k| f64::from(k) / f64::from(n)).collect();
+        let identity = format!(
+            "ROM {} ({} modes, {} pairs), extensions {}, dt {dt:e} s",
+            model.rom.meta.config_hash,
+            model.rom.n_modes(),
+            model.rom.n_pairs(),
+            model.extensions.to_json()
+        );
         Ok(Twin {
             rom,
             effects,
             detector,
             observation,
             map,
+            identity,
             after_gap: spec.after_gap,
             steps_per_sample: n,
             weights,
@@ -256,6 +267,61 @@ impl Twin {
         self.detector.reset();
         self.last_accel = None;
         self.next_sample = None;
+    }
+
+    /// The state between two blocks, for a warm start ([`TwinState`]); `None` before the first
+    /// block (a twin at rest needs none).
+    pub fn state(&self) -> Option<TwinState> {
+        Some(TwinState {
+            model: self.identity.clone(),
+            next_sample: self.next_sample?,
+            last_seq: self.last_seq,
+            last_accel: self.last_accel,
+            rom: self.rom.state().clone(),
+            last_velocity: self.rom.last().velocity,
+            effects: self.effects.state(),
+            contact_voltage: self.detector.voltage(),
+        })
+    }
+
+    /// Restores a [`Twin::state`] of a twin of the same model: the next block is expected at
+    /// its `next_sample`, and the twin continues as the captured one did, bit for bit. Fails,
+    /// changing nothing, on a state of another model or one that does not fit. The counters
+    /// are kept.
+    pub fn set_state(&mut self, state: &TwinState) -> Result<(), TwinError> {
+        if state.model != self.identity {
+            return Err(StateError::Model {
+                state: state.model.clone(),
+                twin: self.identity.clone(),
+            }
+            .into());
+        }
+        if state.last_accel.is_some_and(|a| !a.is_finite()) {
+            return Err(StateError::NonFinite("last_accel").into());
+        }
+        if !state.contact_voltage.is_finite() {
+            return Err(StateError::NonFinite("contact_voltage").into());
+        }
+        let integ = self.rom.integrator();
+        state
+            .rom
+            .check(integ.n_modes(), integ.n_pairs())
+            .map_err(StateError::from)?;
+        if state.last_velocity.iter().any(|v| !v.is_finite()) {
+            return Err(StateError::NonFinite("last_velocity").into());
+        }
+        // Changes nothing (the ROM's clearance included) unless it fits.
+        self.effects
+            .set_state(&mut self.rom, &state.effects)
+            .map_err(StateError::from)?;
+        self.rom
+            .set_state(state.rom.clone(), state.last_velocity)
+            .map_err(StateError::from)?;
+        self.detector.set_voltage(state.contact_voltage);
+        self.last_accel = state.last_accel;
+        self.next_sample = Some(state.next_sample);
+        self.last_seq = state.last_seq;
+        Ok(())
     }
 
     /// Runs the twin over one DAQ block (see the module docs). Fails, leaving the twin as it

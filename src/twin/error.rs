@@ -54,6 +54,9 @@ pub enum TwinError {
     /// A DAQ block that does not fit the layout or the stream.
     #[error("twin input: {0}")]
     Block(#[from] BlockError),
+    /// A warm-start state that does not fit the twin.
+    #[error(transparent)]
+    State(#[from] super::state::StateError),
     /// A clearance that is not a finite number.
     #[error("twin: clearance = {0} m: expected a finite normal gap (m)")]
     Clearance(f64),

@@ -16,6 +16,8 @@
 //!   sensitivities, contact detection through the circuit and threshold).
 //! - [`compare`]: the per-step comparison with the measurement ([`TwinComparison`]) over the
 //!   record windows cut from the twin's output ([`TwinWindows`]).
+//! - [`state`]: warm starts ([`TwinState`]: what a twin carries between blocks, captured and
+//!   restored bit for bit).
 //! - [`clearance`]: the twin's clearance test by test ([`ClearanceSchedule`]), one rule for
 //!   the live twin and the twin replay.
 //!
@@ -36,6 +38,7 @@ pub mod model;
 pub mod observe;
 pub mod output;
 pub mod spec;
+pub mod state;
 pub mod task;
 
 pub use clearance::ClearanceSchedule;
@@ -47,6 +50,7 @@ pub use model::TwinModel;
 pub use observe::{Observation, TipObservation};
 pub use output::{TwinBlock, TwinEvent, TwinGap, TwinSamples, TwinStatus, TwinTrace, TWIN_SENSORS};
 pub use spec::{AfterGap, TwinSpec};
+pub use state::{StateError, TwinState};
 pub use task::{Pushed, TwinReceiver, TwinTask};
 
 #[cfg(test)]

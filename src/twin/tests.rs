@@ -674,3 +674,70 @@ fn logged_samples_keep_the_sensor_order_and_cut_record_windows() {
     bad.upper_tip.pop();
     assert!(TwinTrace::cut(&[blocks[0].clone(), bad, blocks[2].clone()], 5, 14).is_none());
 }
+
+#[test]
+fn a_restored_state_continues_bit_for_bit_and_another_model_is_refused() {
+    let rom = stub_rom(&[50.0, 400.0], 0.01, 0.5, 2e-4);
+    let lay = layout();
+    let a = sine(5.0, 50.0);
+    let blocks: Vec<DaqBlock> = (0..80).map(|s| block(&lay, s, &a)).collect();
+    // Wear acting: the clearance moves with the contact work, so the effects' state matters.
+    let extensions = crate::config::PhysicsSpec {
+        wear: Some(crate::config::physics::WearSpec {
+            coefficient: 1e-3,
+            max_growth: Some(2e-5),
+        }),
+        ..Default::default()
+    };
+    let model = TwinModel::nominal(&rom).with_extensions(extensions);
+    let new = || Twin::new(&model, &TwinSpec::default(), &lay, 2e-4).unwrap();
+    let mut full = new();
+    assert_eq!(full.state(), None, "no state before the first block");
+    let mut states = Vec::new();
+    let mut out = Vec::new();
+    for b in &blocks {
+        states.push(full.state());
+        out.push(full.push_block(b).unwrap());
+    }
+    assert!(out.iter().flat_map(|b| &b.contact).any(|&c| c));
+    for k in [1, 23, 57] {
+        let state = states[k].clone().unwrap();
+        // Through JSON, as the log keeps it: every number round-trips.
+        let text = serde_json::to_string(&state).unwrap();
+        let back: TwinState = serde_json::from_str(&text).unwrap();
+        assert_eq!(back, state);
+        let mut warm = new();
+        warm.set_state(&back).unwrap();
+        for (b, expected) in blocks[k..].iter().zip(&out[k..]) {
+            let got = warm.push_block(b).unwrap();
+            let bits = |t: &TwinBlock| -> Vec<u64> {
+                t.velocity
+                    .iter()
+                    .chain(&t.normal_force)
+                    .chain(&t.tangential_force)
+                    .map(|x| x.to_bits())
+                    .collect()
+            };
+            assert_eq!(bits(&got), bits(expected), "block {} from state {k}", b.seq);
+            assert_eq!(got.contact, expected.contact);
+        }
+        assert_eq!(warm.clearance().to_bits(), full.clearance().to_bits());
+    }
+    assert!(full.clearance() > 2e-4, "wear did not act");
+
+    // Another model (no wear): refused, and the twin is unchanged.
+    let state = states[23].clone().unwrap();
+    let mut other = Twin::new(&TwinModel::nominal(&rom), &TwinSpec::default(), &lay, 2e-4).unwrap();
+    let err = other.set_state(&state).unwrap_err().to_string();
+    assert!(err.contains("another model"), "{err}");
+    assert_eq!(other.next_sample(), None);
+    // A state that does not fit: refused with the field named.
+    let mut bad = state.clone();
+    bad.rom = crate::sim::State::at_rest(3, 1, 0.0);
+    let err = new().set_state(&bad).unwrap_err().to_string();
+    assert!(err.contains("eta"), "{err}");
+    let mut bad = state;
+    bad.contact_voltage = f64::NAN;
+    let err = new().set_state(&bad).unwrap_err().to_string();
+    assert!(err.contains("contact_voltage"), "{err}");
+}

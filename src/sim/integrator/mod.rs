@@ -36,7 +36,7 @@ mod validation;
 
 pub use limits::{stability_limits, StabilityLimits};
 pub use parameters::{Coupling, IntegratorParameters, TimeStep};
-pub use state::{RunReport, RunStop, SolverCounters, State};
+pub use state::{RunReport, RunStop, SolverCounters, State, StateMismatch};
 
 use crate::contact::ContactSolver;
 use crate::rom::Rom;

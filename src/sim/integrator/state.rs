@@ -60,11 +60,16 @@ impl SolverCounters {
 /// At step count `j` it holds `eta^j`, the modal velocity of the last step `v^{j-1/2}`, the
 /// contact forces of the last step and their boundary displacement `G_res lambda`, the time
 /// `t^j`, and the cumulative energy accounts and solver counters.
-#[derive(Clone, Debug, PartialEq)]
+///
+/// It serialises (serde) for warm starts: the contact vectors, zero for every open pair, as
+/// their non-zero entries only ([`sparse`]); every number round-trips exactly through JSON.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct State {
     pub(super) eta: Vec<f64>,
     pub(super) eta_dot: Vec<f64>,
+    #[serde(with = "sparse")]
     pub(super) lambda: Vec<f64>,
+    #[serde(with = "sparse")]
     pub(super) g_lambda: Vec<f64>,
     pub(super) closed: Vec<usize>,
     pub(super) time: f64,
@@ -134,6 +139,131 @@ impl State {
     /// Cumulative contact-solver counters.
     pub fn counters(&self) -> SolverCounters {
         self.counters
+    }
+
+    /// Checks that the state fits a ROM of `n_modes` modes and `n_pairs` contact pairs and is
+    /// finite (a state read back from a log, before it replaces a run's).
+    pub fn check(&self, n_modes: usize, n_pairs: usize) -> Result<(), StateMismatch> {
+        let sizes = [
+            ("eta", self.eta.len(), n_modes),
+            ("eta_dot", self.eta_dot.len(), n_modes),
+            ("lambda", self.lambda.len(), 3 * n_pairs),
+            ("g_lambda", self.g_lambda.len(), 3 * n_pairs),
+        ];
+        for (field, got, expected) in sizes {
+            if got != expected {
+                return Err(StateMismatch::Size {
+                    field,
+                    got,
+                    expected,
+                });
+            }
+        }
+        let vectors = [
+            ("eta", &self.eta),
+            ("eta_dot", &self.eta_dot),
+            ("lambda", &self.lambda),
+            ("g_lambda", &self.g_lambda),
+        ];
+        for (field, v) in vectors {
+            if let Some(i) = v.iter().position(|x| !x.is_finite()) {
+                return Err(StateMismatch::NonFinite { field, index: i });
+            }
+        }
+        if !self.time.is_finite() {
+            return Err(StateMismatch::NonFinite {
+                field: "time",
+                index: 0,
+            });
+        }
+        let ascending = self.closed.windows(2).all(|w| w[0] < w[1]);
+        if !ascending || self.closed.last().is_some_and(|&p| p >= n_pairs) {
+            return Err(StateMismatch::ClosedPairs { n_pairs });
+        }
+        Ok(())
+    }
+}
+
+/// Why a state does not fit a ROM ([`State::check`]).
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum StateMismatch {
+    /// A vector has the wrong length.
+    #[error("state field {field} has {got} entries, the ROM needs {expected}")]
+    Size {
+        /// Field name.
+        field: &'static str,
+        /// Its length.
+        got: usize,
+        /// The ROM's.
+        expected: usize,
+    },
+    /// A value is NaN or infinite.
+    #[error("state field {field} is not finite at index {index}")]
+    NonFinite {
+        /// Field name.
+        field: &'static str,
+        /// Index of the first bad value.
+        index: usize,
+    },
+    /// The closed pairs are not ascending pair indices of the ROM.
+    #[error("state field closed is not a list of ascending pair indices below {n_pairs}")]
+    ClosedPairs {
+        /// The ROM's pair count.
+        n_pairs: usize,
+    },
+}
+
+/// A vector stored by its non-zero entries: `{"len": n, "index": [...], "value": [...]}`.
+mod sparse {
+    use serde::{Deserialize, Deserializer, Serialize, Serializer};
+
+    #[derive(Serialize, Deserialize)]
+    struct Sparse {
+        len: usize,
+        index: Vec<usize>,
+        value: Vec<f64>,
+    }
+
+    pub fn serialize<S: Serializer>(v: &[f64], s: S) -> Result<S::Ok, S::Error> {
+        // NOTE: -0.0 is kept (it is not == 0.0 bitwise and may matter to a bit-for-bit rerun).
+        let (index, value) = v
+            .iter()
+            .enumerate()
+            .filter(|(_, x)| x.to_bits() != 0)
+            .map(|(i, &x)| (i, x))
+            .unzip();
+        Sparse {
+            len: v.len(),
+            index,
+            value,
+        }
+        .serialize(s)
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<f64>, D::Error> {
+        let sp = Sparse::deserialize(d)?;
+        if sp.index.len() != sp.value.len() {
+            return Err(serde::de::Error::custom(format!(
+                "sparse vector: {} indices but {} values",
+                sp.index.len(),
+                sp.value.len()
+            )));
+        }
+        if sp.len > 1 << 24 {
+            return Err(serde::de::Error::custom(format!(
+                "sparse vector: length {} beyond the limit {}",
+                sp.len,
+                1 << 24
+            )));
+        }
+        let mut v = vec![0.0; sp.len];
+        for (&i, &x) in sp.index.iter().zip(&sp.value) {
+            let slot = v.get_mut(i).ok_or_else(|| {
+                serde::de::Error::custom(format!("sparse vector: index {i} beyond length {}", sp.len))
+            })?;
+            *slot = x;
+        }
+        Ok(v)
     }
 }
 

@@ -1,0 +1,65 @@
+//! Warm starts ([`TwinState`]): everything a [`super::Twin`] carries from one DAQ block to the
+//! next — the ROM's state (modal coordinates, contact forces, energy accounts), the
+//! extensions' state (clamp joints' sliders, wear), the contact circuit's voltage, the base
+//! acceleration of the last sample and the stream position — captured between two blocks and
+//! restored into a twin of the same model, which then continues bit for bit as the captured
+//! one did. The session log keeps one at the start of every step (`/twin/state`), so
+//! `rigtwin replay --twin --steps` can re-run a subset of steps from there instead of from
+//! rest.
+//!
+//! A state names the model it belongs to ([`TwinState::model`]: ROM identity, extensions,
+//! twin step); restoring it into another model is refused, since its numbers would mean
+//! something else there.
+
+use serde::{Deserialize, Serialize};
+
+use crate::sim::effects::EffectsState;
+use crate::sim::State;
+
+/// A twin's state between two blocks (see the module docs). Serialises to JSON exactly (every
+/// number round-trips), the contact vectors by their non-zero entries only.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TwinState {
+    /// The model the state belongs to (ROM hash and size, extensions, twin step).
+    pub model: String,
+    /// The DAQ sample the next block starts with.
+    pub next_sample: u64,
+    /// The last block's sequence number.
+    pub last_seq: u64,
+    /// Base acceleration of the last sample processed, m/s^2 (`None` after a gap or reset).
+    pub last_accel: Option<f64>,
+    /// The ROM's state.
+    pub rom: State,
+    /// Relative velocities of the beam sensors at the last step ([`super::TWIN_SENSORS`]),
+    /// m/s.
+    pub last_velocity: [f64; 4],
+    /// The `[model]` extensions' state and the clearance.
+    pub effects: EffectsState,
+    /// Voltage of the contact-resistance circuit, V.
+    pub contact_voltage: f64,
+}
+
+/// Why a [`TwinState`] cannot be restored.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum StateError {
+    /// The state belongs to another model.
+    #[error(
+        "twin state: it belongs to another model ({state}); this twin is {twin}: re-run the \
+         whole session, or re-run with the model the state was logged with"
+    )]
+    Model {
+        /// The state's model.
+        state: String,
+        /// The twin's.
+        twin: String,
+    },
+    /// The ROM's part does not fit.
+    #[error("twin state: {0}")]
+    Rom(#[from] crate::sim::StateMismatch),
+    /// The extensions' part does not fit.
+    #[error("twin state: {0}")]
+    Effects(#[from] crate::sim::effects::EffectsStateMismatch),
+    /// A scalar is not finite.
+    #[error("twin state: {0} is not finite")]
+    NonFinite(&'static str),
+}

@@ -5,7 +5,10 @@
 //! - the same recording and model give the same bits; a changed model changes them;
 //! - a bad model argument is a clear error;
 //! - the live twin's predicted channels are logged (`/twin/blocks`), a replay's copy of the log
-//!   (`--out`) holds the same bytes, and `report` draws them.
+//!   (`--out`) holds the same bytes, and `report` draws them;
+//! - warm starts: the twin's state is logged at every step start (`/twin/state`), and
+//!   `replay --twin --steps` re-runs a subset of steps from there, bit for bit equal to the
+//!   whole run, with every model extension on.
 
 mod cli_support;
 
@@ -220,6 +223,15 @@ fn the_live_twin_equals_its_replay_and_is_logged() {
         payloads(&s, rigtwin::session::topics::TOPIC_TWIN_STEPS),
         payloads(&c, rigtwin::session::topics::TOPIC_TWIN_STEPS)
     );
+    // The twin's state at every step start (warm starts): the live twin and the replay capture
+    // the same states at the same samples.
+    let states = payloads(&s, rigtwin::session::topics::TOPIC_TWIN_STATE);
+    assert_eq!(
+        states.len(),
+        1,
+        "the second step's start (the first has no block before it)"
+    );
+    assert!(states == payloads(&c, rigtwin::session::topics::TOPIC_TWIN_STATE));
     // The rest of the session is copied as it was; the copy names its model.
     for topic in [
         rigtwin::session::topics::TOPIC_DAQ,
@@ -272,6 +284,115 @@ fn the_live_twin_equals_its_replay_and_is_logged() {
     ]);
     assert!(!o.status.success());
     assert!(text(&o).contains("overwrite"), "{}", text(&o));
+}
+
+/// Warm starts with every `[model]` extension acting (clamp friction and wear carry state from
+/// step to step): the steps re-run from their logged states equal the live twin's, bit for bit;
+/// bad selections and another model are refused with clear errors.
+#[test]
+fn steps_re_run_from_logged_states_equal_the_whole_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let plan = dir.path().join("plan.toml");
+    std::fs::write(
+        &plan,
+        PLAN.replace("steps = 3", "steps = 4")
+            .replace("omega_end = 1.00", "omega_end = 0.97"),
+    )
+    .unwrap();
+    let model = r#"
+[model]
+sensor_gains = [{ channel = "lower_tip", gain = 0.97 }]
+modes = [{ mode = "1FL", damping_ratio = 0.002 }]
+
+[model.clamp_friction]
+stiffness_fraction = 0.05
+half_slip_tip_amplitude = 1.5e-4
+sliders = 16
+beams = ["upper"]
+
+[model.wear]
+coefficient = 2.0e-5
+max_growth = 3.0e-5
+
+[model.tilt]
+angle = 2.0e-3
+axis = [0.6, 0.8]
+"#;
+    let rig = default_rig_with(dir.path(), model);
+    let mcap = dir.path().join("session.mcap");
+    let live = dir.path().join("live.json");
+    let o = rigtwin(&[
+        "run",
+        rig.to_str().unwrap(),
+        "--plan",
+        plan.to_str().unwrap(),
+        "--quiet",
+        "--twin",
+        "--out",
+        mcap.to_str().unwrap(),
+        "--json",
+        live.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let live = json(&live);
+    let twin = |s: &serde_json::Value, k: usize| s["tests"][0]["steps"][k]["twin"].clone();
+    for k in 0..4 {
+        assert!(twin(&live, k).is_object(), "live twin missed step {k}");
+    }
+    let part = dir.path().join("part.json");
+    let o = rigtwin(&[
+        "replay",
+        mcap.to_str().unwrap(),
+        "--twin",
+        "--steps",
+        "high-down:2,high-down:4",
+        "--json",
+        part.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(text(&o).contains("2 steps compared"), "{}", text(&o));
+    let warm = json(&part);
+    for k in [1, 3] {
+        assert_eq!(twin(&warm, k), twin(&live, k), "step {}", k + 1);
+    }
+    for k in [0, 2] {
+        assert!(twin(&warm, k).is_null(), "step {} was not asked for", k + 1);
+    }
+    // The first step starts with the recording: from rest, as the whole run did.
+    let o = rigtwin(&[
+        "replay",
+        mcap.to_str().unwrap(),
+        "--twin",
+        "--steps",
+        "high-down:1",
+        "--json",
+        part.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert_eq!(twin(&json(&part), 0), twin(&live, 0));
+
+    let fails = |steps: &str, extra: &[&str]| -> String {
+        let mut args = vec!["replay", mcap.to_str().unwrap(), "--twin", "--steps", steps];
+        args.extend_from_slice(extra);
+        let o = rigtwin(&args);
+        assert!(!o.status.success(), "--steps {steps} {extra:?} succeeded");
+        text(&o)
+    };
+    let e = fails("high-down:9", &[]);
+    assert!(
+        e.contains("no step high-down:9") && e.contains("high-down:1-4"),
+        "{e}"
+    );
+    let e = fails("other", &[]);
+    assert!(e.contains("no step other"), "{e}");
+    let e = fails("high-down:0", &[]);
+    assert!(e.contains("not a step number"), "{e}");
+    let e = fails("high-down:3-2", &[]);
+    assert!(e.contains("backwards"), "{e}");
+    // Another model: the logged states are not its states.
+    let nominal = default_rig_with(dir.path(), "");
+    let e = fails("high-down:2", &["--config", nominal.to_str().unwrap()]);
+    assert!(e.contains("another model"), "{e}");
 }
 
 /// A twin that cannot keep up (throttled to 4 wall seconds per second of data, queue of 8

@@ -271,6 +271,7 @@ fn same_blocks_give_the_same_bits_on_the_thread_and_in_the_sync_core() {
         match ev {
             TwinEvent::Block(b) => threaded.push(b),
             TwinEvent::Error { seq, message } => panic!("block {seq}: {message}"),
+            TwinEvent::State { test, step, .. } => panic!("no state asked for ({test} {step})"),
         }
     }
     assert_eq!(bits(&threaded), bits(&a));

@@ -7,7 +7,9 @@ use clap::Args;
 use std::path::PathBuf;
 
 use crate::session::replay::{twin_model_source, TwinModelChoice, TwinRom};
-use crate::session::twin_replay::{replay_twin, TwinLogCopy, TwinSink};
+use crate::session::twin_replay::{
+    replay_twin, replay_twin_steps, StepSelection, TwinLogCopy, TwinSink,
+};
 
 use super::models;
 use super::paths::Files;
@@ -41,6 +43,13 @@ pub struct ReplayArgs {
     /// (`/twin/blocks`, `/twin/steps`) in place of the recorded twin's, for `rigtwin report`.
     #[arg(long, requires = "twin")]
     pub out: Option<PathBuf>,
+    /// With `--twin`: re-run only these steps, each from the twin's state logged at its start
+    /// (warm start; the log's `/twin/state`, written by `run --twin` and `replay --twin
+    /// --out`): `TEST`, `TEST:N` or `TEST:N-M` (steps counted from 1), comma-separated, e.g.
+    /// `high-down:3-5,high-up`. With the model the states were logged with, each step's
+    /// comparison equals the whole run's bit for bit.
+    #[arg(long, requires = "twin", conflicts_with = "out")]
+    pub steps: Option<StepSelection>,
 }
 
 pub(crate) fn run(a: ReplayArgs) -> anyhow::Result<()> {
@@ -116,14 +125,25 @@ pub(crate) fn run(a: ReplayArgs) -> anyhow::Result<()> {
             Some(c) => c,
             None => &mut (),
         };
-        let stats = replay_twin(
-            &r.recording,
-            &mut summary,
-            &twin_model,
-            &spec,
-            rom.meta.beam_length,
-            sink,
-        )
+        let stats = match &a.steps {
+            Some(select) => replay_twin_steps(
+                &r.recording,
+                &mut summary,
+                &twin_model,
+                &spec,
+                rom.meta.beam_length,
+                select,
+                sink,
+            ),
+            None => replay_twin(
+                &r.recording,
+                &mut summary,
+                &twin_model,
+                &spec,
+                rom.meta.beam_length,
+                sink,
+            ),
+        }
         .with_context(|| format!("twin replay of {}", a.file.display()))?;
         summary.twin_model = Some(twin_model.extensions);
         println!(

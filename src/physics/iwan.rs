@@ -135,7 +135,7 @@ impl Iwan {
 }
 
 /// The state of an [`Iwan`] element: its sliders' positions and the energy dissipated so far.
-#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
 pub struct IwanState {
     /// Slider positions, in the element's coordinate.
     pub slider: Vec<f64>,

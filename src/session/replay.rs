@@ -18,8 +18,8 @@ use crate::twin::{TwinModel, TwinSpec};
 
 use super::summary::{Missing, SessionSummary};
 use super::topics::{
-    StepMessage, PLAN_ATTACHMENT, RIG_ATTACHMENT, TOPIC_DAQ, TOPIC_EVENTS, TOPIC_LAYOUT,
-    TOPIC_STEPS,
+    StepMessage, TwinStateMessage, PLAN_ATTACHMENT, RIG_ATTACHMENT, TOPIC_DAQ, TOPIC_EVENTS,
+    TOPIC_LAYOUT, TOPIC_STEPS, TOPIC_TWIN_STATE,
 };
 
 /// Errors of a replay.
@@ -68,6 +68,9 @@ pub struct Recording {
     pub events: Vec<SessionEvent>,
     /// Blocks missing inside the recording, in order (empty for an intact log).
     pub gaps: Vec<BlockGap>,
+    /// The twin's states at the start of its steps, as logged (warm starts; empty for a log
+    /// without them).
+    pub twin_states: Vec<TwinStateMessage>,
 }
 
 /// DAQ blocks missing inside a recording (damaged chunks of the log).
@@ -202,11 +205,13 @@ pub fn recording(session: &SessionRead) -> Result<Recording, ReplayError> {
         last_end = b.time + b.len as f64 / layout.sample_rate;
     }
     let events = decode_or_none(session, TOPIC_EVENTS)?;
+    let twin_states = decode_or_none(session, TOPIC_TWIN_STATE)?;
     Ok(Recording {
         layout,
         blocks,
         events,
         gaps,
+        twin_states,
     })
 }
 

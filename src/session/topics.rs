@@ -28,6 +28,9 @@ pub const TOPIC_TWIN_BLOCKS: &str = "/twin/blocks";
 pub const TOPIC_TWIN_STATUS: &str = "/twin/status";
 /// The twin's comparison of every step ([`TwinStepMessage`]).
 pub const TOPIC_TWIN_STEPS: &str = "/twin/steps";
+/// The twin's state at the start of every step, for warm starts ([`TwinStateMessage`]; log
+/// only; `rigtwin replay --twin --steps`).
+pub const TOPIC_TWIN_STATE: &str = "/twin/state";
 /// Decimated DAQ points, one message per time point with every channel's min, max and mean in
 /// physical units (live view only).
 pub const TOPIC_LIVE_DAQ: &str = "/live/daq";
@@ -46,7 +49,7 @@ pub enum Published {
 }
 
 /// Every topic of a session: name, where it is published, and the name of its message type.
-pub const TOPICS: [(&str, Published, &str); 11] = [
+pub const TOPICS: [(&str, Published, &str); 12] = [
     (TOPIC_LAYOUT, Published::Both, "DaqLayout"),
     (TOPIC_DAQ, Published::Log, "DaqBlock"),
     (TOPIC_CONTROL, Published::Both, "ControlState"),
@@ -56,6 +59,7 @@ pub const TOPICS: [(&str, Published, &str); 11] = [
     (TOPIC_TWIN_BLOCKS, Published::Log, "TwinSamples"),
     (TOPIC_TWIN_STATUS, Published::Both, "TwinStatus"),
     (TOPIC_TWIN_STEPS, Published::Both, "TwinStepMessage"),
+    (TOPIC_TWIN_STATE, Published::Log, "TwinStateMessage"),
     (TOPIC_LIVE_DAQ, Published::Live, "LiveDaqPoint"),
     (TOPIC_LIVE_TWIN, Published::Live, "LiveTwinPoint"),
 ];
@@ -117,6 +121,18 @@ impl TwinStepMessage {
             twin: twin.cloned(),
         }
     }
+}
+
+/// The twin's state at the start of a step, as logged on [`TOPIC_TWIN_STATE`] (log time: the
+/// first sample of the block the step starts with).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
+pub struct TwinStateMessage {
+    /// Test name.
+    pub test: String,
+    /// Step index.
+    pub step: usize,
+    /// The state (its `next_sample` is the step's first block).
+    pub state: crate::twin::TwinState,
 }
 
 #[cfg(test)]

@@ -7,7 +7,8 @@
 //! Logged (when given a log): [`TOPIC_TWIN_BLOCKS`] (the predicted channels of every block the
 //! twin processed, [`TwinSamples`]), [`TOPIC_TWIN_STATUS`] (lag, queue, skipped blocks, speed)
 //! about once a second of rig time, [`TOPIC_TWIN_STEPS`] (the comparison of every step) as it
-//! completes. With a live view ([`TwinRecorder::with_live`]) the same status and comparisons,
+//! completes, [`TOPIC_TWIN_STATE`] (the twin's state at the start of every step, for warm
+//! starts). With a live view ([`TwinRecorder::with_live`]) the same status and comparisons,
 //! and the predicted channels decimated, go to the Foxglove app.
 
 use std::collections::VecDeque;
@@ -16,18 +17,22 @@ use crate::control::{ControlState, SessionEvent, StepInfo, StepSummary};
 use crate::log::{log_time_ns, LogChannel, LogError, LogHandle};
 use crate::rig::{DaqBlock, DaqLayout, RigStatus};
 use crate::twin::{
-    ClearanceSchedule, Pushed, TwinComparison, TwinEvent, TwinReceiver, TwinSamples, TwinStatus,
-    TwinTask, TwinWindows,
+    ClearanceSchedule, Pushed, StepStarts, TwinComparison, TwinEvent, TwinReceiver, TwinSamples,
+    TwinStatus, TwinTask, TwinWindows,
 };
 
 use super::live::LiveRecorder;
 use super::recorder::{RecordError, SessionRecorder};
 use super::runner::STATUS_PERIOD_S;
-use super::topics::{TwinStepMessage, TOPIC_TWIN_BLOCKS, TOPIC_TWIN_STATUS, TOPIC_TWIN_STEPS};
+use super::topics::{
+    TwinStateMessage, TwinStepMessage, TOPIC_TWIN_BLOCKS, TOPIC_TWIN_STATE, TOPIC_TWIN_STATUS,
+    TOPIC_TWIN_STEPS,
+};
 
 struct Logs {
     log: LogHandle,
     blocks: LogChannel<TwinSamples>,
+    states: LogChannel<TwinStateMessage>,
     status: LogChannel<TwinStatus>,
     steps: LogChannel<TwinStepMessage>,
 }
@@ -38,6 +43,8 @@ pub struct TwinRecorder {
     rx: TwinReceiver,
     dt: f64,
     clearances: ClearanceSchedule,
+    /// Where the twin's state is captured for warm starts (step starts).
+    step_starts: StepStarts,
     windows: VecDeque<(StepInfo, StepSummary)>,
     out: TwinWindows,
     /// Comparisons in step order (`None`: the twin missed part of the window).
@@ -84,6 +91,7 @@ impl TwinRecorder {
         let logs = match log {
             Some(log) => Some(Logs {
                 blocks: log.channel(TOPIC_TWIN_BLOCKS)?,
+                states: log.channel(TOPIC_TWIN_STATE)?,
                 status: log.channel(TOPIC_TWIN_STATUS)?,
                 steps: log.channel(TOPIC_TWIN_STEPS)?,
                 log,
@@ -95,6 +103,7 @@ impl TwinRecorder {
             rx,
             dt,
             clearances,
+            step_starts: StepStarts::default(),
             windows: VecDeque::new(),
             out,
             results: Vec::new(),
@@ -135,6 +144,17 @@ impl TwinRecorder {
                         live.twin_block(&b);
                     }
                     self.out.push(&b);
+                }
+                TwinEvent::State { test, step, state } => {
+                    if let Some(l) = &self.logs {
+                        let time = state.next_sample as f64 * self.dt;
+                        let message = TwinStateMessage {
+                            test,
+                            step,
+                            state: *state,
+                        };
+                        let _ = l.log.log(&l.states, log_time_ns(time), &message);
+                    }
                 }
                 TwinEvent::Error { seq, message } => {
                     // The twin skipped that block and goes on: a gap in its output.
@@ -201,6 +221,9 @@ impl SessionRecorder for TwinRecorder {
                 self.fail(e);
             }
         }
+        if let Some((test, step)) = self.step_starts.next_due(block.first_sample) {
+            self.task.capture_next(&test, step);
+        }
         match self.task.push(block) {
             Ok(Pushed::Queued) => {}
             Ok(Pushed::Skipped { .. }) => {} // counted by the task, visible in its status
@@ -226,6 +249,7 @@ impl SessionRecorder for TwinRecorder {
 
     fn event(&mut self, event: &SessionEvent) -> Result<(), RecordError> {
         self.clearances.on_event(event);
+        self.step_starts.on_event(event);
         Ok(())
     }
 

@@ -20,13 +20,16 @@ use crate::log::{
 };
 use crate::signal::SignalError;
 use crate::twin::{
-    ClearanceSchedule, Completed, Twin, TwinBlock, TwinComparison, TwinError, TwinModel,
-    TwinSamples, TwinSpec, TwinWindows,
+    ClearanceSchedule, Completed, StepStarts, Twin, TwinBlock, TwinComparison, TwinError,
+    TwinModel, TwinSamples, TwinSpec, TwinWindows,
 };
 
 use super::replay::Recording;
 use super::summary::SessionSummary;
-use super::topics::{TwinStepMessage, TOPIC_TWIN_BLOCKS, TOPIC_TWIN_STEPS, TWIN_REPLAY_METADATA};
+use super::topics::{
+    TwinStateMessage, TwinStepMessage, TOPIC_TWIN_BLOCKS, TOPIC_TWIN_STATE, TOPIC_TWIN_STEPS,
+    TWIN_REPLAY_METADATA,
+};
 
 /// Errors of a twin replay.
 #[derive(Debug, thiserror::Error)]
@@ -70,6 +73,26 @@ pub enum TwinReplayError {
         /// Rig time missing, s.
         seconds: f64,
     },
+    /// Steps asked for that the recording does not have.
+    #[error("--steps: the recording has no step {steps} (its tests and steps: {have})")]
+    NoSuchSteps {
+        /// The selection items that match nothing.
+        steps: String,
+        /// What the recording has.
+        have: String,
+    },
+    /// No logged twin state to start a selected step from.
+    #[error(
+        "--steps: no twin state logged at the start of step {step} of test {test} (the log has          {states} twin states; states are logged by `run --twin` and `replay --twin --out` since          warm starts exist): re-run the whole session with `replay --twin`, or write a copy          with states by `replay --twin --out COPY.mcap` first"
+    )]
+    NoState {
+        /// Test name.
+        test: String,
+        /// Step, counted from 1.
+        step: usize,
+        /// Twin states in the log.
+        states: usize,
+    },
     /// The source log has a channel without a schema (not a rigtwin session log).
     #[error(
         "twin log: {path}: channel {topic} has no schema; only rigtwin session logs can be copied"
@@ -107,6 +130,10 @@ pub trait TwinSink {
         info: &StepInfo,
         twin: Option<&TwinComparison>,
     ) -> Result<(), TwinReplayError>;
+    /// The twin's state at the start of a step (warm starts), before the step's first block.
+    fn state(&mut self, _state: &TwinStateMessage) -> Result<(), TwinReplayError> {
+        Ok(())
+    }
 }
 
 impl TwinSink for () {
@@ -144,6 +171,7 @@ pub fn replay_twin(
         &rec.events,
     );
     let mut twin = Twin::new(model, spec, &rec.layout, clearances.first().unwrap_or(0.0))?;
+    let mut step_starts = StepStarts::of_events(&rec.events);
     let dt = rec.layout.dt();
     // The measured step summaries are in record-window order.
     let mut pending: VecDeque<(StepInfo, StepSummary)> = rec
@@ -180,6 +208,11 @@ pub fn replay_twin(
         while let Some(c) = clearances.next_due(b.first_sample) {
             twin.set_clearance(c)?;
         }
+        if let Some((test, step)) = step_starts.next_due(b.first_sample) {
+            if let Some(state) = twin.state() {
+                sink.state(&TwinStateMessage { test, step, state })?;
+            }
+        }
         let tb = twin.push_block(b)?;
         stats.blocks += 1;
         stats.solver_failures += tb
@@ -198,6 +231,236 @@ pub fn replay_twin(
     Ok(stats)
 }
 
+/// The steps a warm-start twin replay re-runs (`rigtwin replay --twin --steps`): a list of
+/// `TEST` (every step of the test) and `TEST:N` or `TEST:N-M` (steps N to M, counted from 1),
+/// comma-separated.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct StepSelection {
+    /// (test, first step, last step) with 0-based steps; `None`: every step.
+    items: Vec<(String, Option<(usize, usize)>)>,
+}
+
+/// A step selection that does not parse.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error(
+    "--steps {text:?}: {why}; expected TEST, TEST:N or TEST:N-M (steps counted from 1),      comma-separated"
+)]
+pub struct StepSelectionError {
+    /// The selection given.
+    pub text: String,
+    /// What is wrong.
+    pub why: String,
+}
+
+impl std::str::FromStr for StepSelection {
+    type Err = StepSelectionError;
+
+    fn from_str(text: &str) -> Result<StepSelection, StepSelectionError> {
+        let err = |why: String| StepSelectionError {
+            text: text.to_string(),
+            why,
+        };
+        let mut items = Vec::new();
+        for item in text.split(',').map(str::trim) {
+            let (test, range) = match item.rsplit_once(':') {
+                Some((test, range)) => (test, Some(range)),
+                None => (item, None),
+            };
+            if test.is_empty() {
+                return Err(err(format!("{item:?} names no test")));
+            }
+            let number = |s: &str| -> Result<usize, StepSelectionError> {
+                match s.trim().parse::<usize>() {
+                    Ok(n) if n >= 1 => Ok(n - 1),
+                    _ => Err(err(format!(
+                        "{s:?} in {item:?} is not a step number (1, 2, ...)"
+                    ))),
+                }
+            };
+            let range = match range {
+                None => None,
+                Some(r) => {
+                    let (a, b) = match r.split_once('-') {
+                        Some((a, b)) => (number(a)?, number(b)?),
+                        None => (number(r)?, number(r)?),
+                    };
+                    if b < a {
+                        return Err(err(format!("{item:?}: the range runs backwards")));
+                    }
+                    Some((a, b))
+                }
+            };
+            items.push((test.to_string(), range));
+        }
+        Ok(StepSelection { items })
+    }
+}
+
+impl StepSelection {
+    /// Whether step `step` (0-based) of test `test` is selected.
+    pub fn contains(&self, test: &str, step: usize) -> bool {
+        self.items
+            .iter()
+            .any(|(t, r)| t == test && r.is_none_or(|(a, b)| (a..=b).contains(&step)))
+    }
+
+    /// The items that select no record window of `rec` (as written, for an error).
+    fn unmatched(&self, rec: &Recording) -> Vec<String> {
+        self.items
+            .iter()
+            .filter(|(t, r)| {
+                !rec.record_windows()
+                    .any(|w| &w.test == t && r.is_none_or(|(a, b)| (a..=b).contains(&w.step)))
+            })
+            .map(|(t, r)| match r {
+                None => t.clone(),
+                Some((a, b)) if a == b => format!("{t}:{}", a + 1),
+                Some((a, b)) => format!("{t}:{}-{}", a + 1, b + 1),
+            })
+            .collect()
+    }
+}
+
+/// Re-runs the twin on the selected steps of the recording only, each from the twin's state
+/// logged at the step's start (`/twin/state`, a warm start; from rest for a step that starts
+/// with the recording), through the end of its record window, and writes their comparisons
+/// into `summary` (the other steps get none). With the model the states were logged with, each
+/// comparison equals, bit for bit, the one the whole session's twin (live or replayed) made.
+/// Arguments as for [`replay_twin`]; only the comparisons go to `sink`.
+pub fn replay_twin_steps(
+    rec: &Recording,
+    summary: &mut SessionSummary,
+    model: &TwinModel<'_>,
+    spec: &TwinSpec,
+    beam_length: f64,
+    select: &StepSelection,
+    sink: &mut dyn TwinSink,
+) -> Result<TwinReplayStats, TwinReplayError> {
+    let unmatched = select.unmatched(rec);
+    if !unmatched.is_empty() {
+        let mut have: Vec<String> = Vec::new();
+        for w in rec.record_windows() {
+            match have.last_mut() {
+                Some(last) if last.starts_with(&format!("{}:", w.test)) => {
+                    *last = format!("{}:1-{}", w.test, w.step + 1);
+                }
+                _ => have.push(format!("{}:1-{}", w.test, w.step + 1)),
+            }
+        }
+        return Err(TwinReplayError::NoSuchSteps {
+            steps: unmatched.join(", "),
+            have: have.join(", "),
+        });
+    }
+    let wall = std::time::Instant::now();
+    let first_schedule = ClearanceSchedule::of_events(
+        beam_length,
+        model.extensions.clearance.as_ref(),
+        &rec.events,
+    );
+    let mut twin = Twin::new(
+        model,
+        spec,
+        &rec.layout,
+        first_schedule.first().unwrap_or(0.0),
+    )?;
+    let dt = rec.layout.dt();
+    let o = twin.observation();
+    let (upper, lower) = (o.upper, o.lower);
+    let mut stats = TwinReplayStats::default();
+    let mut rig_seconds = 0.0;
+    let mut results = Vec::new();
+    let first_block = rec.blocks.first().map_or(0, |b| b.first_sample);
+    for (info, measured) in rec
+        .record_windows()
+        .zip(summary.steps().map(|s| &s.measured))
+    {
+        if !select.contains(&info.test, info.step) {
+            results.push(None);
+            continue;
+        }
+        let logged = rec
+            .twin_states
+            .iter()
+            .rev()
+            .find(|m| m.test == info.test && m.step == info.step);
+        let mut clearances = first_schedule.clone();
+        twin.reset();
+        let from = match logged {
+            Some(m) => {
+                twin.set_state(&m.state)?;
+                // The clearances due up to the state are in it.
+                while clearances.next_due(m.state.next_sample).is_some() {}
+                m.state.next_sample
+            }
+            None if step_start(rec, info).is_some_and(|s| s <= first_block) => {
+                twin.set_clearance(first_schedule.first().unwrap_or(0.0))?;
+                first_block
+            }
+            None => {
+                return Err(TwinReplayError::NoState {
+                    test: info.test.clone(),
+                    step: info.step + 1,
+                    states: rec.twin_states.len(),
+                })
+            }
+        };
+        let Some(start) = rec.blocks.iter().position(|b| b.first_sample == from) else {
+            return Err(TwinReplayError::NoState {
+                test: info.test.clone(),
+                step: info.step + 1,
+                states: rec.twin_states.len(),
+            });
+        };
+        let mut out = TwinWindows::new(upper, lower);
+        for b in &rec.blocks[start..] {
+            if b.first_sample >= info.record_end_sample() {
+                break;
+            }
+            while let Some(c) = clearances.next_due(b.first_sample) {
+                twin.set_clearance(c)?;
+            }
+            let tb = twin.push_block(b)?;
+            stats.blocks += 1;
+            rig_seconds += b.len as f64 * dt;
+            stats.solver_failures += tb
+                .solver_failures
+                .iter()
+                .map(|&f| u64::from(f))
+                .sum::<u64>();
+            out.push(&tb);
+        }
+        let c = match out.compare(info, measured, dt) {
+            Some(Ok(c)) => Some(c),
+            Some(Err(source)) => {
+                return Err(TwinReplayError::Metrics {
+                    test: info.test.clone(),
+                    step: info.step,
+                    source,
+                })
+            }
+            None => None,
+        };
+        sink.step(info, c.as_ref())?;
+        results.push(c);
+    }
+    stats.steps_compared = summary.attach_twin(results);
+    stats.wall_per_rig_second = wall.elapsed().as_secs_f64() / rig_seconds.max(f64::MIN_POSITIVE);
+    Ok(stats)
+}
+
+/// The sample of the `step_start` event of the step of `info`.
+fn step_start(rec: &Recording, info: &StepInfo) -> Option<u64> {
+    rec.events.iter().find_map(|e| match &e.kind {
+        crate::control::EventKind::StepStart { test, step, .. }
+            if *test == info.test && *step == info.step =>
+        {
+            Some(e.sample)
+        }
+        _ => None,
+    })
+}
+
 /// Topics of the recorded twin, left out of the copy.
 fn is_twin_topic(topic: &str) -> bool {
     topic.starts_with("/twin/")
@@ -208,6 +471,7 @@ pub struct TwinLogCopy {
     handle: LogHandle,
     join: LogJoin,
     blocks: LogChannel<TwinSamples>,
+    states: LogChannel<TwinStateMessage>,
     steps: LogChannel<TwinStepMessage>,
     /// DAQ sample interval, s (log time of a step's comparison).
     dt: f64,
@@ -284,6 +548,7 @@ impl TwinLogCopy {
         }
         Ok(TwinLogCopy {
             blocks: handle.channel(TOPIC_TWIN_BLOCKS)?,
+            states: handle.channel(TOPIC_TWIN_STATE)?,
             steps: handle.channel(TOPIC_TWIN_STEPS)?,
             handle,
             join,
@@ -322,5 +587,10 @@ impl TwinSink for TwinLogCopy {
     ) -> Result<(), TwinReplayError> {
         let time = info.record_end_time(self.dt);
         self.put(&self.steps, time, &TwinStepMessage::of(info, twin))
+    }
+
+    fn state(&mut self, state: &TwinStateMessage) -> Result<(), TwinReplayError> {
+        let time = state.state.next_sample as f64 * self.dt;
+        self.put(&self.states, time, state)
     }
 }

@@ -48,7 +48,7 @@ pub struct Effects {
 }
 
 /// What evolves in [`Effects`] (see [`Effects::state`]).
-#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
 pub struct EffectsState {
     /// The clamp joints' elements, one per beam (`None`: no clamp friction).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -61,7 +61,9 @@ pub struct EffectsState {
 }
 
 /// The wear so far.
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize, schemars::JsonSchema,
+)]
 pub struct WearState {
     /// `W`: the running maximum of the dissipated contact work, J.
     pub work: f64,

@@ -52,7 +52,16 @@ impl Energy {
 
 /// Cumulative work done on the modes since the state was created, J. Carried in the state,
 /// so it continues across runs.
-#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    Default,
+    PartialEq,
+    serde::Serialize,
+    serde::Deserialize,
+    schemars::JsonSchema,
+)]
 pub struct EnergyAccounts {
     /// Work of the base excitation's inertia load `sum_j -a_base^j beta . dt vbar`, J.
     pub base_work: f64,

@@ -239,6 +239,12 @@ impl Twin {
         self.rom.clearance()
     }
 
+    /// The clearance set at start or by [`Twin::set_clearance`], m (without the growth a
+    /// `[model.wear]` adds).
+    pub fn nominal_clearance(&self) -> f64 {
+        self.effects.nominal_clearance()
+    }
+
     /// Changes the clearance (e.g. per test of a plan), m, from the next sample on; the state
     /// is kept.
     pub fn set_clearance(&mut self, clearance_m: f64) -> Result<(), TwinError> {

@@ -50,7 +50,7 @@ pub use model::TwinModel;
 pub use observe::{Observation, TipObservation};
 pub use output::{TwinBlock, TwinEvent, TwinGap, TwinSamples, TwinStatus, TwinTrace, TWIN_SENSORS};
 pub use spec::{AfterGap, TwinSpec};
-pub use state::{StateError, TwinState};
+pub use state::{StateError, StepStarts, TwinState};
 pub use task::{Pushed, TwinReceiver, TwinTask};
 
 #[cfg(test)]

@@ -258,6 +258,16 @@ pub struct TwinStatus {
 pub enum TwinEvent {
     /// The prediction for one block.
     Block(TwinBlock),
+    /// The twin's state at the start of a step (asked for with
+    /// [`super::TwinTask::capture_next`]), before the block that starts the step.
+    State {
+        /// Test name.
+        test: String,
+        /// Step index.
+        step: usize,
+        /// The state.
+        state: Box<super::TwinState>,
+    },
     /// The twin rejected a block (it is skipped; the twin continues with the next).
     Error {
         /// Sequence number of the block.

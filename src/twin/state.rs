@@ -18,7 +18,7 @@ use crate::sim::State;
 
 /// A twin's state between two blocks (see the module docs). Serialises to JSON exactly (every
 /// number round-trips), the contact vectors by their non-zero entries only.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct TwinState {
     /// The model the state belongs to (ROM hash and size, extensions, twin step).
     pub model: String,
@@ -62,4 +62,49 @@ pub enum StateError {
     /// A scalar is not finite.
     #[error("twin state: {0} is not finite")]
     NonFinite(&'static str),
+}
+
+/// Where warm-start states are captured: at the start of every step, i.e. before the first
+/// DAQ block that starts at or after the sample of the step's `step_start` event (the step's
+/// drive frequency applies from that block). The live twin and the twin replay use this one
+/// rule, so they capture at the same samples.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct StepStarts {
+    /// (sample of the `step_start` event, test, step), in event order.
+    pending: std::collections::VecDeque<(u64, String, usize)>,
+}
+
+impl StepStarts {
+    /// The step starts of a recorded session's events.
+    pub fn of_events<'a>(
+        events: impl IntoIterator<Item = &'a crate::control::SessionEvent>,
+    ) -> StepStarts {
+        let mut s = StepStarts::default();
+        for e in events {
+            s.on_event(e);
+        }
+        s
+    }
+
+    /// Takes a session event: a `step_start` schedules a capture.
+    pub fn on_event(&mut self, event: &crate::control::SessionEvent) {
+        if let crate::control::EventKind::StepStart { test, step, .. } = &event.kind {
+            self.pending.push_back((event.sample, test.clone(), *step));
+        }
+    }
+
+    /// The step whose state is due before the block starting at `first_sample` (test, step),
+    /// removed from the schedule; of several due, the last (the earlier ones had no block of
+    /// their own).
+    pub fn next_due(&mut self, first_sample: u64) -> Option<(String, usize)> {
+        let mut due = None;
+        while let Some((sample, _, _)) = self.pending.front() {
+            if *sample > first_sample {
+                break;
+            }
+            let (_, test, step) = self.pending.pop_front().expect("front");
+            due = Some((test, step));
+        }
+        due
+    }
 }

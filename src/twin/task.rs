@@ -65,10 +65,12 @@ pub enum Pushed {
     },
 }
 
-/// A queued block: the twin's input and the clearance in force for it.
+/// A queued block: the twin's input, the clearance in force for it, and the step whose start
+/// state the twin reports before running it.
 struct Queued {
     input: TwinInput,
     clearance: f64,
+    capture: Option<(String, usize)>,
 }
 
 /// What the twin thread reports (under a mutex the producer never touches on push).
@@ -106,6 +108,8 @@ pub struct TwinTask {
     shared: Arc<Shared>,
     map: InputMap,
     clearance: f64,
+    /// The step whose start state the next queued block asks for.
+    capture: Option<(String, usize)>,
     capacity: u64,
     offered: u64,
     queued: u64,
@@ -145,7 +149,7 @@ impl TwinTask {
             }),
         });
         let map = twin.input_map().clone();
-        let clearance = twin.clearance();
+        let clearance = twin.nominal_clearance();
         let throttle = spec.throttle;
         let thread_shared = Arc::clone(&shared);
         let handle = std::thread::Builder::new()
@@ -159,6 +163,7 @@ impl TwinTask {
                 shared,
                 map,
                 clearance,
+                capture: None,
                 capacity: spec.queue_blocks as u64,
                 offered: 0,
                 queued: 0,
@@ -214,6 +219,7 @@ impl TwinTask {
         match tx.try_send(Queued {
             input,
             clearance: self.clearance,
+            capture: self.capture.take(),
         }) {
             Ok(()) => {
                 self.queued += 1;
@@ -221,6 +227,7 @@ impl TwinTask {
             }
             Err(TrySendError::Full(q)) => {
                 self.behind = true;
+                self.capture = q.capture;
                 Ok(self.skip(&q.input, true))
             }
             Err(TrySendError::Disconnected(_)) => Err(TaskError::Stopped { seq }.into()),
@@ -245,6 +252,13 @@ impl TwinTask {
         }
         self.clearance = clearance_m;
         Ok(())
+    }
+
+    /// Asks for the twin's state at the start of step `step` of test `test`: the twin reports
+    /// it ([`TwinEvent::State`]) before it runs the next block queued (the next one pushed,
+    /// or the first queued after skipped ones).
+    pub fn capture_next(&mut self, test: &str, step: usize) {
+        self.capture = Some((test.to_string(), step));
     }
 
     /// The clearance for the next block pushed, m.
@@ -351,9 +365,18 @@ fn run(
             continue;
         }
         let start = Instant::now();
-        if q.clearance != twin.clearance() {
+        if q.clearance != twin.nominal_clearance() {
             // Checked finite by the producer: cannot fail.
             let _ = twin.set_clearance(q.clearance);
+        }
+        if let Some((test, step)) = q.capture {
+            if let Some(state) = twin.state() {
+                let _ = out.send(TwinEvent::State {
+                    test,
+                    step,
+                    state: Box::new(state),
+                });
+            }
         }
         let result = twin.push_input(&q.input);
         let data_s = q.input.len() as f64 / fs;

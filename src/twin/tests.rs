@@ -360,6 +360,7 @@ fn collect(rx: &mut TwinReceiver) -> Vec<TwinBlock> {
         match ev {
             TwinEvent::Block(b) => out.push(b),
             TwinEvent::Error { seq, message } => panic!("block {seq}: {message}"),
+            TwinEvent::State { .. } => {}
         }
     }
     out

@@ -5,7 +5,16 @@ use super::super::energy::EnergyAccounts;
 
 /// Contact-solver bookkeeping, cumulative (in a [`State`]) or per run (in a [`RunReport`]).
 /// Failures are counted here and reported per step in [`crate::sim::StepOutput::solve`].
-#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    Default,
+    PartialEq,
+    serde::Serialize,
+    serde::Deserialize,
+    schemars::JsonSchema,
+)]
 pub struct SolverCounters {
     /// Steps with a contact solve (at least one candidate pair).
     pub solves: u64,
@@ -63,13 +72,15 @@ impl SolverCounters {
 ///
 /// It serialises (serde) for warm starts: the contact vectors, zero for every open pair, as
 /// their non-zero entries only ([`sparse`]); every number round-trips exactly through JSON.
-#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
 pub struct State {
     pub(super) eta: Vec<f64>,
     pub(super) eta_dot: Vec<f64>,
     #[serde(with = "sparse")]
+    #[schemars(with = "sparse::Sparse")]
     pub(super) lambda: Vec<f64>,
     #[serde(with = "sparse")]
+    #[schemars(with = "sparse::Sparse")]
     pub(super) g_lambda: Vec<f64>,
     pub(super) closed: Vec<usize>,
     pub(super) time: f64,
@@ -217,10 +228,14 @@ pub enum StateMismatch {
 mod sparse {
     use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
-    #[derive(Serialize, Deserialize)]
-    struct Sparse {
+    /// A vector by its length and non-zero entries.
+    #[derive(Serialize, Deserialize, schemars::JsonSchema)]
+    pub struct Sparse {
+        /// Length.
         len: usize,
+        /// Indices of the non-zero entries, ascending.
         index: Vec<usize>,
+        /// Their values.
         value: Vec<f64>,
     }
 
@@ -259,7 +274,10 @@ mod sparse {
         let mut v = vec![0.0; sp.len];
         for (&i, &x) in sp.index.iter().zip(&sp.value) {
             let slot = v.get_mut(i).ok_or_else(|| {
-                serde::de::Error::custom(format!("sparse vector: index {i} beyond length {}", sp.len))
+                serde::de::Error::custom(format!(
+                    "sparse vector: index {i} beyond length {}",
+                    sp.len
+                ))
             })?;
             *slot = x;
         }

@@ -154,6 +154,41 @@ fn simulate_writes_results_and_figures_and_rejects_bad_plans() {
         );
         assert!(!err.contains("panicked"), "{line}: {err}");
     }
+
+    // `[model]` values the ROM decides on (a mode label, the beams' 1F modes) are checked
+    // against it before anything runs, the error naming the file and the key.
+    let fixture_text = std::fs::read_to_string(fixture()).unwrap();
+    for (extra, key) in [
+        (
+            "[model]\nmodes = [{ mode = \"9XZ\", damping_ratio = 0.01 }]\n",
+            "model.modes[0].mode",
+        ),
+        (
+            "[model]\nmodes = [{ mode = \"1FU\", frequency_hz = 1.0e6 }]\n",
+            "model.modes[0].frequency_hz",
+        ),
+    ] {
+        let rig = dir.path().join("bad-model.toml");
+        std::fs::write(&rig, format!("{fixture_text}\n{extra}")).unwrap();
+        std::fs::write(&plan, PLAN).unwrap();
+        let out = rigtwin(
+            &cache,
+            &[
+                "simulate",
+                "--config",
+                rig.to_str().unwrap(),
+                "--plan",
+                plan.to_str().unwrap(),
+                "--quiet",
+            ],
+        );
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{extra}: accepted");
+        assert!(
+            err.contains("bad-model.toml") && err.contains(key),
+            "{extra}: error does not name the file and {key}: {err}"
+        );
+    }
 }
 
 #[test]

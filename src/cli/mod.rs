@@ -150,6 +150,21 @@ pub(crate) fn cache_dir() -> PathBuf {
     PathBuf::from(".rigtwin-cache")
 }
 
+/// Checks the `[model]` extensions `model` of the rig description `source` against the ROM they
+/// act on (mode labels, the beams' first bending modes and tip outputs), before anything runs:
+/// the error names the file and the key.
+pub(crate) fn check_extensions(
+    rom: &crate::rom::Rom,
+    model: &crate::config::PhysicsSpec,
+    source: &str,
+) -> anyhow::Result<()> {
+    let prepared = crate::sim::effects::prepare(rom, model, "model")
+        .map_err(|e| anyhow::anyhow!("{source}: {e}"))?;
+    crate::sim::effects::Effects::new(&prepared, model, "model", rom.clearance)
+        .map_err(|e| anyhow::anyhow!("{source}: {e}"))?;
+    Ok(())
+}
+
 /// One line naming the `[model]` extensions that are on, with their parameters (`none` when
 /// none is), for the console of every command that runs the model.
 pub(crate) fn extensions_line(model: &crate::config::PhysicsSpec) -> String {

@@ -107,6 +107,7 @@ pub(crate) fn run(a: ReplayArgs) -> anyhow::Result<()> {
             }
         };
         let twin_model = model.model(&rom);
+        super::check_extensions(&rom, &twin_model.extensions, &model.source)?;
         println!(
             "twin model extensions: {}",
             super::extensions_line(&twin_model.extensions)

@@ -164,6 +164,7 @@ pub(crate) fn run_session_on(
     let live = session.foxglove.map(start_live_view).transpose()?;
     let runtime = crate::session::runtime()?;
     let (model, model_path, _) = models::cached_rom(cfg, session.rebuild, session.quiet)?;
+    super::check_extensions(&model, &cfg.model, &cfg.source)?;
     if session.twin {
         println!(
             "twin model extensions: {}",

@@ -228,6 +228,7 @@ pub(crate) fn load_rom(
     }
     let cfg = super::models::load_config(source.config.as_deref())?;
     let (rom, path, _) = super::models::cached_rom(&cfg, false, quiet)?;
+    super::check_extensions(&rom, &cfg.model, &cfg.source)?;
     Ok((rom, path.display().to_string(), cfg.model))
 }
 

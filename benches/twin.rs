@@ -13,7 +13,12 @@
 //! - `preload -1e-5`: Omega = omega_2, 0.5e-5 l, clearance -1e-5 l (the faces overlap: every
 //!   pair a candidate in every step; a twentieth of the data).
 //!
-//! The twin has no tilt (the integrator bench has the tilted-contact case).
+//! - `impacts + EXT`: the `impacts` case with one `[model]` extension on (issue 14): `modes`
+//!   (1FU and 1FL frequency and damping corrected), `clamp friction` (Iwan, 64 sliders, both
+//!   beams), `wear`, `tilt` (2e-3 rad), `sensor gains` (a platform accelerometer and a tip),
+//!   and `all` of them at once: the cost of each extension against `impacts`.
+//!
+//! `--case TEXT` runs only the cases whose name contains TEXT.
 //!
 //! Each case settles for `--settle` periods, then runs `--seconds` of data `--repeat` times
 //! from the settled twin (sync core, `Twin::push_block`, one JSON line per run), then once
@@ -30,7 +35,7 @@ use std::f64::consts::PI;
 use std::path::PathBuf;
 use std::time::Instant;
 
-use rigtwin::config::RigConfig;
+use rigtwin::config::{PhysicsSpec, RigConfig};
 use rigtwin::rig::daq::{ChannelKind, DaqBlock, DaqLayout};
 use rigtwin::rig::sim::DaqSpec;
 use rigtwin::rom::build::BuildOptions;
@@ -40,6 +45,7 @@ struct Args {
     repeat: usize,
     seconds: f64,
     settle: f64,
+    case: Option<String>,
 }
 
 fn parse_args() -> Args {
@@ -47,6 +53,7 @@ fn parse_args() -> Args {
         repeat: 5,
         seconds: 10.0,
         settle: 200.0,
+        case: None,
     };
     let mut it = std::env::args().skip(1);
     while let Some(arg) = it.next() {
@@ -59,6 +66,7 @@ fn parse_args() -> Args {
             "--repeat" => a.repeat = val("--repeat") as usize,
             "--seconds" => a.seconds = val("--seconds"),
             "--settle" => a.settle = val("--settle"),
+            "--case" => a.case = it.next(),
             "--bench" => {}
             other => panic!("unknown argument {other}"),
         }
@@ -106,6 +114,8 @@ struct Case {
     clearance: f64,
     /// Fraction of `--seconds` and `--settle` the case runs (the slow case runs less).
     share: f64,
+    /// The `[model]` extensions on.
+    model: PhysicsSpec,
 }
 
 fn main() {
@@ -135,6 +145,34 @@ fn main() {
         w2 / (2.0 * PI),
         layout.block_size
     );
+    let extensions = |toml: &str| -> PhysicsSpec {
+        let t: toml::Table = toml::from_str(toml).expect("extension TOML");
+        let spec: PhysicsSpec = t["model"].clone().try_into().expect("extension spec");
+        spec.validate("model", &DaqSpec::default())
+            .expect("valid extension");
+        spec
+    };
+    let modes = r#"modes = [{ mode = "1FU", frequency_hz = 50.5, damping_ratio = 0.003 },
+         { mode = "1FL", damping_ratio = 0.002 }]"#;
+    let gains = r#"sensor_gains = [{ channel = "platform_1", gain = 1.02 }, { channel = "lower_tip", gain = 0.97 }]"#;
+    let clamp = r#"[model.clamp_friction]
+stiffness_fraction = 0.1
+half_slip_tip_amplitude = 1.0e-4"#;
+    let wear = r#"[model.wear]
+coefficient = 1.0e-6
+max_growth = 5.0e-5"#;
+    let tilt = r#"[model.tilt]
+angle = 2.0e-3
+axis = [0.6, 0.8]"#;
+    let all = format!("[model]\n{modes}\n{gains}\n{clamp}\n{wear}\n{tilt}");
+    let impacts_with = |name: &'static str, ext: &str| Case {
+        name,
+        omega_ratio: 1.0,
+        level: 6e-5,
+        clearance: 2.78e-3,
+        share: 1.0,
+        model: extensions(ext),
+    };
     let cases = [
         Case {
             name: "open",
@@ -142,6 +180,7 @@ fn main() {
             level: 2e-5,
             clearance: 2.78e-3,
             share: 1.0,
+            model: PhysicsSpec::default(),
         },
         Case {
             name: "impacts",
@@ -149,6 +188,7 @@ fn main() {
             level: 6e-5,
             clearance: 2.78e-3,
             share: 1.0,
+            model: PhysicsSpec::default(),
         },
         Case {
             name: "touching 0.5e-5",
@@ -156,6 +196,7 @@ fn main() {
             level: 0.5e-5,
             clearance: 0.0,
             share: 0.2,
+            model: PhysicsSpec::default(),
         },
         Case {
             name: "touching 2e-5",
@@ -163,6 +204,7 @@ fn main() {
             level: 2e-5,
             clearance: 0.0,
             share: 0.2,
+            model: PhysicsSpec::default(),
         },
         Case {
             name: "touching 6e-5",
@@ -170,6 +212,7 @@ fn main() {
             level: 6e-5,
             clearance: 0.0,
             share: 0.2,
+            model: PhysicsSpec::default(),
         },
         Case {
             name: "small clearance",
@@ -177,6 +220,7 @@ fn main() {
             level: 0.5e-5,
             clearance: 1e-5,
             share: 0.2,
+            model: PhysicsSpec::default(),
         },
         Case {
             name: "preload -1e-5",
@@ -184,14 +228,33 @@ fn main() {
             level: 0.5e-5,
             clearance: -1e-5,
             share: 0.05,
+            model: PhysicsSpec::default(),
         },
+        impacts_with("impacts + modes", &format!("[model]\n{modes}")),
+        impacts_with("impacts + clamp friction", &format!("[model]\n{clamp}")),
+        impacts_with("impacts + wear", &format!("[model]\n{wear}")),
+        impacts_with("impacts + tilt", &format!("[model]\n{tilt}")),
+        impacts_with("impacts + sensor gains", &format!("[model]\n{gains}")),
+        impacts_with("impacts + all", &all),
     ];
     let mut summary = Vec::new();
     for case in &cases {
+        if args
+            .case
+            .as_ref()
+            .is_some_and(|c| !case.name.contains(c.as_str()))
+        {
+            continue;
+        }
         let omega = case.omega_ratio * w2;
         let clearance = case.clearance * l;
-        let mut twin =
-            Twin::new(&TwinModel::nominal(&rom), &spec, &layout, clearance).expect("twin");
+        let mut twin = Twin::new(
+            &TwinModel::nominal(&rom).with_extensions(case.model.clone()),
+            &spec,
+            &layout,
+            clearance,
+        )
+        .expect("twin");
         let settle_blocks = (case.share * args.settle * 2.0 * PI / omega / block_s).ceil() as u64;
         let run_blocks = (case.share * args.seconds / block_s).ceil() as u64;
         for b in blocks(&layout, 0, settle_blocks, case.level * l, omega) {

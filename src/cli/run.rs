@@ -135,6 +135,10 @@ fn start_live_view(addr: SocketAddr) -> anyhow::Result<(LiveRecorder, LiveView)>
     } else {
         println!("live view: open Foxglove, connect to {}", view.ws_url());
     }
+    println!(
+        "live view: a ready layout (tips measured and twin, control, contact, twin status,          step tables): import {} in Foxglove (Layouts > Import from file)",
+        crate::session::live::FOXGLOVE_LAYOUT
+    );
     Ok((recorder, view))
 }
 

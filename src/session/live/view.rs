@@ -169,29 +169,32 @@ impl LiveView {
             detail: e.to_string(),
         })?;
         let latch = Arc::new(LayoutLatch::new(Arc::clone(&channels.layout)));
-        let host = match addr {
-            SocketAddr::V4(a) => a.ip().to_string(),
-            SocketAddr::V6(a) => format!("[{}]", a.ip()),
-        };
+        // The front door first: a busy or foreign address fails before anything starts.
+        let listener = runtime
+            .block_on(tokio::net::TcpListener::bind(addr))
+            .map_err(|io| LiveError::Bind { addr, io })?;
+        let bound = listener
+            .local_addr()
+            .map_err(|io| LiveError::Bind { addr, io })?;
+        // The SDK's server listens on the loopback interface only; clients reach it through
+        // the door (`door.rs`), which also speaks the protocol's published subprotocol name.
         let server = runtime
             .block_on(
                 foxglove::WebSocketServer::new()
                     .name(format!("rigtwin {}", env!("CARGO_PKG_VERSION")))
                     .context(&ctx)
-                    .bind(host, addr.port())
+                    .bind("127.0.0.1", 0)
                     .tokio_runtime(runtime.handle())
                     .listener(Arc::clone(&latch) as Arc<dyn foxglove::websocket::ServerListener>)
                     .message_backlog_size(options.client_backlog)
                     .start(),
             )
-            .map_err(|e| match e {
-                foxglove::FoxgloveError::Bind(io) => LiveError::Bind { addr, io },
-                other => LiveError::Start {
-                    what: "cannot start the server",
-                    detail: other.to_string(),
-                },
+            .map_err(|e| LiveError::Start {
+                what: "cannot start the server",
+                detail: e.to_string(),
             })?;
-        let bound = SocketAddr::new(addr.ip(), server.port());
+        let upstream = SocketAddr::from((std::net::Ipv4Addr::LOCALHOST, server.port()));
+        runtime.spawn(super::door::serve(listener, upstream));
 
         let shared = Arc::new(Shared::default());
         let (tx, rx) = mpsc::sync_channel(options.queue_capacity);

@@ -130,7 +130,7 @@ pub struct RunArgs {
     #[arg(long)]
     pub figures: Option<PathBuf>,
     /// Worker threads for `--from-rest` (tests run in parallel). Default: the available cores.
-    #[arg(long)]
+    #[arg(long, requires = "from_rest")]
     pub jobs: Option<usize>,
     /// Run every test from rest (in parallel) instead of in plan order, each from the state
     /// the previous test left, as the rig does. Either way the drive ramps in.

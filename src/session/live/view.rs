@@ -344,6 +344,54 @@ mod tests {
     }
 
     #[test]
+    fn the_door_accepts_the_published_and_the_sdk_subprotocols_and_refuses_others() {
+        use tokio_tungstenite::tungstenite::client::IntoClientRequest;
+        use tokio_tungstenite::tungstenite::http::HeaderValue;
+        use tokio_tungstenite::tungstenite::Error;
+
+        let addr: SocketAddr = "127.0.0.1:0".parse().unwrap();
+        let (_recorder, view) = LiveView::start(addr, LiveOptions::default()).unwrap();
+        let url = view.ws_url();
+        let rt = tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()
+            .unwrap();
+        let connect = |protocol: &'static str| {
+            let mut request = url.as_str().into_client_request().unwrap();
+            request
+                .headers_mut()
+                .insert("sec-websocket-protocol", HeaderValue::from_static(protocol));
+            rt.block_on(tokio_tungstenite::connect_async(request))
+        };
+        for protocol in [
+            super::super::PUBLISHED_SUBPROTOCOL,
+            "foxglove.sdk.v1",
+            "foxglove.sdk.v1.1",
+        ] {
+            let (mut ws, response) = connect(protocol).unwrap();
+            assert_eq!(
+                response.headers()["sec-websocket-protocol"],
+                protocol,
+                "{protocol}"
+            );
+            // The SDK's server answers through the door: its serverInfo comes first.
+            let first = rt
+                .block_on(futures_util::StreamExt::next(&mut ws))
+                .unwrap()
+                .unwrap();
+            assert!(
+                first.to_text().unwrap().contains("\"serverInfo\""),
+                "{protocol}: {first}"
+            );
+        }
+        match connect("foxglove.websocket.v2") {
+            Err(Error::Http(response)) => assert_eq!(response.status(), 400),
+            other => panic!("expected HTTP 400, got {other:?}"),
+        }
+        view.close();
+    }
+
+    #[test]
     fn a_view_starts_on_a_free_port_and_stops_cleanly() {
         let addr: SocketAddr = "127.0.0.1:0".parse().unwrap();
         let (mut recorder, view) = LiveView::start(addr, LiveOptions::default()).unwrap();

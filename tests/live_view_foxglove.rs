@@ -16,13 +16,12 @@
 //! - a malformed or busy `--foxglove` address fails at once with an error naming the flag.
 
 mod cli_support;
+mod live_support;
 mod log_support;
 
 use std::collections::{BTreeMap, BTreeSet};
-use std::io::{BufRead, BufReader};
 use std::path::Path;
-use std::process::{Command, Stdio};
-use std::sync::mpsc;
+use std::process::Stdio;
 use std::time::{Duration, Instant};
 
 use futures_util::{SinkExt, StreamExt};
@@ -30,6 +29,7 @@ use tokio_tungstenite::tungstenite::client::IntoClientRequest;
 use tokio_tungstenite::tungstenite::Message;
 
 use cli_support::{rigtwin_command as rigtwin, text};
+use live_support::wait_for_url;
 use rigtwin::control::ControlState;
 use rigtwin::log::read_session;
 use rigtwin::rig::{DaqBlock, DaqLayout};
@@ -182,35 +182,6 @@ async fn watch(url: &str, deadline: Duration, topics: &[&str]) -> Seen {
         }
     }
     seen
-}
-
-/// Waits for the line with the live view's URL on the child's stdout; returns the URL and the
-/// channel of the following lines.
-fn wait_for_url(child: &mut std::process::Child) -> (String, mpsc::Receiver<String>) {
-    let stdout = child.stdout.take().unwrap();
-    let (tx, rx) = mpsc::channel();
-    std::thread::spawn(move || {
-        for line in BufReader::new(stdout).lines() {
-            let Ok(line) = line else { break };
-            if tx.send(line).is_err() {
-                break;
-            }
-        }
-    });
-    let end = Instant::now() + Duration::from_secs(600);
-    loop {
-        let line = rx
-            .recv_timeout(end.saturating_duration_since(Instant::now()))
-            .expect("the command printed no live-view URL");
-        if let Some(i) = line.find("connect to ws://") {
-            let url = line[i + "connect to ".len()..]
-                .split_whitespace()
-                .next()
-                .unwrap()
-                .to_string();
-            return (url, rx);
-        }
-    }
 }
 
 fn ns(t: f64) -> u64 {
@@ -526,54 +497,19 @@ fn a_foxglove_client_sees_the_live_twin_beside_the_measurement() {
 /// Validates the advertised schemas and the received payloads with Python's `jsonschema`
 /// (skipped when it is not installed, unless RIGTWIN_REQUIRE_JSONSCHEMA_PY is set).
 fn check_with_jsonschema(dir: &Path, seen: &Seen) {
-    let python = log_support::python();
-    let available = Command::new(&python)
-        .args(["-c", "import jsonschema"])
-        .output()
-        .is_ok_and(|o| o.status.success());
-    if !available {
-        if std::env::var_os("RIGTWIN_REQUIRE_JSONSCHEMA_PY").is_some() {
-            panic!("RIGTWIN_REQUIRE_JSONSCHEMA_PY is set but `{python}` cannot import jsonschema");
-        }
-        eprintln!("SKIPPED the jsonschema check: `{python} -m pip install jsonschema` to run it");
-        return;
-    }
-    let mut input = serde_json::Map::new();
-    for (topic, a) in &seen.channels {
-        let messages: Vec<serde_json::Value> = seen
-            .messages
-            .get(topic)
-            .map(|m| m.iter().map(|x| x.1.clone()).collect())
-            .unwrap_or_default();
-        input.insert(
-            topic.clone(),
-            serde_json::json!({"schema": a.schema, "messages": messages}),
-        );
-    }
-    let path = dir.join("live.json");
-    std::fs::write(&path, serde_json::Value::Object(input).to_string()).unwrap();
-    let script =
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/live_support/check_jsonschema.py");
-    let o = Command::new(&python)
-        .arg(script)
-        .arg(&path)
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", text(&o));
-    let report: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
-    for (topic, r) in report.as_object().unwrap() {
-        assert!(
-            r["schema_error"].is_null(),
-            "{topic}: {}",
-            r["schema_error"]
-        );
-        assert!(
-            r["invalid"].as_array().unwrap().is_empty(),
-            "{topic}: {}",
-            r["invalid"]
-        );
-        assert!(r["checked"].as_u64().unwrap() > 0, "{topic}");
-    }
+    let topics = seen
+        .channels
+        .iter()
+        .map(|(topic, a)| {
+            let messages: Vec<serde_json::Value> = seen
+                .messages
+                .get(topic)
+                .map(|m| m.iter().map(|x| x.1.clone()).collect())
+                .unwrap_or_default();
+            (topic.clone(), (a.schema.clone(), messages))
+        })
+        .collect();
+    live_support::check_with_jsonschema(dir, &topics);
 }
 
 #[test]

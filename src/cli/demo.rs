@@ -81,6 +81,7 @@ pub(crate) fn run(a: DemoArgs) -> anyhow::Result<()> {
         crate::sim::IntegratorParameters::default(),
         &super::simulate::PlanOutputs {
             jobs: None,
+            from_rest: false,
             json: Some(&a.out.join("stepped-sine.json")),
             figures: Some(&a.out.join("figures")),
             quiet: a.quiet,

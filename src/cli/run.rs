@@ -135,6 +135,21 @@ fn start_live_view(addr: SocketAddr) -> anyhow::Result<(LiveRecorder, LiveView)>
     } else {
         println!("live view: open Foxglove, connect to {}", view.ws_url());
     }
+    // The sources' copy when this binary was built from them (a clone), else its name there.
+    let layout = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join(crate::session::live::FOXGLOVE_LAYOUT);
+    let layout = if layout.is_file() {
+        layout.display().to_string()
+    } else {
+        format!(
+            "{} (in the rigtwin sources)",
+            crate::session::live::FOXGLOVE_LAYOUT
+        )
+    };
+    println!(
+        "live view: a ready layout (tips measured and twin, control, contact, twin status, \
+         step tables): import {layout} in Foxglove (Layouts > Import from file)"
+    );
     Ok((recorder, view))
 }
 

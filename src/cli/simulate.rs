@@ -129,9 +129,13 @@ pub struct RunArgs {
     /// Write the figures (PNG) into this folder.
     #[arg(long)]
     pub figures: Option<PathBuf>,
-    /// Worker threads (tests run in parallel). Default: the available cores.
-    #[arg(long)]
+    /// Worker threads for `--from-rest` (tests run in parallel). Default: the available cores.
+    #[arg(long, requires = "from_rest")]
     pub jobs: Option<usize>,
+    /// Run every test from rest (in parallel) instead of in plan order, each from the state
+    /// the previous test left, as the rig does. Either way the drive ramps in.
+    #[arg(long)]
+    pub from_rest: bool,
     /// No progress display.
     #[arg(long)]
     pub quiet: bool,
@@ -279,8 +283,10 @@ impl RomSummary {
 /// What [`run_plan_to_outputs`] writes and how it runs.
 #[derive(Clone, Copy)]
 pub(crate) struct PlanOutputs<'a> {
-    /// Worker threads (default: the available cores).
+    /// Worker threads with `from_rest` (default: the available cores).
     pub jobs: Option<usize>,
+    /// Every test from rest, in parallel (else in plan order, the state carried).
+    pub from_rest: bool,
     /// JSON results file.
     pub json: Option<&'a Path>,
     /// Figures folder.
@@ -301,6 +307,7 @@ pub(crate) fn run_plan_to_outputs(
 ) -> anyhow::Result<Vec<TestResult>> {
     let PlanOutputs {
         jobs,
+        from_rest,
         json,
         figures,
         quiet,
@@ -312,6 +319,7 @@ pub(crate) fn run_plan_to_outputs(
     let opts = SteppedSineOptions {
         integrator: params,
         model: model.clone(),
+        carry_state: !from_rest,
         ..Default::default()
     };
     if !quiet {
@@ -356,7 +364,11 @@ pub(crate) fn run_plan_to_outputs(
     let wall = t0.elapsed().as_secs_f64();
     let time_steps: u64 = results.iter().map(|r| r.time_steps).sum();
     let failures: u64 = results.iter().map(|r| r.solver_failures).sum();
-    let workers = jobs.min(plan.tests.len()).max(1);
+    let workers = if from_rest {
+        jobs.min(plan.tests.len()).max(1)
+    } else {
+        1 // in plan order, the state carried from test to test
+    };
 
     println!(
         "{} tests, {} frequency steps, {:.3e} time steps in {:.1} s: {:.0} steps/s ({} workers)",
@@ -447,6 +459,7 @@ fn stepped_sine(a: RunArgs) -> anyhow::Result<()> {
         a.integrator.parameters(),
         &PlanOutputs {
             jobs: a.jobs,
+            from_rest: a.from_rest,
             json: a.json.as_deref(),
             figures: a.figures.as_deref(),
             quiet: a.quiet,

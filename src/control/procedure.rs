@@ -12,7 +12,9 @@
 
 use std::f64::consts::TAU;
 
-use crate::plan::{per_l_to_metres, Plan, TestSpec};
+// TEST_START_RAMP_S: the ramp of the drive command that starts a test (from rest or from the
+// previous test's level), shared with the virtual stepped sine.
+use crate::plan::{per_l_to_metres, Plan, TestSpec, TEST_START_RAMP_S};
 use crate::rig::channels::ChannelMap;
 use crate::rig::{DaqBlock, DaqLayout, DriveCommand, DriveState};
 
@@ -102,10 +104,6 @@ struct RecordWindow {
     /// Whether the step settled before this window (or the settle time ran out).
     settled: bool,
 }
-
-/// Ramp time of the drive command that starts a test (from rest or from the previous test's
-/// level), s. Steps within a test change frequency without a ramp.
-const TEST_START_RAMP_S: f64 = 0.25;
 
 /// The stepped-sine state machine.
 #[derive(Debug)]

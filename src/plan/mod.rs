@@ -39,6 +39,13 @@ pub use error::{PlanError, PlanLocation};
 /// choice, section 4.1).
 pub const DEFAULT_STEPS_PER_PERIOD: u32 = 1000;
 
+/// Ramp time of the drive that starts a test, s: the rig's procedure (`src/control`) commands
+/// each test's first drive level as a linear ramp over this time (from rest for the first test,
+/// from the previous test's level after that), and the virtual stepped sine (`src/sim`) ramps
+/// the base acceleration amplitude of each test in from zero over the same time. Steps within a
+/// test change frequency without a ramp.
+pub const TEST_START_RAMP_S: f64 = 0.25;
+
 /// Direction of the frequency stepping.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]

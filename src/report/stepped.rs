@@ -1,7 +1,8 @@
 //! The figures of a stepped sine: the virtual stepped sine's (`rigtwin simulate`, the demo)
 //! from its results, and the building blocks a recorded session's figures share with it
 //! ([`time_figures`], [`scalogram_of`]): time histories and contact activity (whole records and
-//! a zoom on the last five periods), RMS response, amplitude ranges and Morlet scalograms.
+//! a zoom on five periods holding an impact cluster, [`zoom_window`]), RMS response, amplitude
+//! ranges and Morlet scalograms.
 
 use std::path::{Path, PathBuf};
 
@@ -45,8 +46,76 @@ fn history(name: &str, tr: &StepTrace, l: f64) -> TimeHistory {
     }
 }
 
-/// Time histories and contact activity (whole records and a zoom on their last five
-/// excitation periods of length `period`, s) of `histories`; returns the files written.
+/// Excitation periods the zoomed time figures show.
+pub const ZOOM_PERIODS: f64 = 5.0;
+
+/// The window of the zoomed time figures (time histories and contact activity alike):
+/// [`ZOOM_PERIODS`] excitation periods of length `period` (s) within the records' common span
+/// that hold the most contact onsets (impacts) of all `histories`, the latest such window on a
+/// tie, as the reference zooms into the late span of its record where the impact cluster is.
+/// Candidates start every half period back from the end. Records with contact but no onset
+/// (held from the start) count closed samples instead. Without contact: the last periods.
+pub fn zoom_window(histories: &[TimeHistory], period: f64) -> TimeWindow {
+    let end = histories
+        .iter()
+        .filter_map(|h| h.t.last().copied())
+        .fold(f64::INFINITY, f64::min);
+    let first = histories
+        .iter()
+        .filter_map(|h| h.t.first().copied())
+        .fold(f64::NEG_INFINITY, f64::max)
+        .max(0.0);
+    let width = ZOOM_PERIODS * period;
+    let last = TimeWindow {
+        start: (end - width).max(first),
+        end,
+    };
+    if !(end.is_finite() && width > 0.0 && width.is_finite()) {
+        return last;
+    }
+    let mut onsets = Vec::new();
+    let mut closed = Vec::new();
+    for h in histories {
+        for (i, (&c, &t)) in h.contact_closed.iter().zip(&h.t).enumerate() {
+            if c {
+                closed.push(t);
+                if i > 0 && !h.contact_closed[i - 1] {
+                    onsets.push(t);
+                }
+            }
+        }
+    }
+    let mut events = if onsets.is_empty() { closed } else { onsets };
+    if events.is_empty() {
+        return last;
+    }
+    events.sort_by(f64::total_cmp);
+    let count = |w: &TimeWindow| {
+        events.partition_point(|&t| t <= w.end) - events.partition_point(|&t| t < w.start)
+    };
+    let (mut best, mut best_count) = (last, count(&last));
+    let mut k = 1.0;
+    loop {
+        let e = end - 0.5 * period * k;
+        let w = TimeWindow {
+            start: e - width,
+            end: e,
+        };
+        if w.start < first {
+            break;
+        }
+        let n = count(&w);
+        if n > best_count {
+            (best, best_count) = (w, n);
+        }
+        k += 1.0;
+    }
+    best
+}
+
+/// Time histories and contact activity (whole records and the zoom of [`zoom_window`], the same
+/// window for both) of `histories`, `period` the excitation period, s; returns the files
+/// written.
 pub fn time_figures(
     histories: &[TimeHistory],
     period: f64,
@@ -57,15 +126,7 @@ pub fn time_figures(
     if histories.is_empty() {
         return Ok(written);
     }
-    // Zoom: the last five excitation periods of the shortest record.
-    let end = histories
-        .iter()
-        .filter_map(|h| h.t.last().copied())
-        .fold(f64::INFINITY, f64::min);
-    let zoom = TimeWindow {
-        start: (end - 5.0 * period).max(0.0),
-        end,
-    };
+    let zoom = zoom_window(histories, period);
     for (file, window) in [
         ("time_histories.png", None),
         ("time_histories_zoom.png", Some(zoom)),
@@ -194,4 +255,74 @@ pub fn scalogram_of(
         &FigureOptions::default(),
     )?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A record of `periods` periods of 1 s at 100 samples per period, closed on `contact`.
+    fn record(periods: usize, contact: impl Fn(f64) -> bool) -> TimeHistory {
+        let t: Vec<f64> = (0..periods * 100).map(|i| i as f64 * 0.01).collect();
+        TimeHistory {
+            name: "r".into(),
+            source: Source::Simulation,
+            omega_ratio: 1.0,
+            upper: vec![0.0; t.len()],
+            lower: Vec::new(),
+            contact_closed: t.iter().map(|&x| contact(x)).collect(),
+            normal_force: Vec::new(),
+            tangential_force: Vec::new(),
+            t,
+        }
+    }
+
+    /// Contact onsets of `h` inside `w`.
+    fn onsets_in(h: &TimeHistory, w: &TimeWindow) -> usize {
+        (1..h.t.len())
+            .filter(|&i| h.contact_closed[i] && !h.contact_closed[i - 1] && w.contains(h.t[i]))
+            .count()
+    }
+
+    #[test]
+    fn the_zoom_holds_the_impact_cluster_wherever_it_is() {
+        // A cluster of impacts (one per period, 0.05 s long) in periods 30..38 of a 100-period
+        // record, nothing at its end: the zoom moves onto the cluster.
+        let h = record(100, |t| (30.0..38.0).contains(&t) && t.fract() < 0.05);
+        let w = zoom_window(std::slice::from_ref(&h), 1.0);
+        assert!((w.end - w.start - ZOOM_PERIODS).abs() < 1e-9, "{w:?}");
+        assert_eq!(onsets_in(&h, &w), 5, "{w:?}");
+        assert!(w.start >= 30.0 - 1e-9 && w.end <= 38.0 + 1.0, "{w:?}");
+        // Two equal clusters: the later one (the late span, as the reference zooms).
+        let h = record(100, |t| {
+            ((10.0..20.0).contains(&t) || (70.0..80.0).contains(&t)) && t.fract() < 0.05
+        });
+        let w = zoom_window(std::slice::from_ref(&h), 1.0);
+        assert!(w.start >= 70.0 - 1e-9, "{w:?}");
+        assert_eq!(onsets_in(&h, &w), 5);
+        // A single impact anywhere is inside the window.
+        for at in [0.5, 42.3, 99.2] {
+            let h = record(100, |t| (at..at + 0.03).contains(&t));
+            let w = zoom_window(std::slice::from_ref(&h), 1.0);
+            let closed =
+                h.t.iter()
+                    .zip(&h.contact_closed)
+                    .any(|(&t, &c)| c && w.contains(t));
+            assert!(closed, "impact at {at}: {w:?}");
+        }
+        // Contact held from the first sample (no onset) still counts.
+        let h = record(50, |t| t < 2.0);
+        let w = zoom_window(std::slice::from_ref(&h), 1.0);
+        assert!(w.start < 2.0, "{w:?}");
+    }
+
+    #[test]
+    fn without_contact_the_zoom_is_the_last_periods() {
+        let h = record(20, |_| false);
+        let w = zoom_window(&[h], 1.0);
+        assert!(
+            (w.end - 19.99).abs() < 1e-9 && (w.start - 14.99).abs() < 1e-9,
+            "{w:?}"
+        );
+    }
 }

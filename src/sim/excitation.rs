@@ -22,6 +22,27 @@ pub enum Excitation {
         #[serde(default)]
         phase: f64,
     },
+    /// A sine whose acceleration amplitude ramps linearly from `from_amplitude_m` to
+    /// `amplitude_m`, as the rig's drive does at the start of a test:
+    /// `a_base(t) = -A(t) omega^2 sin(omega t + phase)` with `A` going from `from_amplitude_m`
+    /// at `ramp_start` to `amplitude_m` at `ramp_start + ramp_s` (constant before and after).
+    /// After the ramp it equals [`Excitation::Sine`] bit for bit.
+    RampedSine {
+        /// Base displacement amplitude before the ramp, m (0: from rest).
+        #[serde(default)]
+        from_amplitude_m: f64,
+        /// Base displacement amplitude reached after the ramp, m.
+        amplitude_m: f64,
+        /// Excitation circular frequency, rad/s (> 0).
+        omega: f64,
+        /// Phase at t = 0, rad.
+        #[serde(default)]
+        phase: f64,
+        /// Time the ramp starts, s.
+        ramp_start: f64,
+        /// Ramp time, s (>= 0; 0: a step to the full amplitude).
+        ramp_s: f64,
+    },
     /// Base acceleration samples `accel[i]` at `t = i dt_sample`, linearly interpolated to the
     /// step times. A run must stay within `0 <= t <= (accel.len() - 1) dt_sample`.
     Sampled {
@@ -36,6 +57,42 @@ impl Excitation {
     /// Checks the parameters and samples (finite, in range).
     pub fn validate(&self) -> Result<(), SimError> {
         match self {
+            Excitation::RampedSine {
+                from_amplitude_m,
+                amplitude_m,
+                omega,
+                phase,
+                ramp_start,
+                ramp_s,
+            } => {
+                if !from_amplitude_m.is_finite() {
+                    return Err(SimError::InvalidParameter {
+                        field: "excitation.from_amplitude_m (m)",
+                        value: *from_amplitude_m,
+                        expected: "a finite base displacement amplitude",
+                    });
+                }
+                if !ramp_start.is_finite() {
+                    return Err(SimError::InvalidParameter {
+                        field: "excitation.ramp_start (s)",
+                        value: *ramp_start,
+                        expected: "a finite time",
+                    });
+                }
+                if !(ramp_s.is_finite() && *ramp_s >= 0.0) {
+                    return Err(SimError::InvalidParameter {
+                        field: "excitation.ramp_s (s)",
+                        value: *ramp_s,
+                        expected: "a finite ramp time >= 0",
+                    });
+                }
+                Excitation::Sine {
+                    amplitude_m: *amplitude_m,
+                    omega: *omega,
+                    phase: *phase,
+                }
+                .validate()
+            }
             Excitation::Sine {
                 amplitude_m,
                 omega,
@@ -117,6 +174,17 @@ impl Excitation {
                 omega,
                 phase,
             } => -amplitude_m * omega * omega * (omega * t + phase).sin(),
+            Excitation::RampedSine {
+                from_amplitude_m,
+                amplitude_m,
+                omega,
+                phase,
+                ramp_start,
+                ramp_s,
+            } => {
+                let a = ramped(t, *ramp_start, *ramp_s, *from_amplitude_m, *amplitude_m);
+                -a * omega * omega * (omega * t + phase).sin()
+            }
             Excitation::Sampled { accel, dt_sample } => {
                 let u = t / dt_sample;
                 let last = accel.len() - 1;
@@ -143,8 +211,35 @@ impl Excitation {
                 omega,
                 phase,
             } => Some(amplitude_m * (omega * t + phase).sin()),
+            // NOTE: the ramped amplitude times the sine: the displacement the ramped
+            // acceleration drives, up to terms of order amplitude_m / (omega ramp_s) while the
+            // ramp runs (exact after it, as the base's drift does not enter the relative motion).
+            Excitation::RampedSine {
+                from_amplitude_m,
+                amplitude_m,
+                omega,
+                phase,
+                ramp_start,
+                ramp_s,
+            } => Some(
+                ramped(t, *ramp_start, *ramp_s, *from_amplitude_m, *amplitude_m)
+                    * (omega * t + phase).sin(),
+            ),
             Excitation::Sampled { .. } => None,
         }
+    }
+}
+
+/// The amplitude of [`Excitation::RampedSine`] at `t`: `from` until `start`, `to` (exactly)
+/// from `start + ramp_s` on, linear in between.
+#[inline]
+fn ramped(t: f64, start: f64, ramp_s: f64, from: f64, to: f64) -> f64 {
+    if t >= start + ramp_s {
+        to
+    } else if t <= start {
+        from
+    } else {
+        from + (to - from) * ((t - start) / ramp_s)
     }
 }
 
@@ -172,6 +267,55 @@ mod tests {
         let u = |t| e.displacement_at(t).unwrap();
         let fd = (u(t + h) - 2.0 * u(t) + u(t - h)) / (h * h);
         assert!((fd - e.accel_at(t)).abs() < 1e-5 * e.accel_at(t).abs().max(1.0));
+    }
+
+    #[test]
+    fn a_ramped_sine_rises_linearly_then_equals_the_sine() {
+        let (amplitude_m, omega, phase) = (2e-5, 300.0, 0.3);
+        let sine = Excitation::Sine {
+            amplitude_m,
+            omega,
+            phase,
+        };
+        let ramped = Excitation::RampedSine {
+            from_amplitude_m: 0.0,
+            amplitude_m,
+            omega,
+            phase,
+            ramp_start: 0.1,
+            ramp_s: 0.25,
+        };
+        assert!(ramped.validate().is_ok());
+        assert_eq!(ramped.accel_at(0.05), 0.0);
+        assert_eq!(ramped.accel_at(0.1), 0.0);
+        for t in [0.15, 0.2, 0.3] {
+            let r = (t - 0.1) / 0.25;
+            let expected = r * sine.accel_at(t);
+            assert!((ramped.accel_at(t) - expected).abs() < 1e-12 * expected.abs().max(1.0));
+        }
+        for t in [0.35, 0.4, 1.234] {
+            assert_eq!(ramped.accel_at(t), sine.accel_at(t));
+            assert_eq!(ramped.displacement_at(t), sine.displacement_at(t));
+        }
+        let from_half = Excitation::RampedSine {
+            from_amplitude_m: 0.5 * amplitude_m,
+            amplitude_m,
+            omega,
+            phase,
+            ramp_start: 0.0,
+            ramp_s: 0.2,
+        };
+        let t = 0.1;
+        assert!((from_half.accel_at(t) - 0.75 * sine.accel_at(t)).abs() < 1e-9);
+        let bad = Excitation::RampedSine {
+            from_amplitude_m: 0.0,
+            amplitude_m,
+            omega,
+            phase,
+            ramp_start: 0.0,
+            ramp_s: -1.0,
+        };
+        assert!(bad.validate().is_err());
     }
 
     #[test]

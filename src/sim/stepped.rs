@@ -3,12 +3,21 @@
 //! from step to step as on the rig; per step a settle window and a record window, and the step
 //! metrics of [`crate::signal`] over the record window.
 //!
+//! How a test starts, as in the rig's procedure (`src/control`): the plan's tests run in order,
+//! each from the state the previous one left (the beams keep vibrating between tests, and the
+//! model's wear grows on), and the drive moves from the previous test's level (zero for the
+//! first test, from rest) to the test's over [`TEST_START_RAMP_S`] at its first frequency: here
+//! the base acceleration amplitude, linearly; on the rig the drive voltage, under amplitude
+//! control. So an up test that follows a down test at its starting frequency stays on the branch
+//! the down test left it on. `carry_state = false` runs every test from rest instead (the drive
+//! still ramped in), the tests in parallel.
+//!
 //! Per test ([`run_test`]): one [`DrivenRom`] (read at the tips) at the test's clearance; per frequency step the
 //! time step is `2 pi / (Omega steps_per_period)` and the base displacement is
 //! `q sin(Omega t + phi)` with the phase chosen so that the displacement is continuous at the
-//! frequency change ([`continuous_phase`]). Independent tests run on worker threads
-//! ([`run_plan`]); each test is sequential and deterministic, so the results do not depend on
-//! the number of workers. No clock and no I/O here: the caller times the run and renders
+//! frequency change ([`continuous_phase`]), also from one test to the next. Independent tests
+//! (from rest) run on worker threads ([`run_plan`]); each test is sequential and deterministic,
+//! so the results do not depend on the number of workers. No clock and no I/O here: the caller times the run and renders
 //! progress from the [`TestProgress`] callbacks.
 
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -16,7 +25,7 @@ use std::sync::Mutex;
 
 use crate::config::PhysicsSpec;
 use crate::contact::{ContactProblem, ContactSolution};
-use crate::plan::{per_l_to_metres, Plan, TestSpec};
+use crate::plan::{per_l_to_metres, Plan, TestSpec, TEST_START_RAMP_S};
 use crate::rom::Rom;
 use crate::signal::{step_metrics, MetricsParams, SignalError, StepMetrics, StepRecord};
 
@@ -55,11 +64,16 @@ pub struct SteppedSineOptions {
     /// periods (>= 1).
     pub progress_periods: u32,
     /// The model's extensions (`[model]`, valid): modal corrections, clamp friction, clearance
-    /// per test, wear (within a test: every test runs from rest), tilt. Sensor gains are an
+    /// per test, wear (carried across tests with `carry_state`), tilt. Sensor gains are an
     /// observation of a rig's channels and do not apply to the ROM's own outputs. Frequencies
     /// stay in units of the nominal ROM's omega_2 (a plan means the same Hz whatever the
     /// model). Default: none.
     pub model: PhysicsSpec,
+    /// Run the plan's tests in order, each from the state the previous test left (the beams,
+    /// the model's effects, the drive level it ramps from), as the rig's procedure does. Off:
+    /// every test from rest, the tests in parallel. Either way a test's drive ramps in over
+    /// [`TEST_START_RAMP_S`]. Default: on.
+    pub carry_state: bool,
 }
 
 impl Default for SteppedSineOptions {
@@ -71,6 +85,7 @@ impl Default for SteppedSineOptions {
             capture: None,
             progress_periods: 10,
             model: PhysicsSpec::default(),
+            carry_state: true,
         }
     }
 }
@@ -395,12 +410,38 @@ fn nearest_step(ratios: &[f64], target: f64) -> usize {
     best
 }
 
-/// Runs one test of a plan from rest. `test_index` only labels the progress callbacks.
+/// The simulated beams between two tests of a plan run in order ([`SteppedSineOptions`]
+/// `carry_state`): the driven ROM with its state, the model's effects (wear grown so far), and
+/// the drive (phase, frequency, level) the next test ramps from.
+struct Carried {
+    driven: Tips,
+    effects: Effects,
+    phase: f64,
+    omega: f64,
+    level_m: f64,
+}
+
+/// Runs one test of a plan from rest, the drive ramped in over [`TEST_START_RAMP_S`].
+/// `test_index` only labels the progress callbacks.
 pub fn run_test(
     rom: &Rom,
     spec: &TestSpec,
     test_index: usize,
     opts: &SteppedSineOptions,
+    progress: &mut dyn FnMut(&TestProgress<'_>),
+) -> Result<TestResult, SteppedSineError> {
+    run_test_after(rom, spec, test_index, opts, &mut None, progress)
+}
+
+/// Runs one test from the state `carried` holds (from rest when `None`), the drive ramped from
+/// the carried level (0 from rest) to the test's over [`TEST_START_RAMP_S`]; leaves the state
+/// at the test's end in `carried` (`None` when the test stopped early).
+fn run_test_after(
+    rom: &Rom,
+    spec: &TestSpec,
+    test_index: usize,
+    opts: &SteppedSineOptions,
+    carried: &mut Option<Carried>,
     progress: &mut dyn FnMut(&TestProgress<'_>),
 ) -> Result<TestResult, SteppedSineError> {
     check_tips(rom)?;
@@ -412,23 +453,36 @@ pub fn run_test(
     let w2 = rom.omega_ref();
     let q = per_l_to_metres(spec.level, l);
     let clearance = opts.model.test_clearance(&spec.name, spec.clearance_m(l));
-    let model = effects::prepare(rom, &opts.model, "model")?;
     let ratios = spec.omega_ratios();
     let spp = f64::from(spec.steps_per_period);
     let chunk = u64::from(opts.progress_periods.max(1));
     let trace_step = opts.trace_at.map(|r| nearest_step(&ratios, r));
 
-    let mut params = opts.integrator.clone();
-    params.time_step = TimeStep::StepsPerPeriod {
-        steps: spp,
-        omega: ratios[0] * w2,
-    };
-    let mut driven = Tips::new(&model, TIPS, params).map_err(|e| match e {
-        DrivenError::Output(missing) => missing_output(missing),
-        DrivenError::Sim(source) => sim_err(source),
-    })?;
-    let mut effects = Effects::new(&model, &opts.model, "model", clearance)?;
-    effects.attach(&mut driven).map_err(sim_err)?;
+    let (mut driven, mut effects, mut phase, mut omega_prev, from_level, fresh) =
+        match carried.take() {
+            Some(mut c) => {
+                // The rig's operator sets the next test's clearance; the wear stays on top.
+                c.effects
+                    .set_clearance(&mut c.driven, clearance)
+                    .map_err(sim_err)?;
+                (c.driven, c.effects, c.phase, c.omega, c.level_m, false)
+            }
+            None => {
+                let model = effects::prepare(rom, &opts.model, "model")?;
+                let mut params = opts.integrator.clone();
+                params.time_step = TimeStep::StepsPerPeriod {
+                    steps: spp,
+                    omega: ratios[0] * w2,
+                };
+                let mut driven = Tips::new(&model, TIPS, params).map_err(|e| match e {
+                    DrivenError::Output(missing) => missing_output(missing),
+                    DrivenError::Sim(source) => sim_err(source),
+                })?;
+                let effects = Effects::new(&model, &opts.model, "model", clearance)?;
+                effects.attach(&mut driven).map_err(sim_err)?;
+                (driven, effects, 0.0, ratios[0] * w2, 0.0, true)
+            }
+        };
 
     let mut result = TestResult {
         spec: spec.clone(),
@@ -443,8 +497,6 @@ pub fn run_test(
     };
     let periods_total = spec.total_periods();
     let mut periods_done = 0u64;
-    let mut phase = 0.0;
-    let mut omega_prev = ratios[0] * w2;
     let n_rec = u64::from(spec.record_periods) * u64::from(spec.steps_per_period);
     let report = |step: usize, ratio: f64, done: u64, finished: bool| TestProgress {
         test: test_index,
@@ -459,18 +511,33 @@ pub fn run_test(
 
     'steps: for (s, &ratio) in ratios.iter().enumerate() {
         let omega = ratio * w2;
-        if s > 0 {
-            // The integrator was built at the first step's dt.
+        if s > 0 || !fresh {
+            // The integrator was built at the first step's dt (of this or an earlier test).
             driven
                 .set_time_step(TimeStep::StepsPerPeriod { steps: spp, omega })
                 .map_err(sim_err)?;
         }
         phase = continuous_phase(omega_prev, phase, omega, driven.state().time());
         omega_prev = omega;
-        let exc = Excitation::Sine {
-            amplitude_m: q,
-            omega,
-            phase,
+        // NOTE: as the rig's procedure ramps the drive that starts a test, the test's first
+        // step ramps the base acceleration amplitude from the previous test's level (zero from
+        // rest) over TEST_START_RAMP_S (in its settle window); the later steps change frequency
+        // without a ramp.
+        let exc = if s == 0 {
+            Excitation::RampedSine {
+                from_amplitude_m: from_level,
+                amplitude_m: q,
+                omega,
+                phase,
+                ramp_start: driven.state().time(),
+                ramp_s: TEST_START_RAMP_S,
+            }
+        } else {
+            Excitation::Sine {
+                amplitude_m: q,
+                omega,
+                phase,
+            }
         };
         let before = driven.state().counters();
         let spp_steps = u64::from(spec.steps_per_period);
@@ -603,6 +670,16 @@ pub fn run_test(
         periods_done,
         true,
     ));
+    // A test that stopped (non-finite state) leaves nothing to carry: the next starts at rest.
+    if result.stopped.is_none() {
+        *carried = Some(Carried {
+            driven,
+            effects,
+            phase,
+            omega: omega_prev,
+            level_m: q,
+        });
+    }
     Ok(result)
 }
 
@@ -648,8 +725,10 @@ fn capture_problems(
     Ok(out)
 }
 
-/// Runs every test of a plan on up to `jobs` worker threads (tests are independent; each runs
-/// from rest). Results are in plan order. `progress` is called from the workers.
+/// Runs every test of a plan. With `opts.carry_state` (the default) the tests run in plan order
+/// on the calling thread, each from the state the previous one left, as on the rig (`jobs` is
+/// not used); without, each test runs from rest on up to `jobs` worker threads (the tests are
+/// then independent). Results are in plan order. `progress` is called from the workers.
 pub fn run_plan(
     rom: &Rom,
     plan: &Plan,
@@ -658,6 +737,15 @@ pub fn run_plan(
     progress: &(dyn Fn(&TestProgress<'_>) + Sync),
 ) -> Result<Vec<TestResult>, SteppedSineError> {
     check_plan(rom, plan, opts)?;
+    if opts.carry_state {
+        let mut carried = None;
+        return plan
+            .tests
+            .iter()
+            .enumerate()
+            .map(|(i, t)| run_test_after(rom, t, i, opts, &mut carried, &mut |p| progress(p)))
+            .collect();
+    }
     let n = plan.tests.len();
     let next = AtomicUsize::new(0);
     let results: Mutex<Vec<Option<Result<TestResult, SteppedSineError>>>> =

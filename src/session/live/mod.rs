@@ -1,5 +1,9 @@
 //! The live view: a session's channels served to the Foxglove app over the Foxglove WebSocket
 //! protocol (the `foxglove` SDK's server), while the session runs (`rigtwin run --foxglove ADDR`).
+//! Clients may negotiate the SDK's subprotocol names (`foxglove.sdk.v1`, `.v1.1`) or the
+//! protocol's published one, [`PUBLISHED_SUBPROTOCOL`] (`@foxglove/ws-protocol`'s reference
+//! client and the viewers built on it): `door` (private) accepts them all on the address asked
+//! for and relays to the SDK's server on the loopback interface.
 //!
 //! - [`LiveView::start`] binds the server (its own one-thread tokio runtime) and starts the
 //!   publisher thread; it returns the [`LiveRecorder`] (a
@@ -20,6 +24,10 @@
 //! MCAP log, and [`TOPIC_LIVE_TWIN`], its predicted channels decimated in the bins of
 //! [`TOPIC_LIVE_DAQ`] (its raw `/twin/blocks` are the log's only).
 //!
+//! [`topic_schemas`] lists every topic and schema; `rig-config/foxglove/rigtwin-live.json` is a
+//! Foxglove layout for them (`run --foxglove` names it; a test checks its message paths against
+//! these schemas).
+//!
 //! [`TOPIC_LAYOUT`]: super::topics::TOPIC_LAYOUT
 //! [`TOPIC_CONTROL`]: super::topics::TOPIC_CONTROL
 //! [`TOPIC_EVENTS`]: super::topics::TOPIC_EVENTS
@@ -29,6 +37,7 @@
 //! [`TOPIC_TWIN_STEPS`]: super::topics::TOPIC_TWIN_STEPS
 
 pub mod decimate;
+mod door;
 mod publisher;
 mod record;
 mod view;
@@ -37,10 +46,15 @@ use crate::config::SpecError;
 use std::net::{IpAddr, Ipv4Addr, SocketAddr};
 use std::time::Duration;
 
+pub use door::PUBLISHED_SUBPROTOCOL;
+pub use publisher::{topic_schemas, TopicSchema};
 pub use record::LiveStats;
 pub use view::{LiveRecorder, LiveView};
 
 pub use super::topics::{TOPIC_LIVE_DAQ, TOPIC_LIVE_TWIN};
+
+/// The Foxglove layout shipped for the live view, relative to the project's root.
+pub const FOXGLOVE_LAYOUT: &str = "rig-config/foxglove/rigtwin-live.json";
 
 /// Schema name of [`TOPIC_LIVE_DAQ`] (its JSON Schema lists the session's channels).
 pub const LIVE_DAQ_SCHEMA: &str = "LiveDaqPoint";

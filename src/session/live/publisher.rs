@@ -22,7 +22,7 @@ use super::super::topics::{
 };
 use super::decimate::{bin_samples, DecimatedPoint, MinMaxDecimator};
 use super::record::{LiveStats, Record};
-use super::{LIVE_DAQ_SCHEMA, LIVE_TWIN_CHANNELS, LIVE_TWIN_SCHEMA};
+use super::{LiveOptions, LIVE_DAQ_SCHEMA, LIVE_TWIN_CHANNELS, LIVE_TWIN_SCHEMA};
 
 /// Keys of a live DAQ point besides the channels; a channel with one of these names is published
 /// as `ch_NAME`.
@@ -42,9 +42,71 @@ fn json_channel<T: schemars::JsonSchema>(
     ctx: &Arc<Context>,
     topic: &str,
 ) -> Result<Arc<RawChannel>, FoxgloveError> {
-    let schema = serde_json::to_vec(&schemars::schema_for!(T))
-        .map_err(|e| FoxgloveError::ValueError(e.to_string()))?;
+    let schema = json_schema::<T>().map_err(|e| FoxgloveError::ValueError(e.to_string()))?;
     raw_channel(ctx, topic, &T::schema_name(), schema)
+}
+
+fn json_schema<T: schemars::JsonSchema>() -> Result<Vec<u8>, serde_json::Error> {
+    serde_json::to_vec(&schemars::schema_for!(T))
+}
+
+/// A topic the live view serves and its JSON Schema.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TopicSchema {
+    /// Topic name.
+    pub topic: &'static str,
+    /// Schema name (as advertised).
+    pub schema_name: String,
+    /// The JSON Schema, as advertised.
+    pub schema: Vec<u8>,
+}
+
+/// Every topic the live view serves for a session with the DAQ `layout` (with the live twin),
+/// with the schema it advertises: what a Foxglove layout may refer to.
+pub fn topic_schemas(layout: &DaqLayout, options: &LiveOptions) -> Vec<TopicSchema> {
+    fn of<T: schemars::JsonSchema>(topic: &'static str) -> TopicSchema {
+        TopicSchema {
+            topic,
+            schema_name: T::schema_name().to_string(),
+            schema: json_schema::<T>().unwrap_or_default(),
+        }
+    }
+    let bin = bin_samples(layout.sample_rate, options.daq_points_per_second);
+    vec![
+        of::<DaqLayout>(TOPIC_LAYOUT),
+        of::<ControlState>(TOPIC_CONTROL),
+        of::<SessionEvent>(TOPIC_EVENTS),
+        of::<StatusMessage>(TOPIC_STATUS),
+        of::<StepMessage>(TOPIC_STEPS),
+        of::<TwinStatus>(TOPIC_TWIN_STATUS),
+        of::<TwinStepMessage>(TOPIC_TWIN_STEPS),
+        TopicSchema {
+            topic: TOPIC_LIVE_DAQ,
+            schema_name: LIVE_DAQ_SCHEMA.to_string(),
+            schema: daq_point_schema(layout, &daq_keys(layout), bin),
+        },
+        TopicSchema {
+            topic: TOPIC_LIVE_TWIN,
+            schema_name: LIVE_TWIN_SCHEMA.to_string(),
+            schema: twin_point_schema(layout.sample_rate, bin),
+        },
+    ]
+}
+
+/// The keys of `/live/daq`'s channels: the channel names, `ch_NAME` for one that clashes with
+/// [`POINT_KEYS`].
+fn daq_keys(layout: &DaqLayout) -> Vec<String> {
+    layout
+        .channels
+        .iter()
+        .map(|c| {
+            if POINT_KEYS.contains(&c.name.as_str()) {
+                format!("ch_{}", c.name)
+            } else {
+                c.name.clone()
+            }
+        })
+        .collect()
 }
 
 fn raw_channel(
@@ -335,17 +397,7 @@ impl Publisher {
     }
 
     fn daq_topic(&self, layout: &DaqLayout) -> Option<PointTopic> {
-        let keys: Vec<String> = layout
-            .channels
-            .iter()
-            .map(|c| {
-                if POINT_KEYS.contains(&c.name.as_str()) {
-                    format!("ch_{}", c.name)
-                } else {
-                    c.name.clone()
-                }
-            })
-            .collect();
+        let keys = daq_keys(layout);
         let bin = bin_samples(layout.sample_rate, self.points_per_second);
         let schema = daq_point_schema(layout, &keys, bin);
         match raw_channel(&self.ctx, TOPIC_LIVE_DAQ, LIVE_DAQ_SCHEMA, schema) {

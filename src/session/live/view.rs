@@ -169,29 +169,32 @@ impl LiveView {
             detail: e.to_string(),
         })?;
         let latch = Arc::new(LayoutLatch::new(Arc::clone(&channels.layout)));
-        let host = match addr {
-            SocketAddr::V4(a) => a.ip().to_string(),
-            SocketAddr::V6(a) => format!("[{}]", a.ip()),
-        };
+        // The front door first: a busy or foreign address fails before anything starts.
+        let listener = runtime
+            .block_on(tokio::net::TcpListener::bind(addr))
+            .map_err(|io| LiveError::Bind { addr, io })?;
+        let bound = listener
+            .local_addr()
+            .map_err(|io| LiveError::Bind { addr, io })?;
+        // The SDK's server listens on the loopback interface only; clients reach it through
+        // the door (`door.rs`), which also speaks the protocol's published subprotocol name.
         let server = runtime
             .block_on(
                 foxglove::WebSocketServer::new()
                     .name(format!("rigtwin {}", env!("CARGO_PKG_VERSION")))
                     .context(&ctx)
-                    .bind(host, addr.port())
+                    .bind("127.0.0.1", 0)
                     .tokio_runtime(runtime.handle())
                     .listener(Arc::clone(&latch) as Arc<dyn foxglove::websocket::ServerListener>)
                     .message_backlog_size(options.client_backlog)
                     .start(),
             )
-            .map_err(|e| match e {
-                foxglove::FoxgloveError::Bind(io) => LiveError::Bind { addr, io },
-                other => LiveError::Start {
-                    what: "cannot start the server",
-                    detail: other.to_string(),
-                },
+            .map_err(|e| LiveError::Start {
+                what: "cannot start the server",
+                detail: e.to_string(),
             })?;
-        let bound = SocketAddr::new(addr.ip(), server.port());
+        let upstream = SocketAddr::from((std::net::Ipv4Addr::LOCALHOST, server.port()));
+        runtime.spawn(super::door::serve(listener, upstream));
 
         let shared = Arc::new(Shared::default());
         let (tx, rx) = mpsc::sync_channel(options.queue_capacity);
@@ -338,6 +341,54 @@ mod tests {
             // No IPv6 loopback here: the error says so.
             Err(e) => assert!(e.to_string().contains("[::1]:0"), "{e}"),
         }
+    }
+
+    #[test]
+    fn the_door_accepts_the_published_and_the_sdk_subprotocols_and_refuses_others() {
+        use tokio_tungstenite::tungstenite::client::IntoClientRequest;
+        use tokio_tungstenite::tungstenite::http::HeaderValue;
+        use tokio_tungstenite::tungstenite::Error;
+
+        let addr: SocketAddr = "127.0.0.1:0".parse().unwrap();
+        let (_recorder, view) = LiveView::start(addr, LiveOptions::default()).unwrap();
+        let url = view.ws_url();
+        let rt = tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()
+            .unwrap();
+        let connect = |protocol: &'static str| {
+            let mut request = url.as_str().into_client_request().unwrap();
+            request
+                .headers_mut()
+                .insert("sec-websocket-protocol", HeaderValue::from_static(protocol));
+            rt.block_on(tokio_tungstenite::connect_async(request))
+        };
+        for protocol in [
+            super::super::PUBLISHED_SUBPROTOCOL,
+            "foxglove.sdk.v1",
+            "foxglove.sdk.v1.1",
+        ] {
+            let (mut ws, response) = connect(protocol).unwrap();
+            assert_eq!(
+                response.headers()["sec-websocket-protocol"],
+                protocol,
+                "{protocol}"
+            );
+            // The SDK's server answers through the door: its serverInfo comes first.
+            let first = rt
+                .block_on(futures_util::StreamExt::next(&mut ws))
+                .unwrap()
+                .unwrap();
+            assert!(
+                first.to_text().unwrap().contains("\"serverInfo\""),
+                "{protocol}: {first}"
+            );
+        }
+        match connect("foxglove.websocket.v2") {
+            Err(Error::Http(response)) => assert_eq!(response.status(), 400),
+            other => panic!("expected HTTP 400, got {other:?}"),
+        }
+        view.close();
     }
 
     #[test]

@@ -34,6 +34,8 @@ fn build_then_info_writes_the_documented_json() {
         "rom build failed: {}",
         String::from_utf8_lossy(&out.stderr)
     );
+    // The console says where the ROM came from (issue 18, item 4): built now, or read.
+    assert!(String::from_utf8_lossy(&out.stdout).contains(", built in "));
     let info_json = dir.path().join("info.json");
     let out = rigtwin()
         .args(["rom", "info"])
@@ -47,6 +49,60 @@ fn build_then_info_writes_the_documented_json() {
         "rom info failed: {}",
         String::from_utf8_lossy(&out.stderr)
     );
+    let said = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        said.contains("read from the file (its build took") && !said.contains(", built in "),
+        "{said}"
+    );
+    // The same file in the ROM cache: "loaded from the cache".
+    let cache = dir.path().join("cache");
+    std::fs::create_dir(&cache).unwrap();
+    std::fs::copy(&rom, cache.join("small.rom")).unwrap();
+    let out = rigtwin()
+        .env("RIGTWIN_CACHE", &cache)
+        .args(["rom", "info"])
+        .arg(cache.join("small.rom"))
+        .output()
+        .unwrap();
+    let said = String::from_utf8_lossy(&out.stdout);
+    assert!(said.contains("loaded from the cache"), "{said}");
+    // A ROM with too few modes: `simulate` warns before it starts that impacts will be slow;
+    // with the coarse rig's own modes it does not.
+    let few = dir.path().join("few.rom");
+    let out = rigtwin()
+        .args(["rom", "build", "--quiet", "--modes", "2", "--out"])
+        .arg(&few)
+        .arg(fixture("small-rig.toml"))
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let plan = dir.path().join("dwell.toml");
+    std::fs::write(
+        &plan,
+        "[[test]]\nname = \"d\"\nlevel = 6e-5\nclearance = 2.78e-3\ndirection = \"up\"\n\
+         omega_start = 1.0\nomega_end = 1.0\nsteps = 1\nsettle_periods = 1\nrecord_periods = 1\n",
+    )
+    .unwrap();
+    for (file, warns) in [(&few, true), (&rom, false)] {
+        let out = rigtwin()
+            .args(["simulate", "--quiet", "--rom"])
+            .arg(file)
+            .arg("--plan")
+            .arg(&plan)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(
+            err.contains("warning: the ROM keeps 2 modes") && err.contains("slow"),
+            warns,
+            "{}: {err}",
+            file.display()
+        );
+    }
     // Into a pipe whose reader is gone (`rigtwin rom info FILE | true`; the reader closes
     // before the ROM is read and anything printed): ends quietly, no panic message.
     let mut child = rigtwin()

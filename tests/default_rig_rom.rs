@@ -9,7 +9,7 @@ use std::sync::OnceLock;
 
 use rigtwin::config::RigConfig;
 use rigtwin::rom::build::{build_calculix, build_native, BuildOptions};
-use rigtwin::rom::info::RomInfo;
+use rigtwin::rom::info::{RomInfo, RomOrigin};
 use rigtwin::rom::Rom;
 
 fn native() -> &'static Rom {
@@ -42,7 +42,7 @@ fn label_freq(rom: &Rom, label: &str) -> f64 {
 fn default_rig_meets_the_reference_frequency_targets() {
     let rom = native();
     let info = RomInfo::new(rom);
-    eprintln!("{}", info.text());
+    eprintln!("{}", info.text(RomOrigin::Built));
     let f1fu = label_freq(rom, "1FU");
     assert_eq!(rom.labels[rom.meta.reference_mode], "1FU");
     let r1 = label_freq(rom, "1FL") / f1fu;

@@ -74,6 +74,7 @@ fn measured_relative_velocities_follow_the_truth_through_impacts() {
             record_samples: n,
             contact_threshold_v: 2.5,
             record_attempt: 1,
+            record_tolerance: None,
         };
         let m = window_signals(&layout, &info, &counts).unwrap();
         let closed = trace.closed_steps.iter().filter(|&&c| c > 0).count();

@@ -268,3 +268,51 @@ fn a_session_that_fails_to_start_leaves_the_existing_log_untouched() {
         ["plan.toml", "rig.toml", "s.json", "s.mcap"]
     );
 }
+
+/// Issue 18, item 3: every `--out`, `--json` and `--figures` creates its missing folders, as a
+/// fresh clone in CI meets them (`run --out new/dir/s.mcap` and `fe export-calculix --out
+/// new/dir` used to fail), and an OS error's text is said once.
+#[test]
+fn missing_output_folders_are_created() {
+    let dir = tempfile::tempdir().unwrap();
+    let plan = write_plan(
+        dir.path(),
+        &PLAN
+            .replace("steps = 2", "steps = 1")
+            .replace("omega_start = 1.01", "omega_start = 0.99"),
+    );
+    let new = |rest: &str| dir.path().join("new").join(rest);
+    let mcap = new("run/s.mcap");
+    let json = new("run-json/deep/s.json");
+    let o = rigtwin(&[
+        "run",
+        "--plan",
+        &plan,
+        "--quiet",
+        "--out",
+        mcap.to_str().unwrap(),
+        "--json",
+        json.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(mcap.is_file() && json.is_file());
+    let decks = new("calculix/dir");
+    let o = rigtwin(&["fe", "export-calculix", "--out", decks.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(decks.join("rig.inp").is_file(), "{}", text(&o));
+    let figures = new("report/figures");
+    let o = rigtwin(&[
+        "report",
+        mcap.to_str().unwrap(),
+        "--out",
+        figures.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(figures.is_dir());
+    // An OS error is said once.
+    let missing = dir.path().join("missing.mcap");
+    let o = rigtwin(&["replay", missing.to_str().unwrap()]);
+    let out = text(&o);
+    assert_eq!(o.status.code(), Some(1), "{out}");
+    assert_eq!(out.matches("(os error 2)").count(), 1, "{out}");
+}

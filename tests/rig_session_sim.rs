@@ -69,6 +69,12 @@ fn session_holds_the_base_amplitude_logs_standard_mcap_and_replays_bit_for_bit()
     let (o, mcap, summary) = run_plan(dir.path(), &plan, &["--backend", "sim"]);
     println!("{}", text(&o));
     assert!(o.status.success(), "{}", text(&o));
+    // The plan sets `steps_per_period`, which the rig does not use: said, not ignored.
+    assert!(
+        text(&o).contains("steps_per_period is not used by `run`"),
+        "{}",
+        text(&o)
+    );
     let s = json(&summary);
     assert_eq!(s["aborted"], false);
     let steps = s["tests"][0]["steps"].as_array().unwrap();
@@ -191,9 +197,18 @@ fn a_session_records_its_truth_variants() {
     assert_eq!(attached, cfg_text.as_bytes());
 }
 
-fn run_with_fault(fault: &str) -> (serde_json::Value, PathBuf, tempfile::TempDir, String) {
+/// `run` of [`PLAN`] with `fault` injected, on the default rig with `rig_extra` appended.
+fn run_with_fault(
+    fault: &str,
+    rig_extra: &str,
+) -> (serde_json::Value, PathBuf, tempfile::TempDir, String) {
     let dir = tempfile::tempdir().unwrap();
-    let (o, mcap, summary) = run_plan(dir.path(), PLAN, &["--inject", fault]);
+    let rig = cli_support::default_rig_with(dir.path(), rig_extra);
+    let (o, mcap, summary) = run_plan(
+        dir.path(),
+        PLAN,
+        &[rig.to_str().unwrap(), "--inject", fault],
+    );
     assert!(
         !o.status.success(),
         "an abort must fail the command: {}",
@@ -271,12 +286,19 @@ fn injected_faults_abort_with_a_reason_a_ramp_down_and_a_complete_log() {
             "saturated",
         ),
         (
-            r#"{"kind":"clearance_change","at_s":2.0,"clearance_m":-0.0002}"#,
+            // A pre-load within the plans' bound (-1e-4 l = -3e-5 m): contact on about a
+            // tenth of the samples at omega_2 (0.5 % before), past a duty limit of 5 %.
+            r#"{"kind":"clearance_change","at_s":2.0,"clearance_m":-2.5e-5}"#,
             "contact_duty",
             "contact duty",
         ),
     ] {
-        let (s, mcap, _dir, out) = run_with_fault(fault);
+        let rig_extra = if fault.contains("clearance_change") {
+            "[safety]\nmax_contact_duty = 0.05\n"
+        } else {
+            ""
+        };
+        let (s, mcap, _dir, out) = run_with_fault(fault, rig_extra);
         println!("{fault}: {}", s["abort_reason"]);
         assert_eq!(s["aborted"], true, "{out}");
         let reason = s["abort_reason"].as_str().unwrap();
@@ -360,6 +382,68 @@ fn bad_input_gives_clear_errors() {
     ]);
     assert!(!o.status.success());
     assert!(text(&o).contains("--inject"), "{}", text(&o));
+    // A clearance change out of the bounds a plan's clearance obeys (-1e-4 l to 0.1 l),
+    // refused before anything runs (it used to run and end as a misreported DAQ watchdog).
+    for bad in ["-1", "-1e-3", "0.5"] {
+        let fault = format!("{{\"kind\":\"clearance_change\",\"at_s\":1.0,\"clearance_m\":{bad}}}");
+        let o = rigtwin(&[
+            "run",
+            "--plan",
+            &plan,
+            "--quiet",
+            "--out",
+            mcap.to_str().unwrap(),
+            "--inject",
+            &fault,
+        ]);
+        let t = text(&o);
+        assert_eq!(o.status.code(), Some(1), "{bad}: {t}");
+        assert!(
+            t.contains("clearance_m") && t.contains("-1e-4") && !t.contains("DAQ silent"),
+            "{bad}: {t}"
+        );
+        assert!(!mcap.exists(), "{bad}: the session must not start");
+    }
+    // The same bounds for the device's clearance, and its --inject errors name the kinds.
+    let o = rigtwin(&["firmware-sim", "--once", "--clearance=-1"]);
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    assert!(
+        text(&o).contains("--clearance -1: expected"),
+        "{}",
+        text(&o)
+    );
+    let o = rigtwin(&[
+        "firmware-sim",
+        "--once",
+        "--inject",
+        "{\"kind\":\"meteor\"}",
+    ]);
+    let t = text(&o);
+    assert_eq!(o.status.code(), Some(1), "{t}");
+    assert!(
+        t.contains("unknown kind") && t.contains("clearance_change") && t.contains("drop_frame"),
+        "{t}"
+    );
+    let o = rigtwin(&[
+        "firmware-sim",
+        "--once",
+        "--inject",
+        "{\"kind\":\"drop_frame\",\"block\":3}",
+    ]);
+    let t = text(&o);
+    assert!(t.contains("missing field `frame`"), "{t}");
+    let o = rigtwin(&[
+        "firmware-sim",
+        "--once",
+        "--inject",
+        "{\"kind\":\"clearance_change\",\"at_s\":1.0,\"clearance_m\":-1.0}",
+    ]);
+    let t = text(&o);
+    assert!(t.contains("clearance_m") && t.contains("-1e-4"), "{t}");
+    // A malformed log filter is an error, not silently the default.
+    let o = rigtwin(&["--log", "rigtwin=loud", "replay", mcap.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    assert!(text(&o).contains("--log \"rigtwin=loud\""), "{}", text(&o));
     // Replay of files that are not session logs.
     let png = dir.path().join("a.png");
     std::fs::write(&png, b"\x89PNG\r\n\x1a\n not an mcap").unwrap();

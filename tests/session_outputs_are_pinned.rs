@@ -102,6 +102,27 @@ fn session_replay_and_twin_replay_match_the_pinned_outputs() {
     ]);
     assert!(o.status.success(), "{}", text(&o));
     let (measured, live_twin) = without_twin(&json(&live));
+    // Issue 18, item 4: a step whose base amplitude still misses the record tolerance after
+    // its last window (this session has one: `base_amp_off_tolerance` in the pinned summary)
+    // is flagged on its line and named at the end.
+    let off = |s: &serde_json::Value| {
+        s["tests"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .flat_map(|t| t["steps"].as_array().unwrap())
+            .filter(|st| st["base_amp_off_tolerance"] == true)
+            .count()
+    };
+    let flagged = |out: &str| {
+        assert!(
+            out.contains("BASE OFF TOLERANCE after 3 record windows")
+                && out.contains("BASE AMPLITUDE OFF TOLERANCE: 1 step(s)"),
+            "{out}"
+        );
+    };
+    assert_eq!(off(&measured), 1, "{measured}");
+    flagged(&text(&o));
 
     let replayed = dir.path().join("replay.json");
     let o = rigtwin(&[
@@ -111,6 +132,7 @@ fn session_replay_and_twin_replay_match_the_pinned_outputs() {
         replayed.to_str().unwrap(),
     ]);
     assert!(o.status.success(), "{}", text(&o));
+    flagged(&text(&o));
     let twin_replayed = dir.path().join("replay-twin.json");
     let o = rigtwin(&[
         "replay",

@@ -9,7 +9,7 @@ use std::path::PathBuf;
 
 use super::models::cached_rom;
 use super::paths::Files;
-use crate::rom::info::RomInfo;
+use crate::rom::info::{RomInfo, RomOrigin};
 
 /// The demo plan, embedded so that the demo runs from any folder.
 const DEMO_PLAN: &str = include_str!("../../rig-config/plans/demo.toml");
@@ -50,11 +50,18 @@ pub(crate) fn run(a: DemoArgs) -> anyhow::Result<()> {
             "the session figures",
             super::report::FOLDER_FILES,
         )
-        .check()?;
+        .ready()?;
     let cfg = crate::config::RigConfig::default_rig();
     let (rom, path, reused) = cached_rom(&cfg, a.rebuild, a.quiet)?;
     let info = RomInfo::new(&rom);
-    println!("{}", info.text());
+    println!(
+        "{}",
+        info.text(if reused {
+            RomOrigin::Cache
+        } else {
+            RomOrigin::Built
+        })
+    );
     println!(
         "ROM {} {}",
         if reused {

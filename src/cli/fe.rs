@@ -35,7 +35,7 @@ pub(crate) fn run(cmd: FeCommand) -> anyhow::Result<()> {
             Files::new()
                 .input_opt("CONFIG", a.config.as_deref(), "the rig description")
                 .output_folder("--out", &a.out, "the CalculiX decks", &["inp"])
-                .check()?;
+                .ready()?;
             let cfg = super::models::load_config(a.config.as_deref())?;
             let mesh = crate::fe::rig::mesh_rig(cfg.model())?;
             let files = crate::fe::calculix::export(&mesh, &a.out, &a.job, a.modes)?;

@@ -3,7 +3,7 @@
 //! simulated rig and speaking exactly the protocols of `firmware-interfaces/`. Prints one JSON
 //! line with where to connect, then one per finished session.
 
-use anyhow::Context;
+use anyhow::{bail, Context};
 use clap::{Args, ValueEnum};
 use std::io::Write;
 use std::net::SocketAddr;
@@ -11,9 +11,9 @@ use std::path::PathBuf;
 
 use crate::config::RigConfig;
 use crate::rig::device::{
-    FirmwareOptions, FirmwareSim, Inject, Pace, HEARTBEAT_PERIOD, HEARTBEAT_TIMEOUT,
+    FirmwareOptions, FirmwareSim, Inject, LinkFault, Pace, HEARTBEAT_PERIOD, HEARTBEAT_TIMEOUT,
 };
-use crate::rig::sim::{SimRig, SimRigSpec};
+use crate::rig::sim::{InjectedFault, SimRig, SimRigSpec};
 
 /// How the device paces its DAQ blocks.
 #[derive(Clone, Copy, Debug, ValueEnum, PartialEq, Eq)]
@@ -33,7 +33,8 @@ pub struct FirmwareSimArgs {
     /// UDP address of the CAN tunnel (loopback by default; port 0: a free port).
     #[arg(long, default_value = "127.0.0.1:0")]
     pub can_listen: SocketAddr,
-    /// The simulated rig's clearance / beam length (default: the rig description's).
+    /// The simulated rig's clearance / beam length (default: the rig description's); within a
+    /// plan's bounds, -1e-4 to 0.1 (0: the probes touch; negative: a pre-load).
     #[arg(long)]
     pub clearance: Option<f64>,
     /// Block pacing.
@@ -56,6 +57,38 @@ pub struct FirmwareSimArgs {
     pub quiet: bool,
 }
 
+/// The link faults `--inject` takes, with their fields, for error messages.
+const LINK_KINDS: &str = "drop_frame {block, frame}, swap_frames {block}, corrupt_sample \
+     {block}, bad_frames {block}, interlock {at_s}, serial_garbage {at_s, port: ldv|amp}, \
+     serial_silent {at_s, port}, mute {at_s}, vanish {at_s}";
+
+/// One `--inject` value: a link fault or a fault of the simulated rig (checked as `rigtwin
+/// run --inject` checks it). An error names the kinds, or what is wrong with a known kind.
+fn parse_inject(s: &str, beam_length_m: f64) -> anyhow::Result<Inject> {
+    let all = || {
+        format!(
+            "the simulated rig's {}; link faults: {LINK_KINDS}",
+            super::run::INJECT_KINDS
+        )
+    };
+    let value: serde_json::Value = serde_json::from_str(s)
+        .map_err(|e| anyhow::anyhow!("--inject {s}: not JSON ({e}); {}", all()))?;
+    let unknown_kind = |e: &serde_json::Error| e.to_string().starts_with("unknown variant");
+    match serde_json::from_value::<LinkFault>(value.clone()) {
+        Ok(f) => Ok(Inject::Link(f)),
+        Err(e) if !unknown_kind(&e) => {
+            bail!("--inject {s}: not a fault description: {e}; {}", all())
+        }
+        Err(_) => match serde_json::from_value::<InjectedFault>(value) {
+            Ok(_) => Ok(Inject::Rig(super::run::parse_inject(s, beam_length_m)?)),
+            Err(e) if !unknown_kind(&e) => {
+                bail!("--inject {s}: not a fault description: {e}; {}", all())
+            }
+            Err(_) => bail!("--inject {s}: unknown kind; {}", all()),
+        },
+    }
+}
+
 pub(crate) fn run(a: FirmwareSimArgs) -> anyhow::Result<()> {
     let cfg = match &a.config {
         Some(p) => RigConfig::from_path(p)?,
@@ -64,19 +97,12 @@ pub(crate) fn run(a: FirmwareSimArgs) -> anyhow::Result<()> {
     let inject: Vec<Inject> = a
         .inject
         .iter()
-        .map(|s| {
-            serde_json::from_str(s).with_context(|| {
-                format!(
-                    "--inject {s}: not a fault description (the simulated rig's {}; link \
-                         faults: drop_frame {{block, frame}}, swap_frames {{block}}, \
-                         corrupt_sample {{block}}, bad_frames {{block}}, interlock {{at_s}}, \
-                         serial_garbage {{at_s, port: ldv|amp}}, serial_silent {{at_s, port}}, \
-                         mute {{at_s}}, vanish {{at_s}})",
-                    super::run::INJECT_KINDS
-                )
-            })
-        })
+        .map(|s| parse_inject(s, cfg.rig.beam_length))
         .collect::<anyhow::Result<_>>()?;
+    if let Some(c) = a.clearance {
+        crate::plan::check_clearance(c)
+            .map_err(|expected| anyhow::anyhow!("--clearance {c}: expected {expected}"))?;
+    }
     let mut truth_cfg = cfg.clone();
     truth_cfg.reduction = crate::config::ReductionSpec {
         cutoff_ratio: Some(cfg.truth.cutoff_ratio),

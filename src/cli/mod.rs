@@ -78,10 +78,18 @@ pub fn main() -> std::process::ExitCode {
     ) {
         default_sigpipe();
     }
-    let filter = tracing_subscriber::EnvFilter::try_new(&cli.log)
-        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn"));
+    let filter = match log_filter(&cli.log) {
+        Ok(f) => f,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return std::process::ExitCode::FAILURE;
+        }
+    };
+    // Colours only for a terminal: a log redirected to a file or a pipe stays plain text.
+    use std::io::IsTerminal;
     tracing_subscriber::fmt()
         .with_env_filter(filter)
+        .with_ansi(std::io::stderr().is_terminal())
         .with_writer(std::io::stderr)
         .init();
     let result = match cli.command {
@@ -101,6 +109,19 @@ pub fn main() -> std::process::ExitCode {
             std::process::ExitCode::FAILURE
         }
     }
+}
+
+/// The `--log` filter, or what is wrong with it (a malformed filter is an error, not silently
+/// replaced by the default).
+fn log_filter(text: &str) -> Result<tracing_subscriber::EnvFilter, String> {
+    tracing_subscriber::EnvFilter::builder()
+        .parse(text)
+        .map_err(|e| {
+            format!(
+                "--log {text:?}: not a log filter ({e}); expected tracing's EnvFilter syntax, \
+                 e.g. \"info\", \"rigtwin=debug\" or \"warn,rigtwin::session=info\""
+            )
+        })
 }
 
 /// An error and its causes, `: `-separated, leaving out a cause whose text the message already
@@ -172,5 +193,27 @@ pub(crate) fn extensions_line(model: &crate::config::PhysicsSpec) -> String {
         format!("{} ({})", model.effects().join(", "), model.to_json())
     } else {
         "none".to_string()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_malformed_log_filter_is_an_error() {
+        for good in [
+            "warn",
+            "info",
+            "rigtwin=debug",
+            "warn,rigtwin::session=info",
+            "off",
+        ] {
+            assert!(log_filter(good).is_ok(), "{good}");
+        }
+        for bad in ["rigtwin=[[", "rigtwin=loud", "=debug"] {
+            let e = log_filter(bad).unwrap_err();
+            assert!(e.contains("--log") && e.contains("EnvFilter"), "{bad}: {e}");
+        }
     }
 }

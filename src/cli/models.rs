@@ -50,6 +50,7 @@ pub(crate) fn cached_rom(
         &mut |e| progress.event(&e),
     )?;
     progress.finish();
+    warn_few_modes(&rom);
     Ok((
         rom,
         path,
@@ -68,4 +69,12 @@ pub(crate) fn truth_rom(cfg: &RigConfig, rebuild: bool, quiet: bool) -> anyhow::
     };
     let (truth, _, _) = cached_rom(&truth_cfg, rebuild, quiet)?;
     Ok(truth)
+}
+
+/// Says before anything runs on `rom` that its impacts will be slow, when it keeps too few
+/// modes ([`crate::rom::info::RomInfo::few_modes_warning`]).
+pub(crate) fn warn_few_modes(rom: &Rom) {
+    if let Some(w) = crate::rom::info::RomInfo::new(rom).few_modes_warning() {
+        eprintln!("warning: {w}");
+    }
 }

@@ -2,8 +2,10 @@
 //! no output may land on one of the command's inputs or on another of its outputs — compared
 //! by path and by file identity (device and inode, so a hard link or a symbolic link to an
 //! input counts as the input) — and every output's folder must exist or be creatable and be
-//! writable. A command builds one [`Files`] from its flags and calls [`Files::check`] before it
-//! reads, builds or runs anything, so a bad path costs nothing and destroys nothing.
+//! writable. A command builds one [`Files`] from its flags and calls [`Files::ready`] before it
+//! reads, builds or runs anything, so a bad path costs nothing and destroys nothing; `ready`
+//! then creates the missing folders of every output (issue 18, item 3: every `--out`, `--json`
+//! and `--figures` behaves the same).
 
 use anyhow::bail;
 use std::os::unix::fs::MetadataExt;
@@ -222,6 +224,32 @@ impl Files {
     }
 }
 
+impl Files {
+    /// [`Files::check`], then creates every output's missing folders: an output file's parent
+    /// folders, an output folder and its parents. (Only folders: no output file is touched.)
+    pub(crate) fn ready(&self) -> anyhow::Result<()> {
+        self.check()?;
+        for out in &self.outputs {
+            let path = &out.named.path;
+            let dir = match out.folder {
+                Some(_) => Some(path.as_path()),
+                None => path.parent().filter(|d| !d.as_os_str().is_empty()),
+            };
+            if let Some(dir) = dir {
+                std::fs::create_dir_all(dir).map_err(|e| {
+                    anyhow::anyhow!(
+                        "{} {}: creating the folder {}: {e}",
+                        out.named.flag,
+                        path.display(),
+                        dir.display()
+                    )
+                })?;
+            }
+        }
+        Ok(())
+    }
+}
+
 /// How output `out` would overwrite `file`, in words, or `None`.
 fn clash(out: &Output, file: &Path) -> Option<String> {
     if same_file(&out.named.path, file) {
@@ -384,5 +412,28 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("not a folder"), "{e}");
+    }
+
+    #[test]
+    fn ready_creates_the_missing_folders_of_every_output() {
+        let dir = tempfile::tempdir().unwrap();
+        let log = dir.path().join("new").join("dir").join("s.mcap");
+        let figs = dir.path().join("other").join("figs");
+        Files::new()
+            .output("--out", &log, "the session log")
+            .output_folder("--figures", &figs, "the figures", &["png"])
+            .ready()
+            .unwrap();
+        assert!(log.parent().unwrap().is_dir());
+        assert!(!log.exists(), "no output file is created");
+        assert!(figs.is_dir());
+        // A refused output creates nothing.
+        let s = dir.path().join("x").join("s.mcap");
+        assert!(Files::new()
+            .output("--out", &s, "the session log")
+            .output("--json", &s, "the summary")
+            .ready()
+            .is_err());
+        assert!(!dir.path().join("x").exists());
     }
 }

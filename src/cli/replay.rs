@@ -63,7 +63,7 @@ pub(crate) fn run(a: ReplayArgs) -> anyhow::Result<()> {
         )
         .output_opt("--out", a.out.as_deref(), "the session log copy")
         .output_opt("--json", a.json.as_deref(), "the summary")
-        .check()?;
+        .ready()?;
     let r = crate::session::replay::replay(&a.file)?;
     if !r.complete {
         println!(
@@ -95,11 +95,12 @@ pub(crate) fn run(a: ReplayArgs) -> anyhow::Result<()> {
         let model = twin_model_source(choice, &a.file, r.rig_toml.as_deref())?;
         let spec = model.spec.clone();
         let (rom, source) = match &model.rom {
-            TwinRom::File(path) => (
-                crate::rom::file::read(path)
-                    .with_context(|| format!("--rom {}", path.display()))?,
-                model.source.clone(),
-            ),
+            TwinRom::File(path) => {
+                let rom = crate::rom::file::read(path)
+                    .with_context(|| format!("--rom {}", path.display()))?;
+                models::warn_few_modes(&rom);
+                (rom, model.source.clone())
+            }
             TwinRom::Description(cfg) => {
                 let (rom, path, _) = models::cached_rom(cfg, a.rebuild, true)?;
                 let source = format!("{} (ROM {})", model.source, path.display());

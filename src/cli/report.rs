@@ -24,7 +24,7 @@ pub(crate) fn run(a: ReportArgs) -> anyhow::Result<()> {
     Files::new()
         .input("FILE", &a.file, "the session log")
         .output_folder("--out", &a.out, "the figures and summary", FOLDER_FILES)
-        .check()?;
+        .ready()?;
     let (written, summary) = figures(&a.file, &a.out)?;
     for p in written {
         println!("{}", p.display());

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use super::paths::Files;
 use super::progress::BuildProgress;
 use crate::rom::build::{build_calculix, build_native, BuildOptions};
-use crate::rom::info::RomInfo;
+use crate::rom::info::{RomInfo, RomOrigin};
 use crate::rom::ModeSelection;
 
 /// `rigtwin rom ...`
@@ -90,7 +90,7 @@ pub(crate) fn run(cmd: RomCommand) -> anyhow::Result<()> {
                     files = files.input("--calculix", &file, "a CalculiX file");
                 }
             }
-            files.check()?;
+            files.ready()?;
             let cfg = super::models::load_config(a.config.as_deref())?;
             let opts = BuildOptions {
                 selection: a.selection.selection()?,
@@ -104,7 +104,7 @@ pub(crate) fn run(cmd: RomCommand) -> anyhow::Result<()> {
             progress.finish();
             crate::rom::file::write(&rom, &a.out)?;
             let info = RomInfo::new(&rom);
-            println!("{}", info.text());
+            println!("{}", info.text(RomOrigin::Built));
             println!("wrote {}", a.out.display());
             if let Some(j) = &a.json {
                 super::write_json(j, &info)?;
@@ -115,11 +115,21 @@ pub(crate) fn run(cmd: RomCommand) -> anyhow::Result<()> {
             Files::new()
                 .input("FILE", &a.file, "the ROM")
                 .output_opt("--json", a.json.as_deref(), "the ROM summary")
-                .check()?;
+                .ready()?;
             let rom =
                 crate::rom::file::read(&a.file).with_context(|| "reading the ROM".to_string())?;
             let info = RomInfo::new(&rom);
-            println!("{}", info.text());
+            // A file of the ROM cache is "loaded from the cache" as `demo` says of it.
+            let in_cache = a.file.parent().is_some_and(|d| {
+                let cache = super::cache_dir();
+                d.canonicalize().ok() == cache.canonicalize().ok() && cache.canonicalize().is_ok()
+            });
+            let origin = if in_cache {
+                RomOrigin::Cache
+            } else {
+                RomOrigin::File
+            };
+            println!("{}", info.text(origin));
             if let Some(j) = &a.json {
                 super::write_json(j, &info)?;
             }

@@ -75,7 +75,8 @@ pub struct RunArgs {
     /// '{"kind":"dead_channel","at_s":3.0,"channel":"upper_tip"}' (repeatable). Kinds and
     /// their fields (at_s: rig time, s): daq_stall {at_s}, dead_channel {at_s, channel: a
     /// layout channel name}, drive_saturation {at_s, limit_v: the amplifier's new output
-    /// limit, V}, clearance_change {at_s, clearance_m: the new clearance, m}.
+    /// limit, V}, clearance_change {at_s, clearance_m: the new clearance, m, within the bounds
+    /// of a plan's clearance: -1e-4 l to 0.1 l}.
     #[arg(long)]
     pub inject: Vec<String>,
     /// Rebuild the ROMs even if cached.
@@ -89,7 +90,17 @@ pub struct RunArgs {
 /// The faults `--inject` takes, with their fields, for error messages.
 pub(crate) const INJECT_KINDS: &str = "kinds: daq_stall {at_s}, dead_channel {at_s, channel}, \
      drive_saturation {at_s, limit_v}, clearance_change {at_s, clearance_m}; at_s in rig \
-     seconds, limit_v in V, clearance_m in m";
+     seconds, limit_v in V, clearance_m in m (-1e-4 l to 0.1 l)";
+
+/// One `--inject` value: a fault of the simulated rig (beams of `beam_length_m`), parsed and
+/// checked ([`InjectedFault::check`]: a new clearance obeys the plans' bounds).
+pub(crate) fn parse_inject(s: &str, beam_length_m: f64) -> anyhow::Result<InjectedFault> {
+    let f: InjectedFault = serde_json::from_str(s)
+        .with_context(|| format!("--inject {s}: not a fault description ({INJECT_KINDS})"))?;
+    f.check(beam_length_m)
+        .map_err(|e| anyhow::anyhow!("--inject {s}: {e}"))?;
+    Ok(f)
+}
 
 /// A session to run: the rig description, the plan and what to run it with.
 pub(crate) struct SessionArgs<'a> {
@@ -261,7 +272,7 @@ fn sim_backend(
         .context("simulated rig")?;
     let mut backend = SimBackend::new(rig, cfg.rig.beam_length, session.realtime);
     for f in session.inject {
-        backend.inject(f.clone());
+        backend.inject(f.clone()).context("--inject")?;
     }
     Ok(backend)
 }
@@ -339,7 +350,7 @@ pub(crate) fn print_summary(s: &SessionSummary) {
         for step in &t.steps {
             let st = &step.measured;
             println!(
-                "    Omega/omega_2 {:.4}  rms upper {:7.2} lower {:7.2}  contact {:.3}  impacts/period {:.2}  base {:.4e} m (target {:.4e}, {:+.2} %)  drive {:.4} V  settle {:.2} s{}",
+                "    Omega/omega_2 {:.4}  rms upper {:7.2} lower {:7.2}  contact {:.3}  impacts/period {:.2}  base {:.4e} m (target {:.4e}, {:+.2} %)  drive {:.4} V  settle {:.2} s{}{}",
                 st.omega_ratio,
                 st.metrics.rms_upper,
                 st.metrics.rms_lower,
@@ -350,7 +361,15 @@ pub(crate) fn print_summary(s: &SessionSummary) {
                 100.0 * (st.base_amp_measured / st.base_amp_target - 1.0),
                 st.drive_amplitude,
                 st.settle_seconds,
-                if st.settled { "" } else { " (not settled)" }
+                if st.settled { "" } else { " (not settled)" },
+                if st.base_amp_off_tolerance {
+                    format!(
+                        "  BASE OFF TOLERANCE after {} record windows",
+                        st.record_attempt
+                    )
+                } else {
+                    String::new()
+                }
             );
             if let Some(w) = &step.twin {
                 println!(
@@ -367,6 +386,31 @@ pub(crate) fn print_summary(s: &SessionSummary) {
                 );
             }
         }
+    }
+    let off: Vec<String> = s
+        .tests
+        .iter()
+        .flat_map(|t| {
+            t.steps
+                .iter()
+                .filter(|step| step.measured.base_amp_off_tolerance)
+                .map(move |step| {
+                    format!(
+                        "{} at {:.4} ({:+.2} %)",
+                        t.name,
+                        step.measured.omega_ratio,
+                        100.0 * step.measured.base_amp_error()
+                    )
+                })
+        })
+        .collect();
+    if !off.is_empty() {
+        println!(
+            "BASE AMPLITUDE OFF TOLERANCE: {} step(s) kept a record window whose base amplitude \
+             misses [control] record_tolerance after the last window allowed: {}",
+            off.len(),
+            off.join(", ")
+        );
     }
     if let Some(r) = &s.abort_reason {
         println!("ABORTED: {r}");
@@ -403,6 +447,30 @@ fn files(a: &RunArgs) -> Files {
     files
 }
 
+/// What `run` says of a plan that sets `steps_per_period`.
+const STEPS_PER_PERIOD_NOTE: &str = "note: the plan's steps_per_period is not used by `run`: it \
+     is the time step of `rigtwin simulate`; the rig samples at [daq] sample_rate and the twin \
+     steps [twin] steps_per_sample times per sample";
+
+/// Whether the plan file sets `steps_per_period` (in `[defaults]` or in a test).
+fn sets_steps_per_period(plan: &Path) -> bool {
+    let Ok(text) = std::fs::read_to_string(plan) else {
+        return false;
+    };
+    let Ok(value) = text.parse::<toml::Table>() else {
+        return false;
+    };
+    let has = |t: Option<&toml::Value>| {
+        t.and_then(toml::Value::as_table)
+            .is_some_and(|t| t.contains_key("steps_per_period"))
+    };
+    has(value.get("defaults"))
+        || value
+            .get("test")
+            .and_then(toml::Value::as_array)
+            .is_some_and(|tests| tests.iter().any(|t| has(Some(t))))
+}
+
 /// What a session log that could not be finished (a full disk) holds, in rig time and steps.
 fn what_the_log_kept(out: &Path) -> String {
     match crate::session::replay::replay(out) {
@@ -418,8 +486,33 @@ fn what_the_log_kept(out: &Path) -> String {
     }
 }
 
+/// Removes what a `run` killed before its session started left of `--out` and `--json`: their
+/// staged files (`NAME.partial-PID-N`) of processes that ended, and says so.
+fn remove_stale_partials(a: &RunArgs) {
+    for dest in std::iter::once(&a.out).chain(a.json.as_ref()) {
+        for p in crate::log::stale_partials(dest) {
+            match std::fs::remove_file(&p) {
+                Ok(()) => println!(
+                    "removed {}: a staged file of {} left by a run killed before it finished \
+                     it (a staged session log holds no samples: the log takes its name when the \
+                     session starts)",
+                    p.display(),
+                    dest.display()
+                ),
+                Err(e) => println!(
+                    "note: {} is a staged file of {} left by a run that was killed; it could \
+                     not be removed: {e}",
+                    p.display(),
+                    dest.display()
+                ),
+            }
+        }
+    }
+}
+
 pub(crate) fn run(a: RunArgs) -> anyhow::Result<()> {
-    files(&a).check()?;
+    files(&a).ready()?;
+    remove_stale_partials(&a);
     let hw = match a.backend {
         BackendArg::Sim => {
             if a.hw.can.is_some()
@@ -443,6 +536,9 @@ pub(crate) fn run(a: RunArgs) -> anyhow::Result<()> {
     };
     let (cfg, text) = models::load_config_text(a.config.as_deref())?;
     let plan = Plan::from_path(&a.plan)?;
+    if sets_steps_per_period(&a.plan) {
+        println!("{STEPS_PER_PERIOD_NOTE}");
+    }
     if cfg.truth.variants.any() {
         println!(
             "simulated rig: hidden physics on ([truth.variants]): {}",
@@ -452,10 +548,7 @@ pub(crate) fn run(a: RunArgs) -> anyhow::Result<()> {
     let inject: Vec<InjectedFault> = a
         .inject
         .iter()
-        .map(|s| {
-            serde_json::from_str(s)
-                .with_context(|| format!("--inject {s}: not a fault description ({INJECT_KINDS})"))
-        })
+        .map(|s| parse_inject(s, cfg.rig.beam_length))
         .collect::<anyhow::Result<_>>()?;
     let hw = match hw {
         None => None,

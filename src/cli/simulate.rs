@@ -228,6 +228,7 @@ pub(crate) fn load_rom(
 ) -> anyhow::Result<(Rom, String, PhysicsSpec)> {
     if let Some(p) = &source.rom {
         let rom = crate::rom::file::read(p).context("reading the ROM")?;
+        super::models::warn_few_modes(&rom);
         return Ok((rom, p.display().to_string(), PhysicsSpec::default()));
     }
     let cfg = super::models::load_config(source.config.as_deref())?;
@@ -449,7 +450,7 @@ fn stepped_sine(a: RunArgs) -> anyhow::Result<()> {
             "the figures",
             FIGURE_FILES,
         )
-        .check()?;
+        .ready()?;
     let plan = Plan::from_path(plan_path)?;
     let (rom, rom_path, model) = load_rom(&a.source, a.quiet)?;
     run_plan_to_outputs(
@@ -479,7 +480,7 @@ fn convergence(a: ConvergenceArgs) -> anyhow::Result<()> {
             "the figure",
             FIGURE_FILES,
         )
-        .check()?;
+        .ready()?;
     if !(a.omega > 0.0 && a.omega < 10.0) {
         bail!("--omega = {}: expected Omega/omega_2 in (0, 10)", a.omega);
     }

@@ -44,8 +44,8 @@ pub struct ControlSpec {
     /// more than this relative tolerance is rejected and recorded again, -. Default 0.01.
     pub record_tolerance: f64,
     /// Record windows a step may take to meet `record_tolerance` (>= 1); the last one is kept
-    /// whatever its error (the summary's `record_attempt` and `base_amp_measured` show it).
-    /// Default 3.
+    /// whatever its error (the summary's `record_attempt`, `base_amp_measured` and
+    /// `base_amp_off_tolerance` show it; the console flags it). Default 3.
     ///
     // NOTE: in the impact regime the beams' free response beats against the drive at 1-2 Hz
     // and moves the base amplitude by +-15 % period by period (the reaction on the shaker's

@@ -510,6 +510,7 @@ impl Procedure {
             record_samples: window.len,
             contact_threshold_v: self.setup.control.contact_threshold_v,
             record_attempt: self.record_attempt,
+            record_tolerance: Some(self.setup.control.record_tolerance),
         };
         let summary =
             summarize(&self.layout, &info, &window.counts).map_err(|e| AbortReason::Backend {

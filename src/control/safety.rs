@@ -110,9 +110,9 @@ pub enum AbortReason {
         target_m: f64,
     },
     /// The session log could not keep up or failed.
-    #[error("session log: {message}")]
+    #[error("{message}")]
     Log {
-        /// What failed.
+        /// What failed (the log's error, which names the log file: "session log PATH: ...").
         message: String,
     },
     /// The backend failed.

@@ -46,6 +46,10 @@ pub struct StepInfo {
     /// base amplitude misses `[control] record_tolerance` is recorded again).
     #[serde(default = "first_attempt")]
     pub record_attempt: u32,
+    /// `[control] record_tolerance` in force: the step's base amplitude was to be within this
+    /// relative error of the target (`None` in logs written before it was recorded).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub record_tolerance: Option<f64>,
 }
 
 fn first_attempt() -> u32 {
@@ -90,6 +94,18 @@ pub struct StepSummary {
     /// [`StepInfo::record_attempt`]).
     #[serde(default = "first_attempt")]
     pub record_attempt: u32,
+    /// The fundamental base amplitude of the kept window still misses `[control]
+    /// record_tolerance` ([`StepInfo::record_tolerance`]): the step took every record window
+    /// it may (`record_attempts`) and kept the last one. Written only when true.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub base_amp_off_tolerance: bool,
+}
+
+impl StepSummary {
+    /// The measured fundamental base amplitude's relative error against the target.
+    pub fn base_amp_error(&self) -> f64 {
+        self.base_amp_measured / self.base_amp_target - 1.0
+    }
 }
 
 /// Errors of a step summary.
@@ -248,5 +264,125 @@ pub fn summarize(
         settled: info.settled,
         record_start_s: info.record_first_sample as f64 * w.dt,
         record_attempt: info.record_attempt,
+        // NaN (a broken window) is never within tolerance, as in the procedure's gate.
+        base_amp_off_tolerance: info.record_tolerance.is_some_and(|t| {
+            let within = (base_amp_measured / info.base_amp_target - 1.0).abs() <= t;
+            !within
+        }),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::DaqSpec;
+    use std::f64::consts::TAU;
+
+    /// Excitation frequency of the synthetic window, Hz.
+    const F: f64 = 50.0;
+
+    /// A record window of 40 periods at [`F`] on the default channel map: the platform
+    /// accelerometers carry the base acceleration, the vibrometer the upper tip's absolute
+    /// velocity, the tip and mid accelerometers their absolute accelerations, the contact
+    /// channel an open contact, the drive channels a sine. `gain` scales one channel's
+    /// recording as a sensitivity error does.
+    fn window(gain: Option<(&str, f64)>) -> (DaqLayout, StepInfo, Vec<i32>) {
+        let layout = crate::rig::channels::layout(&DaqSpec::default());
+        let dt = layout.dt();
+        let w = TAU * F;
+        let n = (40.0 / (F * dt)).round() as usize;
+        let a_b = 2.0; // base acceleration amplitude, m/s^2
+        let (v_up, v_lo) = (0.05, 0.03); // relative tip velocity amplitudes, m/s
+        let signal = |name: &str, t: f64| -> f64 {
+            let (s, c) = (w * t).sin_cos();
+            let base_v = -a_b / w * c;
+            match name {
+                "vibrometer" => base_v + v_up * s,
+                "upper_tip" | "upper_mid" => a_b * s + v_up * w * c,
+                "lower_tip" | "lower_mid" => a_b * s + v_lo * w * (w * t + 0.3).cos(),
+                "contact_voltage" => 5.0,
+                "drive_voltage" | "drive_current" => 0.1 * s,
+                _ => a_b * s, // the platform accelerometers
+            }
+        };
+        let mut counts = Vec::with_capacity(n * layout.channels.len());
+        for ch in &layout.channels {
+            let g = gain.filter(|(c, _)| *c == ch.name).map_or(1.0, |x| x.1);
+            counts.extend(
+                (0..n).map(|i| (g * signal(&ch.name, i as f64 * dt) / ch.scale).round() as i32),
+            );
+        }
+        let info = StepInfo {
+            test: "t".into(),
+            step: 0,
+            omega_ratio: 1.0,
+            omega: w,
+            base_amp_target: a_b / (w * w),
+            drive_amplitude: 0.1,
+            settle_seconds: 1.0,
+            settled: true,
+            record_first_sample: 0,
+            record_samples: n,
+            contact_threshold_v: 2.5,
+            record_attempt: 1,
+            record_tolerance: Some(0.01),
+        };
+        (layout, info, counts)
+    }
+
+    fn summary(gain: Option<(&str, f64)>) -> StepSummary {
+        let (layout, info, counts) = window(gain);
+        summarize(&layout, &info, &counts).unwrap()
+    }
+
+    /// Which channel feeds which metric (documented in rig-config/README.md, "Which channel
+    /// feeds which metric"): a 3 % sensitivity error shows in the upper RMS through the
+    /// vibrometer, in the lower RMS through the lower-tip accelerometer, in the base amplitude
+    /// through each platform accelerometer; the upper-tip accelerometer (used only without a
+    /// vibrometer), the mid accelerometers and the drive channels change no summary value.
+    #[test]
+    fn each_metric_comes_from_its_channels() {
+        let nominal = summary(None);
+        assert!(!nominal.base_amp_off_tolerance, "{nominal:?}");
+        for unused in [
+            "upper_tip",
+            "upper_mid",
+            "lower_mid",
+            "drive_voltage",
+            "drive_current",
+        ] {
+            assert_eq!(summary(Some((unused, 1.03))), nominal, "{unused}");
+        }
+        let vib = summary(Some(("vibrometer", 1.03)));
+        assert!(
+            vib.metrics.rms_upper > 1.01 * nominal.metrics.rms_upper,
+            "{vib:?}"
+        );
+        assert_eq!(vib.metrics.rms_lower, nominal.metrics.rms_lower);
+        assert_eq!(vib.base_amp_measured, nominal.base_amp_measured);
+        let lower = summary(Some(("lower_tip", 1.03)));
+        assert_ne!(lower.metrics.rms_lower, nominal.metrics.rms_lower);
+        assert_eq!(lower.metrics.rms_upper, nominal.metrics.rms_upper);
+        let platform = summary(Some(("platform_1", 1.03)));
+        let e = platform.base_amp_measured / nominal.base_amp_measured - 1.0;
+        assert!(
+            (e - 0.01).abs() < 1e-3,
+            "one of three platform accelerometers: {e}"
+        );
+        let all_platform = {
+            let (layout, info, mut counts) = window(None);
+            let n = info.record_samples;
+            for (k, ch) in layout.channels.iter().enumerate() {
+                if ch.name.starts_with("platform_") {
+                    counts[k * n..(k + 1) * n]
+                        .iter_mut()
+                        .for_each(|c| *c = (f64::from(*c) * 1.03).round() as i32);
+                }
+            }
+            summarize(&layout, &info, &counts).unwrap()
+        };
+        // 3 % off: past the record tolerance (1 %), flagged.
+        assert!(all_platform.base_amp_off_tolerance, "{all_platform:?}");
+        assert!((all_platform.base_amp_error() - 0.03).abs() < 1e-3);
+    }
 }

@@ -110,7 +110,9 @@ pub enum LogError {
 }
 
 /// Errors of reading a session log. A file cut off by a crash is not an error: the reader
-/// returns what it holds and marks the session incomplete.
+/// returns what it holds and marks the session incomplete. Nor is damage after writing (a
+/// chunk failing its CRC, a record that does not parse): the reader skips it, salvages the
+/// rest and describes what was lost in the session's note, so no variant stands for it.
 #[derive(Debug, thiserror::Error)]
 pub enum LogReadError {
     /// The file could not be opened or read.
@@ -148,31 +150,6 @@ pub enum LogReadError {
         path: PathBuf,
         /// File length, bytes.
         len: usize,
-    },
-    /// A chunk failed its CRC or could not be decompressed.
-    #[error(
-        "session log {path}: corrupted chunk at byte offset {offset}: {reason} \
-         (the file was damaged after writing)"
-    )]
-    CorruptChunk {
-        /// The file.
-        path: PathBuf,
-        /// Byte offset of the chunk record.
-        offset: u64,
-        /// What is wrong.
-        reason: String,
-    },
-    /// A record could not be parsed or is inconsistent.
-    #[error("session log {path}: corrupted record (opcode {opcode:#04x}) at byte offset {offset}: {reason}")]
-    CorruptRecord {
-        /// The file.
-        path: PathBuf,
-        /// Byte offset of the record.
-        offset: u64,
-        /// The record's opcode.
-        opcode: u8,
-        /// What is wrong.
-        reason: String,
     },
     /// The MCAP file was not written by rigtwin (no "rigtwin" metadata record), or by a newer
     /// rigtwin with a format this version cannot read.

@@ -35,7 +35,7 @@ pub use reader::{
     read_session, read_session_bytes, ChannelInfo, LoggedMessage, RigtwinInfo, SchemaInfo,
     SessionRead,
 };
-pub use staged::{write_atomically, Staged};
+pub use staged::{stale_partials, write_atomically, Staged};
 pub use writer::{
     Attachment, LogChannel, LogHandle, LogJoin, LogProgress, LogStats, MetadataRecord, RawChannel,
     SessionLog,

@@ -4,6 +4,12 @@
 //! dropped. The session log is published when the session starts (from then on it holds
 //! samples worth keeping, and a crash leaves it at its own name); a copy or a JSON summary when
 //! it is complete ([`write_atomically`]).
+//!
+//! A process killed with SIGKILL (or by a power cut) before it published its file leaves the
+//! temporary `NAME.partial-PID-N` behind: no drop runs. For the session log that is a file
+//! holding only its header and metadata (the log is published as soon as the backend starts),
+//! so it holds no sample. [`stale_partials`] finds such files of a destination whose process
+//! is gone; `rigtwin run` removes those of its outputs and says so.
 
 use std::fs::{File, OpenOptions};
 use std::io::Write;
@@ -91,6 +97,57 @@ impl Drop for Staged {
     }
 }
 
+/// The temporary files `NAME.partial-PID-N` beside `dest` (named `NAME`) left by processes that
+/// are no longer running (killed before they published them), in name order. Files of a
+/// running process (this one, or another writing the same destination right now) are not
+/// listed. A folder that cannot be read lists nothing.
+pub fn stale_partials(dest: &Path) -> Vec<PathBuf> {
+    let (Some(name), dir) = (dest.file_name(), dest.parent()) else {
+        return Vec::new();
+    };
+    let dir = match dir {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    let mut prefix = name.to_os_string();
+    prefix.push(".partial-");
+    let prefix = prefix.to_string_lossy().into_owned();
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return Vec::new();
+    };
+    let mut stale: Vec<PathBuf> = entries
+        .filter_map(Result::ok)
+        .filter(|e| {
+            let file_name = e.file_name();
+            let file_name = file_name.to_string_lossy();
+            let Some(rest) = file_name.strip_prefix(&prefix) else {
+                return false;
+            };
+            let mut parts = rest.splitn(2, '-');
+            let pid = parts.next().and_then(|p| p.parse::<u32>().ok());
+            let n = parts.next().and_then(|n| n.parse::<u32>().ok());
+            matches!((pid, n), (Some(pid), Some(_)) if !process_alive(pid))
+        })
+        .map(|e| e.path())
+        .collect();
+    stale.sort();
+    stale
+}
+
+/// Whether a process with this id is running (kill(2) with signal 0: it exists, or exists
+/// and belongs to another user).
+fn process_alive(pid: u32) -> bool {
+    let Ok(pid) = libc::pid_t::try_from(pid) else {
+        return false;
+    };
+    if pid <= 0 {
+        return false;
+    }
+    // SAFETY: signal 0 sends nothing; kill(2) only checks that the process exists.
+    let r = unsafe { libc::kill(pid, 0) };
+    r == 0 || std::io::Error::last_os_error().raw_os_error() == Some(libc::EPERM)
+}
+
 /// Writes `data` to `dest` through a temporary file synced to disk and renamed into place, so
 /// that `dest` is never left half written and keeps its old content if anything fails.
 pub fn write_atomically(dest: &Path, data: &[u8]) -> std::io::Result<()> {
@@ -133,5 +190,23 @@ mod tests {
         write_atomically(&dest, b"{}").unwrap();
         assert_eq!(std::fs::read(&dest).unwrap(), b"{}");
         assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+    }
+
+    #[test]
+    fn stale_partials_are_those_of_ended_processes() {
+        let dir = tempfile::tempdir().unwrap();
+        let dest = dir.path().join("s.mcap");
+        // A process that has ended: its id names no running process (until reused).
+        let mut child = std::process::Command::new("true").spawn().unwrap();
+        let dead = child.id();
+        child.wait().unwrap();
+        let stale = dir.path().join(format!("s.mcap.partial-{dead}-0"));
+        std::fs::write(&stale, b"x").unwrap();
+        // This process's own staged file, another output's and a look-alike are not listed.
+        let (_f, own) = Staged::create(&dest).unwrap();
+        std::fs::write(dir.path().join(format!("t.mcap.partial-{dead}-0")), b"x").unwrap();
+        std::fs::write(dir.path().join("s.mcap.partial-notes"), b"x").unwrap();
+        assert!(own.temp().exists());
+        assert_eq!(stale_partials(&dest), vec![stale]);
     }
 }

@@ -206,14 +206,16 @@ impl Shared {
     }
 
     fn closed_error(&self) -> LogError {
+        let path = &self.thread.path;
+        // The failure is a log error that names the file already: said once.
+        let prefix = format!("session log {}: ", path.display());
+        let reason = match self.thread.failure.get() {
+            Some(f) => f.strip_prefix(&prefix).unwrap_or(f).to_string(),
+            None => "the log was closed".into(),
+        };
         LogError::Closed {
-            path: self.thread.path.clone(),
-            reason: self
-                .thread
-                .failure
-                .get()
-                .cloned()
-                .unwrap_or_else(|| "the log was closed".into()),
+            path: path.clone(),
+            reason,
         }
     }
 }

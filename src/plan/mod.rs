@@ -106,6 +106,14 @@ pub struct TestSpec {
     pub steps_per_period: u32,
 }
 
+/// Checks a clearance / l against the bounds every plan obeys (`[-CLEARANCE_PRELOAD_MAX,
+/// 0.1]`: 0 the probes touching, negative a bounded pre-load); `Err` says what is expected.
+/// Also the rule for a clearance given elsewhere (an injected `clearance_change`,
+/// `firmware-sim --clearance`).
+pub fn check_clearance(value_over_l: f64) -> Result<(), String> {
+    validate::check_clearance(value_over_l)
+}
+
 /// A length given in units of the beam length l (plan levels and clearances), in metres.
 ///
 /// The one place where plan units become SI: plans, session events and summaries carry

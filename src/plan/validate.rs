@@ -81,7 +81,7 @@ fn check_level(v: f64) -> Result<(), String> {
     }
 }
 
-fn check_clearance(v: f64) -> Result<(), String> {
+pub(super) fn check_clearance(v: f64) -> Result<(), String> {
     if v.is_finite() && (-CLEARANCE_PRELOAD_MAX..=CLEARANCE_MAX).contains(&v) {
         Ok(())
     } else {

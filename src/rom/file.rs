@@ -279,22 +279,34 @@ pub fn from_bytes(bytes: &[u8], path: &Path) -> Result<Rom, RomFileError> {
         what,
     };
     let (header, payload) = parse_header(bytes, path)?;
-    let total: usize = header.arrays.iter().map(|a| a.len).sum();
-    if payload.len() < total * 8 {
+    // NOTE: the header's lengths come from the file (the checksum covers only the payload):
+    // sums and products are checked so that a damaged or crafted header is an error, never
+    // an overflow.
+    let total_bytes = header
+        .arrays
+        .iter()
+        .try_fold(0usize, |sum, a| sum.checked_add(a.len))
+        .and_then(|n| n.checked_mul(8))
+        .ok_or_else(|| {
+            corrupt(format!(
+                "the header's array lengths add up to more than {} bytes",
+                usize::MAX
+            ))
+        })?;
+    let total = total_bytes / 8;
+    if payload.len() < total_bytes {
         return Err(RomFileError::Truncated {
             path: path.to_path_buf(),
             what: format!(
-                "payload declares {} values ({} bytes), {} bytes remain",
-                total,
-                total * 8,
+                "payload declares {total} values ({total_bytes} bytes), {} bytes remain",
                 payload.len()
             ),
         });
     }
-    if payload.len() > total * 8 {
+    if payload.len() > total_bytes {
         return Err(corrupt(format!(
             "{} trailing bytes after the payload",
-            payload.len() - total * 8
+            payload.len() - total_bytes
         )));
     }
     if sha256_hex(payload) != header.payload_sha256 {
@@ -315,8 +327,10 @@ pub fn from_bytes(bytes: &[u8], path: &Path) -> Result<Rom, RomFileError> {
             .ok_or_else(|| corrupt(format!("array `{name}` missing")))?;
         if a.rows != rows
             || a.cols != cols
-            || a.len != rows * cols
-            || a.offset + a.len > values.len()
+            || rows.checked_mul(cols) != Some(a.len)
+            || a.offset
+                .checked_add(a.len)
+                .is_none_or(|end| end > values.len())
         {
             return Err(corrupt(format!(
                 "array `{name}` is {}x{} (len {}, offset {}), expected {rows}x{cols}",
@@ -329,6 +343,14 @@ pub fn from_bytes(bytes: &[u8], path: &Path) -> Result<Rom, RomFileError> {
         let d = get(name, rows, cols)?;
         Ok(Mat::from_fn(rows, cols, |i, j| d[i + rows * j]))
     };
+    // Every mode and pair owns values of the payload: larger counts are damage (and would
+    // overflow the sizes below).
+    if m > values.len() || c > values.len() {
+        return Err(corrupt(format!(
+            "the header declares {m} modes and {c} pairs, more than the payload's {} values",
+            values.len()
+        )));
+    }
     if header.labels.len() != m {
         return Err(corrupt(format!(
             "{} labels for {m} modes",
@@ -441,5 +463,49 @@ pub(crate) mod tests {
         extra.push(0);
         assert!(msg(&extra).contains("trailing"));
         assert!(msg(&[]).starts_with("x.rom"));
+    }
+
+    /// The header with `edit` applied (its length rewritten), the payload as it was.
+    fn with_header(bytes: &[u8], edit: impl Fn(&mut serde_json::Value)) -> Vec<u8> {
+        let hlen = u64::from_le_bytes(bytes[16..24].try_into().unwrap()) as usize;
+        let mut header: serde_json::Value = serde_json::from_slice(&bytes[24..24 + hlen]).unwrap();
+        edit(&mut header);
+        let text = serde_json::to_vec(&header).unwrap();
+        let mut out = bytes[..16].to_vec();
+        out.extend_from_slice(&(text.len() as u64).to_le_bytes());
+        out.extend_from_slice(&text);
+        out.extend_from_slice(&bytes[24 + hlen..]);
+        out
+    }
+
+    /// Sizes in the header (which the payload checksum does not cover) that would overflow
+    /// are errors, not panics or wrapped arithmetic.
+    #[test]
+    fn huge_sizes_in_the_header_are_errors() {
+        let bytes = to_bytes(&sample_rom());
+        let p = Path::new("x.rom");
+        let msg = |b: &[u8]| from_bytes(b, p).unwrap_err().to_string();
+        let huge_len = with_header(&bytes, |h| h["arrays"][0]["len"] = usize::MAX.into());
+        assert!(
+            msg(&huge_len).contains("add up to more than"),
+            "{}",
+            msg(&huge_len)
+        );
+        let times_eight = with_header(&bytes, |h| {
+            h["arrays"][0]["len"] = (usize::MAX / 8 + 1).into()
+        });
+        assert!(msg(&times_eight).contains("add up to more than"));
+        let huge_offset = with_header(&bytes, |h| {
+            h["arrays"][0]["offset"] = (usize::MAX - 1).into()
+        });
+        assert!(
+            msg(&huge_offset).contains("offset"),
+            "{}",
+            msg(&huge_offset)
+        );
+        let huge_pairs = with_header(&bytes, |h| h["n_pairs"] = (usize::MAX / 2).into());
+        assert!(msg(&huge_pairs).contains("pairs"), "{}", msg(&huge_pairs));
+        let huge_modes = with_header(&bytes, |h| h["n_modes"] = usize::MAX.into());
+        assert!(msg(&huge_modes).contains("modes"), "{}", msg(&huge_modes));
     }
 }

@@ -35,22 +35,12 @@ pub enum RunError {
     /// The handlers of SIGINT and SIGTERM could not be installed.
     #[error("installing the SIGINT and SIGTERM handlers: {0}")]
     Signal(#[source] std::io::Error),
-    /// The session log could not be created.
-    #[error("creating the session log {path}: {source}")]
-    LogCreate {
-        /// The log file.
-        path: String,
-        /// What failed.
-        source: LogError,
-    },
-    /// The session log could not be finished.
-    #[error("closing the session log {path}: {source}")]
-    LogClose {
-        /// The log file.
-        path: String,
-        /// What failed.
-        source: LogError,
-    },
+    /// The session log could not be created (the log error names the file).
+    #[error("{0}")]
+    LogCreate(#[source] LogError),
+    /// The session log could not be finished (the log error names the file).
+    #[error("{0} (while closing the log)")]
+    LogClose(#[source] LogError),
     /// The live twin could not start.
     #[error("the twin: {0}")]
     Twin(#[from] TwinError),
@@ -196,11 +186,7 @@ pub fn run<B: RigBackend>(
         beam_length: l,
     };
     let (metadata, attachments) = log_records(&request);
-    let path = || out.display().to_string();
-    let create_error = |source| RunError::LogCreate {
-        path: path(),
-        source,
-    };
+    let create_error = RunError::LogCreate;
     // Everything that can refuse the session is checked before the log is created: the
     // control setup and the twin. (The log is written under a temporary name and moves into
     // place when the backend has started, so a later failure does not touch an older file of
@@ -266,12 +252,10 @@ pub fn run<B: RigBackend>(
     drop(recorder);
     // A log that cannot be finished (a full disk) is not the end of the outcome: the summary
     // and what the log kept are still reported.
-    let log_error = join.close().err().map(|source| {
-        error_chain(&RunError::LogClose {
-            path: path(),
-            source,
-        })
-    });
+    let log_error = join
+        .close()
+        .err()
+        .map(|source| error_chain(&RunError::LogClose(source)));
     let wall_seconds = t0.elapsed().as_secs_f64();
     let live = live_view.map(LiveView::close);
     Ok(RunOutcome {

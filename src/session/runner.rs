@@ -60,8 +60,8 @@ pub enum SessionError {
     /// The backend did not start.
     #[error(transparent)]
     Rig(#[from] crate::rig::RigError),
-    /// The recorder failed before the start.
-    #[error("session log: {0}")]
+    /// The recorder failed before the start (its error names the log file).
+    #[error(transparent)]
     Log(#[from] RecordError),
 }
 

@@ -15,7 +15,7 @@
 //! edges is below -60 dB for records of 20 periods and more.
 
 use super::error::{require_len, SignalError};
-use super::fft::{Complex, Fft};
+use super::fft::{Complex, Fft, ZERO};
 use super::periods::PeriodGrid;
 
 /// Number of half-harmonic bands: `Omega / 2` to `10 Omega`.
@@ -44,7 +44,7 @@ pub fn band_spectrum(
     // Periodic Hann window over the used samples; its mean square normalises the power.
     let w = |k: usize| 0.5 - 0.5 * (std::f64::consts::TAU * k as f64 / n as f64).cos();
     let mean = x[..n].iter().sum::<f64>() / n as f64;
-    let mut buf = vec![Complex::ZERO; m];
+    let mut buf = vec![ZERO; m];
     let mut w2 = 0.0;
     for (k, (b, &v)) in buf.iter_mut().zip(&x[..n]).enumerate() {
         let wk = w(k);

@@ -16,7 +16,7 @@
 //!   the signal times sqrt(s).
 
 use super::error::{require_finite, require_positive, SignalError};
-use super::fft::{Complex, Fft};
+use super::fft::{Complex, Fft, ZERO};
 use std::f64::consts::{PI, TAU};
 
 /// How the wavelet is normalised across scales (module docs).
@@ -171,17 +171,17 @@ pub fn morlet_scalogram(
     let s_max = omega0 / (TAU * f_min);
     let pad = (SUPPORT_SCALES * s_max / dt).ceil().min(n as f64) as usize;
     let m = (n + pad).next_power_of_two();
-    let fft = Fft::new(m);
+    let mut fft = Fft::new(m);
 
     let mean = x.iter().sum::<f64>() / n as f64;
-    let mut spectrum = vec![Complex::ZERO; m];
+    let mut spectrum = vec![ZERO; m];
     for (s, &v) in spectrum.iter_mut().zip(x) {
         *s = Complex::new(v - mean, 0.0);
     }
     fft.forward(&mut spectrum);
 
     let d_omega = TAU / (m as f64 * dt);
-    let mut buf = vec![Complex::ZERO; m];
+    let mut buf = vec![ZERO; m];
     for (i, &f) in frequencies.iter().enumerate() {
         let s = omega0 / (TAU * f);
         let amp = match params.norm {
@@ -192,7 +192,7 @@ pub fn morlet_scalogram(
         // Nyquist bin, reached only for f near Nyquist).
         let j_lo = (((omega0 - GAUSS_CUT) / (s * d_omega)).ceil().max(1.0)) as usize;
         let j_hi = (((omega0 + GAUSS_CUT) / (s * d_omega)).floor() as usize).min(m / 2);
-        buf.iter_mut().for_each(|b| *b = Complex::ZERO);
+        buf.iter_mut().for_each(|b| *b = ZERO);
         for j in j_lo..=j_hi {
             let d = s * j as f64 * d_omega - omega0;
             buf[j] = spectrum[j].scale(amp * (-0.5 * d * d).exp());

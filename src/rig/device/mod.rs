@@ -157,6 +157,27 @@ pub struct SessionReport {
     pub safety_ramp_blocks: u64,
     /// Setpoints received.
     pub setpoints: u64,
+    /// The last valid drive setpoint received (a host's ramp-down: amplitude 0 over its ramp
+    /// time).
+    pub last_setpoint: Option<SetpointReport>,
+    /// Rig time when the host's STREAM_CONTROL stop arrived, s (`None`: no stop).
+    pub stopped_at_s: Option<f64>,
+    /// Drive amplitude when the stop arrived, before the device switched the drive off, V:
+    /// 0 when the host had ramped it down.
+    pub amplitude_at_stop_v: Option<f64>,
+    /// The host switched the amplifier off (`ENABLE 0` on its serial link) during the session.
+    pub amp_disabled_by_host: bool,
+}
+
+/// A drive setpoint as the device received it.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct SetpointReport {
+    /// Target amplitude, V.
+    pub amplitude_v: f64,
+    /// Ramp time to the target, s.
+    pub ramp_s: f64,
+    /// Rig time of its arrival, s.
+    pub at_s: f64,
 }
 
 /// The device: a simulated rig behind the documented links.
@@ -233,6 +254,7 @@ impl FirmwareSim {
             },
             misbehaviour: [Misbehaviour::default(); 2],
             rx_errors: 0,
+            host_disabled_amp: false,
         }));
         let stop = Arc::new(AtomicBool::new(false));
         let (ldv_m, ldv_s, ldv) = pty()?;

@@ -42,6 +42,8 @@ pub struct Devices {
     pub misbehaviour: [Misbehaviour; 2],
     /// Lines received that failed (checksum, garbage, unknown request).
     pub rx_errors: u64,
+    /// The host sent the amplifier `ENABLE 0` (since the session started).
+    pub host_disabled_amp: bool,
 }
 
 /// Pause after a read that returned nothing before reading again.
@@ -84,6 +86,7 @@ fn handle(port: Port, d: &mut Devices, verb: &str, arg: Option<&str>) -> Reply {
         (Port::Amp, "ENABLE", Some(a)) => match a {
             "0" => {
                 d.amp.enabled = false;
+                d.host_disabled_amp = true;
                 ok("ENABLE", vec!["0".into()])
             }
             "1" if d.amp.interlock_open => err(3, "interlock open".into()),

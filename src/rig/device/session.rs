@@ -18,7 +18,8 @@ use crate::rig::{ChannelKind, DaqBlock, DriveCommand, RigFault};
 
 use super::serial::Devices;
 use super::{
-    DeviceError, FirmwareSim, Inject, LinkFault, Pace, SessionReport, VIRTUAL_LEAD_BLOCKS,
+    DeviceError, FirmwareSim, Inject, LinkFault, Pace, SessionReport, SetpointReport,
+    VIRTUAL_LEAD_BLOCKS,
 };
 
 /// Pause after a failed tunnel receive (the host went away: ICMP unreachable) before the
@@ -167,6 +168,7 @@ impl<'a> Session<'a> {
         self.setpoint = None;
         self.commands.clear();
         self.gated = false;
+        self.devices().host_disabled_amp = false;
         Ok(())
     }
 
@@ -214,6 +216,7 @@ impl<'a> Session<'a> {
                 }
                 StreamCommand::Stop => {
                     if self.state != State::Idle {
+                        self.report.stopped_at_s = Some(self.rig_time());
                         return Ok(Some(End::Stop));
                     }
                 } // (On stop the drive goes off at once: see `run`.)
@@ -229,6 +232,11 @@ impl<'a> Session<'a> {
                     self.report.rx_errors += 1;
                 } else {
                     self.setpoint = Some(cmd);
+                    self.report.last_setpoint = Some(SetpointReport {
+                        amplitude_v: cmd.amplitude_v,
+                        ramp_s: cmd.ramp_s,
+                        at_s: self.rig_time(),
+                    });
                     self.applied_seq = sp.seq;
                     if self.state == State::Streaming && !self.gated {
                         self.commands.push(cmd);
@@ -502,6 +510,7 @@ impl<'a> Session<'a> {
             }
         }
         if end == End::Stop {
+            self.report.amplitude_at_stop_v = self.rig.as_ref().map(|r| r.drive().amplitude_v);
             // STREAM_CONTROL stop: drive off (the host ramped it down before).
             if let Some(rig) = self.rig.as_mut() {
                 let f = rig.drive().frequency_hz.max(1.0);
@@ -514,8 +523,12 @@ impl<'a> Session<'a> {
         }
         self.report.reason = end.as_str().to_string();
         self.report.final_amplitude_v = self.rig.as_ref().map_or(0.0, |r| r.drive().amplitude_v);
-        let serial_rx_errors = self.devices().rx_errors;
+        let (serial_rx_errors, host_disabled_amp) = {
+            let d = self.devices();
+            (d.rx_errors, d.host_disabled_amp)
+        };
         self.report.serial_rx_errors = serial_rx_errors;
+        self.report.amp_disabled_by_host = host_disabled_amp;
         {
             let mut d = self.devices();
             d.amp.enabled = false;

@@ -16,7 +16,7 @@ use tokio::time::Instant;
 
 use crate::plan::TestSpec;
 
-use super::{InjectedFault, SimRig};
+use super::{InjectedFault, SimRig, SimRigError};
 use crate::rig::{
     CommandError, DaqBlock, DaqLayout, DriveCommand, DriveState, RigBackend, RigError, RigFault,
     RigStatus, StateError,
@@ -70,9 +70,12 @@ impl SimBackend {
         }
     }
 
-    /// Schedules an injected fault (applied before the next block is computed).
-    pub fn inject(&mut self, fault: InjectedFault) {
+    /// Schedules an injected fault (applied before the next block is computed), after
+    /// checking its values ([`InjectedFault::check`] on this rig's beam length).
+    pub fn inject(&mut self, fault: InjectedFault) -> Result<(), SimRigError> {
+        fault.check(self.beam_length).map_err(SimRigError::Fault)?;
         self.faults.push(fault);
+        Ok(())
     }
 
     /// Takes the core back from the computation in flight (if any). Cancel-safe: the

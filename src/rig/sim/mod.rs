@@ -114,6 +114,37 @@ pub enum InjectedFault {
 }
 
 impl InjectedFault {
+    /// Checks the fault's values before it is scheduled on a rig with beams of `beam_length_m`
+    /// (m): a finite time >= 0, a finite amplifier limit >= 0, and a new clearance within the
+    /// bounds a plan's clearance obeys ([`crate::plan::check_clearance`], as a fraction of
+    /// the beam length). (The channel name is checked against the layout by
+    /// [`SimRig::schedule`].)
+    pub fn check(&self, beam_length_m: f64) -> Result<(), String> {
+        let at_s = self.at_s();
+        if !(at_s.is_finite() && at_s >= 0.0) {
+            return Err(format!("at_s = {at_s}: expected a finite rig time >= 0 s"));
+        }
+        match self {
+            InjectedFault::DriveSaturation { limit_v, .. }
+                if !(limit_v.is_finite() && *limit_v >= 0.0) =>
+            {
+                Err(format!(
+                    "drive_saturation: limit_v = {limit_v}: expected a finite limit >= 0 V"
+                ))
+            }
+            InjectedFault::ClearanceChange { clearance_m, .. } => {
+                crate::plan::check_clearance(clearance_m / beam_length_m).map_err(|expected| {
+                    format!(
+                        "clearance_change: clearance_m = {clearance_m} m ({:e} l on a \
+                         {beam_length_m} m beam): expected {expected}",
+                        clearance_m / beam_length_m
+                    )
+                })
+            }
+            _ => Ok(()),
+        }
+    }
+
     /// Activation time, s.
     pub fn at_s(&self) -> f64 {
         match *self {

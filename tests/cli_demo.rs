@@ -29,6 +29,11 @@ fn demo_reports_the_rom_and_runs_the_demo_plan() {
         String::from_utf8_lossy(&out.stderr)
     );
     println!("{stdout}");
+    // The console says where the ROM came from (issue 18, item 4): a ROM from the cache is not
+    // "built in N s".
+    let reused = stdout.contains("ROM reused from");
+    assert_eq!(stdout.contains("loaded from the cache"), reused, "{stdout}");
+    assert_eq!(stdout.contains(", built in "), !reused, "{stdout}");
     let info: serde_json::Value = serde_json::from_str(
         &std::fs::read_to_string(out_dir.path().join("rom-info.json")).unwrap(),
     )

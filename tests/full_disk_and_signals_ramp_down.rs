@@ -8,6 +8,7 @@
 //!   over the CAN link within the safety ramp time plus a second of rig time, the amplifier
 //!   switched off (`ENABLE 0` on its serial link) and the stream stopped; on both backends the
 //!   exit is non-zero and the console says what the log kept.
+//!   The console's log reaches the pipe without ANSI colour codes.
 //! - SIGINT and SIGTERM on the hw backend (the sim backend's are in `rig_session_sim.rs`):
 //!   the logged ramp-down to zero drive, `session_end`, a closed log, a summary that says
 //!   why, and on the device the amplifier off and the stream stopped with the drive at zero.
@@ -134,6 +135,14 @@ fn assert_says_what_was_kept(o: &Output, what: &str) {
         "{what}: {t}"
     );
     assert!(!t.contains("panicked"), "{what}: {t}");
+    // The abort's log line (tracing, on stderr) reaches a pipe without colour codes (issue 18,
+    // item 4).
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(stderr.contains("WARN"), "{what}: {stderr}");
+    assert!(
+        !stderr.contains('\u{1b}'),
+        "{what}: ANSI codes on a pipe: {stderr:?}"
+    );
     let abort = t
         .lines()
         .find(|l| l.starts_with("ABORTED: "))

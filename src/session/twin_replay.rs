@@ -215,11 +215,7 @@ pub fn replay_twin(
         }
         let tb = twin.push_block(b)?;
         stats.blocks += 1;
-        stats.solver_failures += tb
-            .solver_failures
-            .iter()
-            .map(|&f| u64::from(f))
-            .sum::<u64>();
+        stats.solver_failures += tb.solver_failure_count();
         sink.block(&tb)?;
         out.push(&tb);
         take(out.complete(&mut pending, dt, false), &mut results, sink)?;
@@ -391,21 +387,16 @@ pub fn replay_twin_steps(
                 twin.set_state(&m.state)?;
                 // The clearances due up to the state are in it.
                 while clearances.next_due(m.state.next_sample).is_some() {}
-                m.state.next_sample
+                Some(m.state.next_sample)
             }
             None if step_start(rec, info).is_some_and(|s| s <= first_block) => {
                 twin.set_clearance(first_schedule.first().unwrap_or(0.0))?;
-                first_block
+                Some(first_block)
             }
-            None => {
-                return Err(TwinReplayError::NoState {
-                    test: info.test.clone(),
-                    step: info.step + 1,
-                    states: rec.twin_states.len(),
-                })
-            }
+            None => None,
         };
-        let Some(start) = rec.blocks.iter().position(|b| b.first_sample == from) else {
+        let start = from.and_then(|from| rec.blocks.iter().position(|b| b.first_sample == from));
+        let Some(start) = start else {
             return Err(TwinReplayError::NoState {
                 test: info.test.clone(),
                 step: info.step + 1,
@@ -423,11 +414,7 @@ pub fn replay_twin_steps(
             let tb = twin.push_block(b)?;
             stats.blocks += 1;
             rig_seconds += b.len as f64 * dt;
-            stats.solver_failures += tb
-                .solver_failures
-                .iter()
-                .map(|&f| u64::from(f))
-                .sum::<u64>();
+            stats.solver_failures += tb.solver_failure_count();
             out.push(&tb);
         }
         let c = match out.compare(info, measured, dt) {

@@ -266,13 +266,7 @@ impl<const N: usize> DrivenRom<N> {
         state: State,
         last_velocity: [f64; N],
     ) -> Result<(), crate::sim::StateMismatch> {
-        state.check(self.integrator.n_modes(), self.integrator.n_pairs())?;
-        if let Some(k) = last_velocity.iter().position(|v| !v.is_finite()) {
-            return Err(crate::sim::StateMismatch::NonFinite {
-                field: "last_velocity",
-                index: k,
-            });
-        }
+        self.check_state(&state, &last_velocity)?;
         self.state = state;
         self.last = SensorStep {
             velocity: last_velocity,
@@ -280,6 +274,23 @@ impl<const N: usize> DrivenRom<N> {
             ..SensorStep::default()
         };
         Ok(())
+    }
+
+    /// Whether [`DrivenRom::set_state`] would take `state` and `last_velocity` (sizes,
+    /// finiteness), without changing anything.
+    pub fn check_state(
+        &self,
+        state: &State,
+        last_velocity: &[f64; N],
+    ) -> Result<(), crate::sim::StateMismatch> {
+        state.check(self.integrator.n_modes(), self.integrator.n_pairs())?;
+        match last_velocity.iter().position(|v| !v.is_finite()) {
+            Some(k) => Err(crate::sim::StateMismatch::NonFinite {
+                field: "last_velocity",
+                index: k,
+            }),
+            None => Ok(()),
+        }
     }
 
     /// Back to rest at time 0, the last sensor values zero.

@@ -70,6 +70,11 @@ pub struct TwinBlock {
 }
 
 impl TwinBlock {
+    /// Contact solves of the block that missed the tolerance, over all its samples.
+    pub fn solver_failure_count(&self) -> u64 {
+        self.solver_failures.iter().map(|&f| u64::from(f)).sum()
+    }
+
     /// The relative velocity of sensor `k` ([`TWIN_SENSORS`]), m/s.
     pub fn sensor(&self, k: usize) -> &[f64] {
         &self.velocity[k * self.len..(k + 1) * self.len]
@@ -137,7 +142,7 @@ impl From<&TwinBlock> for TwinSamples {
             contact: b.contact.iter().map(|&c| u8::from(c)).collect(),
             normal_force: f32s(&b.normal_force),
             tangential_force: f32s(&b.tangential_force),
-            solver_failures: b.solver_failures.iter().map(|&f| u64::from(f)).sum(),
+            solver_failures: b.solver_failure_count(),
             gap: b.gap,
             restarts: b.restarts.clone(),
         }

@@ -50,20 +50,38 @@ fn choose<'a>(offered: impl IntoIterator<Item = &'a str>) -> Option<(&'static st
 }
 
 /// Accepts connections on `listener` and relays each to the SDK's server at `upstream`, until
-/// the task is dropped with its runtime.
-pub(super) async fn serve(listener: TcpListener, upstream: SocketAddr) {
+/// `closing` turns true; then stops accepting and returns once every relay has ended (each
+/// ends when the SDK's server closes its side, after passing the close frame on to the
+/// client), so stopping the runtime afterwards cuts no connection short.
+pub(super) async fn serve(
+    listener: TcpListener,
+    upstream: SocketAddr,
+    mut closing: tokio::sync::watch::Receiver<bool>,
+) {
+    let mut relays = tokio::task::JoinSet::new();
     loop {
-        match listener.accept().await {
-            Ok((stream, peer)) => {
-                tokio::spawn(relay(stream, peer, upstream));
-            }
-            Err(e) => {
-                // Out of file descriptors and the like: wait a little, then go on accepting.
-                tracing::warn!("live view: cannot accept a connection: {e}");
-                tokio::time::sleep(std::time::Duration::from_millis(100)).await;
+        tokio::select! {
+            accepted = listener.accept() => match accepted {
+                Ok((stream, peer)) => {
+                    relays.spawn(relay(stream, peer, upstream));
+                }
+                Err(e) => {
+                    // Out of file descriptors and the like: wait a little, then go on accepting.
+                    tracing::warn!("live view: cannot accept a connection: {e}");
+                    tokio::time::sleep(std::time::Duration::from_millis(100)).await;
+                }
+            },
+            // Reaps the relays that ended, so the set holds only live ones.
+            Some(_) = relays.join_next(), if !relays.is_empty() => {}
+            changed = closing.changed() => {
+                if changed.is_err() || *closing.borrow() {
+                    break;
+                }
             }
         }
     }
+    drop(listener);
+    while relays.join_next().await.is_some() {}
 }
 
 /// One client: the handshake (a client without a Foxglove subprotocol gets HTTP 400 and a log

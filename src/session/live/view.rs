@@ -131,6 +131,11 @@ pub struct LiveView {
     tx: SyncSender<Record>,
     thread: Option<JoinHandle<LiveStats>>,
     server: Option<foxglove::WebSocketServerHandle>,
+    /// The door's stop signal and task (see `door::serve`).
+    door: Option<(
+        tokio::sync::watch::Sender<bool>,
+        tokio::task::JoinHandle<()>,
+    )>,
     runtime: Option<tokio::runtime::Runtime>,
 }
 
@@ -194,7 +199,8 @@ impl LiveView {
                 detail: e.to_string(),
             })?;
         let upstream = SocketAddr::from((std::net::Ipv4Addr::LOCALHOST, server.port()));
-        runtime.spawn(super::door::serve(listener, upstream));
+        let (closing, door_closing) = tokio::sync::watch::channel(false);
+        let door = runtime.spawn(super::door::serve(listener, upstream, door_closing));
 
         let shared = Arc::new(Shared::default());
         let (tx, rx) = mpsc::sync_channel(options.queue_capacity);
@@ -219,6 +225,7 @@ impl LiveView {
                 tx,
                 thread: Some(thread),
                 server: Some(server),
+                door: Some((closing, door)),
                 runtime: Some(runtime),
             },
         ))
@@ -267,6 +274,18 @@ impl LiveView {
                 .is_err()
             {
                 tracing::warn!("live view: connections still open after {timeout:?}; closing them");
+            }
+        }
+        // The SDK's server has closed its connections; the door's relays pass each close
+        // frame on to their client before the runtime (and every task on it) goes.
+        if let (Some((closing, door)), Some(runtime)) = (self.door.take(), self.runtime.as_ref()) {
+            let _ = closing.send(true);
+            let timeout = self.options.shutdown_timeout;
+            if runtime
+                .block_on(async { tokio::time::timeout(timeout, door).await })
+                .is_err()
+            {
+                tracing::warn!("live view: relays still open after {timeout:?}; closing them");
             }
         }
         if let Some(runtime) = self.runtime.take() {

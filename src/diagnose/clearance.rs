@@ -273,3 +273,55 @@ pub fn clearance_trend(
         tests: n,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_cantilever_mode_is_zero_at_the_clamp_and_largest_at_the_tip() {
+        assert!(cantilever_first_mode(0.0).abs() < 1e-12);
+        assert!((cantilever_first_mode(1.0) - 2.0).abs() < 1e-5);
+        let r = cantilever_first_mode(0.95) / cantilever_first_mode(1.0);
+        assert!((r - 0.9312).abs() < 1e-3, "{r}");
+    }
+
+    fn test(i: usize, c: Option<f64>) -> TestClearance {
+        TestClearance {
+            test: format!("t{i}"),
+            test_index: i,
+            level: 2e-5,
+            start_s: 0.0,
+            plan_clearance_m: 7e-4,
+            clearance_m: c,
+            clearance_l: None,
+            uncertainty_m: c.map(|_| 1e-5),
+            lower_bound_m: None,
+            upper_bound_m: None,
+            lower_bound_omega_ratio: None,
+            first_contact_omega_ratio: None,
+            impact_free_windows: 3,
+            accumulated_contact_work_j: None,
+            note: String::new(),
+        }
+    }
+
+    #[test]
+    fn the_trend_is_the_line_through_the_bracketed_tests() {
+        let tests: Vec<_> = (0..4)
+            .map(|i| test(i, (i != 2).then_some(7e-4 + 2e-5 * i as f64)))
+            .collect();
+        let x: Vec<f64> = (0..4).map(|i| i as f64).collect();
+        let t = clearance_trend(&tests, &x, "session order").unwrap();
+        assert_eq!(t.tests, 3);
+        assert!((t.slope_m - 2e-5).abs() < 1e-12 && (t.intercept_m - 7e-4).abs() < 1e-12);
+        assert!(matches!(
+            clearance_trend(&tests, &x[..2], "x"),
+            Err(EvidenceError::AbscissaeMismatch { .. })
+        ));
+        assert!(matches!(
+            clearance_trend(&tests[..1], &x[..1], "x"),
+            Err(EvidenceError::TooFewPoints { .. })
+        ));
+    }
+}

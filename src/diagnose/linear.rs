@@ -714,3 +714,41 @@ pub fn amplitude_dependence(
         clamp_friction_signature,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Synthetic steps of a mode at `nu`, `zeta` with residual terms.
+    fn synthetic(nu: f64, zeta: f64) -> (Vec<f64>, Vec<Complex64>, f64) {
+        let s: Vec<f64> = (0..11).map(|k| 0.985 + 0.003 * k as f64).collect();
+        let s_c = 1.0;
+        let p = [nu, zeta, -1.5, 0.05, 1.1, 150.0];
+        let y = s.iter().map(|&x| model(&p, x, s_c)).collect();
+        (s, y, s_c)
+    }
+
+    #[test]
+    fn the_fit_recovers_a_synthetic_mode() {
+        for (nu, zeta) in [(0.993, 0.003), (1.006, 0.0012)] {
+            let (s, y, s_c) = synthetic(nu, zeta);
+            let f = fit_mode(&s, &y, s_c).unwrap();
+            assert!((f.params[0] / nu - 1.0).abs() < 1e-9, "{:?}", f.params);
+            assert!((f.params[1] / zeta - 1.0).abs() < 1e-6, "{:?}", f.params);
+            assert!(f.relative_residual < 1e-9);
+        }
+    }
+
+    #[test]
+    fn a_free_transient_is_separated_from_the_steady_state() {
+        let (omega_n, zeta, omega): (f64, f64, f64) = (320.0, 0.002, 322.0);
+        let period = TAU / omega;
+        let omega_d = omega_n * (1.0 - zeta * zeta).sqrt();
+        let z = (Complex64::new(-zeta * omega_n, omega_d - omega) * period).exp();
+        let (ss, c) = (Complex64::new(3.0, -1.0), Complex64::new(0.8, 0.4));
+        let per: Vec<Complex64> = (0..40).map(|p| ss + c * z.powu(p)).collect();
+        let (a, b) = steady_state(&per, omega_n, zeta, omega).unwrap();
+        assert!((a - ss).norm() < 1e-9 && (b - c).norm() < 1e-9, "{a} {b}");
+        assert!(steady_state(&per[..3], omega_n, zeta, omega).is_none());
+    }
+}

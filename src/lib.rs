@@ -11,7 +11,8 @@
 //! safety, the stepped-sine procedure), [`twin`] (the live digital twin: the ROM on the
 //! measured base acceleration, on its own thread), [`log`] (MCAP files: writer and reader) and
 //! [`session`] (the composition root: backend, procedure, recorders, log, twin and live view;
-//! replay; the session summary). [`cli`] parses the `rigtwin` binary's commands and prints.
+//! replay; the session summary). [`diagnose`] reads a recorded session for the physics the
+//! model leaves out (sensor sensitivities, linear modes, clearance). [`cli`] parses the `rigtwin` binary's commands and prints.
 //!
 //! Numerical modules are synchronous, deterministic and never read the clock; async (tokio)
 //! lives in the session and the simulated rig's pacing.
@@ -20,6 +21,7 @@ pub mod cli;
 pub mod config;
 pub mod contact;
 pub mod control;
+pub mod diagnose;
 pub mod fe;
 pub mod log;
 pub mod physics;

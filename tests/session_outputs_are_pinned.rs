@@ -148,8 +148,38 @@ fn session_replay_and_twin_replay_match_the_pinned_outputs() {
     assert_matches_pinned("replay-summary.json", &json(&replayed));
     assert_matches_pinned("replay-twin-summary.json", &twin_replayed);
 
-    // The live twin's comparisons: where it made one, the replay's.
-    let (_, replay_twin) = without_twin(&twin_replayed);
+    // The ensemble (issue 14, part 4) does not depend on the threads that run it.
+    let one_thread = dir.path().join("replay-twin-1.json");
+    let o = rigtwin(&[
+        "replay",
+        mcap.to_str().unwrap(),
+        "--twin",
+        "--jobs",
+        "1",
+        "--json",
+        one_thread.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert_eq!(
+        json(&one_thread),
+        twin_replayed,
+        "--jobs 1 against the default"
+    );
+
+    // The live twin runs no ensemble: where it made a comparison, it is the one of a replay
+    // without ensemble, bit for bit.
+    let no_ensemble = dir.path().join("replay-twin-0.json");
+    let o = rigtwin(&[
+        "replay",
+        mcap.to_str().unwrap(),
+        "--twin",
+        "--ensemble",
+        "0",
+        "--json",
+        no_ensemble.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let (_, replay_twin) = without_twin(&json(&no_ensemble));
     assert_eq!(live_twin.len(), replay_twin.len());
     let compared = live_twin.iter().filter(|c| !c.is_null()).count();
     assert!(compared > 0, "the live twin compared no step");
@@ -161,4 +191,32 @@ fn session_replay_and_twin_replay_match_the_pinned_outputs() {
             );
         }
     }
+
+    // The ensemble changes the model spreads and the scores only: the twin's own values are
+    // those of the run without it, and a spread never shrinks.
+    let (_, with_ensemble) = without_twin(&twin_replayed);
+    let mut widened = 0;
+    for (i, (a, b)) in with_ensemble.iter().zip(&replay_twin).enumerate() {
+        if b.is_null() {
+            continue;
+        }
+        assert_eq!(a["rms_upper"], b["rms_upper"], "step {i}");
+        assert_eq!(a["contact_fraction"], b["contact_fraction"], "step {i}");
+        let (fa, fb) = (
+            a["features"].as_array().unwrap(),
+            b["features"].as_array().unwrap(),
+        );
+        assert_eq!(fa.len(), fb.len(), "step {i}");
+        for (x, y) in fa.iter().zip(fb) {
+            assert_eq!(x["model"], y["model"], "step {i}: {x} {y}");
+            assert_eq!(x["measured"], y["measured"], "step {i}: {x} {y}");
+            let spread = |v: &serde_json::Value| v["model_spread"].as_f64().unwrap_or(0.0);
+            assert!(spread(x) >= spread(y), "step {i}: {x} {y}");
+            widened += usize::from(spread(x) > spread(y));
+        }
+        if a["ensemble_members"] != 0 {
+            assert_eq!(a["ensemble_members"], 4, "step {i}: the default ensemble");
+        }
+    }
+    assert!(widened > 0, "the ensemble widened no model spread");
 }

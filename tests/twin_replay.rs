@@ -165,10 +165,13 @@ fn the_live_twin_equals_its_replay_and_is_logged() {
     assert!(o.status.success(), "{}", text(&o));
     assert!(text(&o).contains("2 of 2 steps compared"), "{}", text(&o));
     let replayed = dir.path().join("replay.json");
+    // The live twin runs no ensemble (issue 14, part 4): its replay without one is its twin.
     let o = rigtwin(&[
         "replay",
         mcap.to_str().unwrap(),
         "--twin",
+        "--ensemble",
+        "0",
         "--json",
         replayed.to_str().unwrap(),
     ]);
@@ -192,12 +195,15 @@ fn the_live_twin_equals_its_replay_and_is_logged() {
     assert!(!status.is_empty());
 
     // The predicted channels of every block are logged, and a replay that writes a copy of the
-    // log (`--out`) logs the same bytes: predictions and comparisons alike.
+    // log (`--out`) logs the same bytes: predictions and comparisons alike (without the
+    // ensemble the live twin does not run).
     let copy = dir.path().join("copy.mcap");
     let o = rigtwin(&[
         "replay",
         mcap.to_str().unwrap(),
         "--twin",
+        "--ensemble",
+        "0",
         "--out",
         copy.to_str().unwrap(),
     ]);
@@ -344,6 +350,8 @@ axis = [0.6, 0.8]
         "replay",
         mcap.to_str().unwrap(),
         "--twin",
+        "--ensemble",
+        "0",
         "--steps",
         "high-down:2,high-down:4",
         "--json",
@@ -354,6 +362,38 @@ axis = [0.6, 0.8]
     let warm = json(&part);
     for k in [1, 3] {
         assert_eq!(twin(&warm, k), twin(&live, k), "step {}", k + 1);
+    }
+    // With an ensemble (issue 14, part 4): the members of a warm re-run start from the logged
+    // state with the same perturbations as in the whole replay, so the spreads and scores
+    // are the same bits too.
+    let (full_e, part_e) = (
+        dir.path().join("full-e.json"),
+        dir.path().join("part-e.json"),
+    );
+    for (out, steps) in [(&full_e, None), (&part_e, Some("high-down:2,high-down:4"))] {
+        let mut args = vec![
+            "replay",
+            mcap.to_str().unwrap(),
+            "--twin",
+            "--ensemble",
+            "2",
+        ];
+        if let Some(s) = steps {
+            args.extend(["--steps", s]);
+        }
+        args.extend(["--json", out.to_str().unwrap()]);
+        let o = rigtwin(&args);
+        assert!(o.status.success(), "{}", text(&o));
+    }
+    let (full_e, part_e) = (json(&full_e), json(&part_e));
+    for k in [1, 3] {
+        assert_eq!(
+            twin(&part_e, k),
+            twin(&full_e, k),
+            "step {} with an ensemble",
+            k + 1
+        );
+        assert_eq!(twin(&full_e, k)["ensemble_members"], 2, "step {}", k + 1);
     }
     for k in [0, 2] {
         assert!(twin(&warm, k).is_null(), "step {} was not asked for", k + 1);

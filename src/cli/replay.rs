@@ -8,7 +8,7 @@ use std::path::PathBuf;
 
 use crate::session::replay::{twin_model_source, TwinModelChoice, TwinRom};
 use crate::session::twin_replay::{
-    replay_twin, replay_twin_steps, StepSelection, TwinLogCopy, TwinSink,
+    replay_twin, replay_twin_steps, EnsembleOptions, StepSelection, TwinLogCopy, TwinSink,
 };
 
 use super::models;
@@ -50,6 +50,14 @@ pub struct ReplayArgs {
     /// comparison equals the whole run's bit for bit.
     #[arg(long, requires = "twin", conflicts_with = "out")]
     pub steps: Option<StepSelection>,
+    /// With `--twin`: runs of the twin from perturbed states at each step's start behind the
+    /// model spread of the comparison's scores (default: `[twin] ensemble_members`, 4; 0 =
+    /// none, the twin's own sub-windows only).
+    #[arg(long, requires = "twin", value_parser = clap::value_parser!(u16).range(0..=64))]
+    pub ensemble: Option<u16>,
+    /// Threads for the ensemble (default: the machine's cores).
+    #[arg(long, value_parser = clap::value_parser!(u16).range(1..))]
+    pub jobs: Option<u16>,
 }
 
 pub(crate) fn run(a: ReplayArgs) -> anyhow::Result<()> {
@@ -93,7 +101,15 @@ pub(crate) fn run(a: ReplayArgs) -> anyhow::Result<()> {
             (None, None) => TwinModelChoice::Logged,
         };
         let model = twin_model_source(choice, &a.file, r.rig_toml.as_deref())?;
-        let spec = model.spec.clone();
+        let mut spec = model.spec.clone();
+        if let Some(n) = a.ensemble {
+            spec.ensemble_members = usize::from(n);
+        }
+        let jobs = a.jobs.map_or_else(
+            || std::thread::available_parallelism().map_or(1, |n| n.get()),
+            usize::from,
+        );
+        let ensemble = EnsembleOptions::of(&spec, jobs);
         let (rom, source) = match &model.rom {
             TwinRom::File(path) => {
                 let rom = crate::rom::file::read(path)
@@ -135,6 +151,7 @@ pub(crate) fn run(a: ReplayArgs) -> anyhow::Result<()> {
                 &spec,
                 rom.meta.beam_length,
                 select,
+                ensemble,
                 sink,
             ),
             None => replay_twin(
@@ -143,6 +160,7 @@ pub(crate) fn run(a: ReplayArgs) -> anyhow::Result<()> {
                 &twin_model,
                 &spec,
                 rom.meta.beam_length,
+                ensemble,
                 sink,
             ),
         }

@@ -50,7 +50,60 @@ pub struct TwinSpec {
     /// data (it sleeps after each block), so a test can make it fall behind; 0 = off (>= 0).
     /// Default 0.
     pub throttle: f64,
+    /// Runs of the model from perturbed initial states besides the twin's own, per step, for
+    /// the model spread of the comparison (`rigtwin replay --twin`; `--ensemble` overrides it;
+    /// the live twin runs none). 0 = the model spread is the twin's own sub-windows'. At most
+    /// 64. Default 4.
+    pub ensemble_members: usize,
+    /// Size of an ensemble member's perturbation: its modal velocities at the step's start
+    /// get a random change of this norm relative to theirs (in (0, 0.1]). Default 1e-3.
+    pub ensemble_perturbation: f64,
+    /// Resolution of the comparison's scores: the floor of the combined spread.
+    pub tolerance: ComparisonTolerance,
 }
+
+/// `[twin.tolerance]`: the resolution below which measurement and model are not told apart,
+/// whatever their spreads (the floor of a score's combined spread).
+///
+// NOTE: the spreads of a steady, periodic response are tiny (sensor noise averaged over
+// hundreds of periods; the model has none), so without a floor a difference far below what
+// matters to the analyst — and below the twin's own discretisation error (BENCHMARKS.md,
+// "The comparison's spread") — would score as a mismatch.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
+#[serde(deny_unknown_fields, default)]
+pub struct ComparisonTolerance {
+    /// For the velocity features, relative to the larger of the two values (>= 0). Default
+    /// 0.01.
+    pub relative: f64,
+    /// For `contact_fraction`, absolute (>= 0). Default 0.005.
+    pub contact_fraction: f64,
+    /// For `impacts_per_period`, absolute (>= 0). Default 0.02.
+    pub impacts_per_period: f64,
+}
+
+impl Default for ComparisonTolerance {
+    fn default() -> Self {
+        ComparisonTolerance {
+            relative: 0.01,
+            contact_fraction: 0.005,
+            impacts_per_period: 0.02,
+        }
+    }
+}
+
+impl ComparisonTolerance {
+    /// The floor for `feature` between the values `measured` and `model`.
+    pub fn of(&self, feature: &str, measured: f64, model: f64) -> f64 {
+        match feature {
+            "contact_fraction" => self.contact_fraction,
+            "impacts_per_period" => self.impacts_per_period,
+            _ => self.relative * measured.abs().max(model.abs()),
+        }
+    }
+}
+
+/// The largest ensemble (`[twin] ensemble_members`).
+pub const MAX_ENSEMBLE_MEMBERS: usize = 64;
 
 impl Default for TwinSpec {
     fn default() -> Self {
@@ -60,6 +113,9 @@ impl Default for TwinSpec {
             queue_blocks: 160,
             after_gap: AfterGap::KeepState,
             throttle: 0.0,
+            ensemble_members: 4,
+            ensemble_perturbation: 1e-3,
+            tolerance: ComparisonTolerance::default(),
         }
     }
 }
@@ -96,6 +152,31 @@ impl TwinSpec {
                 t,
                 "a finite number of wall seconds per second of data >= 0 (0 = off)",
             ));
+        }
+        if self.ensemble_members > MAX_ENSEMBLE_MEMBERS {
+            return Err(SpecError::new(
+                "twin.ensemble_members",
+                self.ensemble_members,
+                "at most 64 ensemble members (0 = none)",
+            ));
+        }
+        let e = self.ensemble_perturbation;
+        if !(e.is_finite() && e > 0.0 && e <= 0.1) {
+            return Err(SpecError::new(
+                "twin.ensemble_perturbation",
+                e,
+                "a relative perturbation in (0, 0.1]",
+            ));
+        }
+        let t = &self.tolerance;
+        for (key, v) in [
+            ("twin.tolerance.relative", t.relative),
+            ("twin.tolerance.contact_fraction", t.contact_fraction),
+            ("twin.tolerance.impacts_per_period", t.impacts_per_period),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(SpecError::new(key, v, "a finite tolerance >= 0"));
+            }
         }
         Ok(())
     }

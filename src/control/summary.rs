@@ -10,10 +10,12 @@
 //! voltage below the threshold. The metrics are those of `rigtwin simulate`
 //! ([`crate::signal::step_metrics`]), normalised by Omega times the target amplitude.
 
-use crate::rig::channels::ChannelMap;
+use crate::rig::channels::{ChannelMap, LOWER_MID, LOWER_TIP, UPPER_MID, UPPER_TIP, VIBROMETER};
+use crate::rig::daq::ChannelKind;
 use crate::rig::DaqLayout;
 use crate::signal::{
-    demodulate, integrate_periodic, PeriodGrid, SignalError, StepMetrics, StepRecord,
+    demodulate, integrate_periodic, window_features, Feature, FeatureWindow, PeriodGrid,
+    SignalError, StepMetrics, StepRecord,
 };
 
 /// What the session knew about a step when its record window ended (logged with the
@@ -99,6 +101,11 @@ pub struct StepSummary {
     /// it may (`record_attempts`) and kept the last one. Written only when true.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub base_amp_off_tolerance: bool,
+    /// The compared features of every beam channel and the contact channel with their
+    /// spread from sub-windows ([`crate::signal::features`]); empty in summaries written
+    /// before they existed.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub features: Vec<Feature>,
 }
 
 impl StepSummary {
@@ -153,7 +160,16 @@ pub struct WindowSignals {
     pub lower: Vec<f64>,
     /// Contact closed per sample.
     pub closed: Vec<bool>,
+    /// The compared beam channels the layout has ([`COMPARED_CHANNELS`] order): relative
+    /// velocities, m/s (the vibrometer's minus the base velocity; an accelerometer's
+    /// acceleration minus the base's, integrated).
+    pub beams: Vec<(&'static str, Vec<f64>)>,
 }
+
+/// The beam channels the twin comparison compares ([`crate::signal::features`]), in order:
+/// the vibrometer and the upper-tip accelerometer (one spot, two sensors), the upper mid, the
+/// lower tip and the lower mid.
+pub const COMPARED_CHANNELS: [&str; 5] = [VIBROMETER, UPPER_TIP, UPPER_MID, LOWER_TIP, LOWER_MID];
 
 /// The physical signals of a record window from its counts (channel-major:
 /// `counts[k * n + i]`, `n = info.record_samples`). See the module docs.
@@ -211,6 +227,24 @@ pub fn window_signals(
         .lower_tip
         .ok_or(SummaryError::MissingChannel("lower_tip acceleration"))?;
     let lower = relative_velocity(k_lower)?;
+    let mut beams = Vec::with_capacity(COMPARED_CHANNELS.len());
+    for name in COMPARED_CHANNELS {
+        let v = match name {
+            VIBROMETER => match map.vibrometer {
+                Some(k) => values(k).iter().zip(&v_base).map(|(v, b)| v - b).collect(),
+                None => continue,
+            },
+            LOWER_TIP => lower.clone(),
+            _ => match layout
+                .index(name)
+                .filter(|&k| layout.channels[k].kind == ChannelKind::BeamAcceleration)
+            {
+                Some(k) => relative_velocity(k)?,
+                None => continue,
+            },
+        };
+        beams.push((name, v));
+    }
     let k_contact = map
         .contact_voltage
         .ok_or(SummaryError::MissingChannel("contact voltage"))?;
@@ -224,6 +258,7 @@ pub fn window_signals(
         upper,
         lower,
         closed,
+        beams,
     })
 }
 
@@ -254,6 +289,16 @@ pub fn summarize(
     }
     .metrics()
     .map_err(sig)?;
+    let channels: Vec<(&'static str, &[f64])> =
+        w.beams.iter().map(|(n, v)| (*n, v.as_slice())).collect();
+    let features = window_features(&FeatureWindow {
+        dt: w.dt,
+        omega,
+        base_level: info.base_amp_target,
+        channels: &channels,
+        contact: &w.closed,
+    })
+    .map_err(sig)?;
     Ok(StepSummary {
         omega_ratio: info.omega_ratio,
         metrics,
@@ -269,6 +314,7 @@ pub fn summarize(
             let within = (base_amp_measured / info.base_amp_target - 1.0).abs() <= t;
             !within
         }),
+        features,
     })
 }
 
@@ -339,19 +385,40 @@ mod tests {
     /// feeds which metric"): a 3 % sensitivity error shows in the upper RMS through the
     /// vibrometer, in the lower RMS through the lower-tip accelerometer, in the base amplitude
     /// through each platform accelerometer; the upper-tip accelerometer (used only without a
-    /// vibrometer), the mid accelerometers and the drive channels change no summary value.
+    /// vibrometer) and the mid accelerometers change no metric, only their own compared
+    /// features; the drive channels change nothing.
     #[test]
     fn each_metric_comes_from_its_channels() {
         let nominal = summary(None);
         assert!(!nominal.base_amp_off_tolerance, "{nominal:?}");
-        for unused in [
-            "upper_tip",
-            "upper_mid",
-            "lower_mid",
-            "drive_voltage",
-            "drive_current",
-        ] {
+        for unused in ["drive_voltage", "drive_current"] {
             assert_eq!(summary(Some((unused, 1.03))), nominal, "{unused}");
+        }
+        let channels: Vec<&str> = nominal
+            .features
+            .iter()
+            .map(|f| f.channel.as_str())
+            .collect();
+        for c in COMPARED_CHANNELS {
+            assert!(channels.contains(&c), "{c} is compared: {channels:?}");
+        }
+        for compared_only in ["upper_tip", "upper_mid", "lower_mid"] {
+            let s = summary(Some((compared_only, 1.03)));
+            assert_eq!(s.metrics, nominal.metrics, "{compared_only}");
+            assert_eq!(s.base_amp_measured, nominal.base_amp_measured);
+            for (a, b) in s.features.iter().zip(&nominal.features) {
+                if a.channel == compared_only {
+                    // The channel records 1.03 a; its relative velocity grows by about 3 %.
+                    let r = a.value / b.value;
+                    assert!(
+                        (1.025..1.035).contains(&r),
+                        "{compared_only} {}: {r}",
+                        a.feature
+                    );
+                } else {
+                    assert_eq!(a, b, "{compared_only} changes {}", a.channel);
+                }
+            }
         }
         let vib = summary(Some(("vibrometer", 1.03)));
         assert!(

@@ -209,7 +209,7 @@ pub fn run<B: RigBackend>(
     let twin_recorder = if let Some(engine) = twin_engine {
         let layout = backend.layout().clone();
         let o = engine.observation();
-        let windows = TwinWindows::new(o.upper, o.lower);
+        let windows = TwinWindows::new(o, cfg.twin.tolerance);
         let clearances = ClearanceSchedule::new(l, cfg.model.clearance.as_ref());
         let (task, rx) = TwinTask::spawn(engine, &cfg.twin)?;
         let recorder = TwinRecorder::new(

@@ -8,7 +8,7 @@
 //! `/twin/blocks` and `/twin/steps`, and a `twin_replay` metadata record naming the model;
 //! `rigtwin report NEW.mcap` draws the re-run twin beside the measurement.
 
-use std::collections::VecDeque;
+use std::collections::{HashMap, VecDeque};
 use std::path::Path;
 
 use serde::{Deserialize, Serialize};
@@ -18,10 +18,11 @@ use crate::log::{
     log_time_ns, Attachment, LogChannel, LogError, LogHandle, LogJoin, LogOptions, LogStats,
     MetadataRecord, SessionLog, SessionRead, RIGTWIN_METADATA,
 };
-use crate::signal::SignalError;
+use crate::signal::features::CONTACT_CHANNEL;
+use crate::signal::{Feature, SignalError};
 use crate::twin::{
-    ClearanceSchedule, Completed, StepStarts, Twin, TwinBlock, TwinComparison, TwinError,
-    TwinModel, TwinSamples, TwinSpec, TwinWindows,
+    ClearanceSchedule, ComparisonTolerance, Completed, Observation, StepStarts, Twin, TwinBlock,
+    TwinComparison, TwinError, TwinModel, TwinSamples, TwinSpec, TwinState, TwinWindows,
 };
 
 use super::replay::Recording;
@@ -118,6 +119,197 @@ pub struct TwinReplayStats {
     pub wall_per_rig_second: f64,
 }
 
+/// The ensemble behind each step's model spread ([`TwinComparison::with_ensemble`]): `members`
+/// runs of the twin from its state at the step's start with the modal velocities perturbed by
+/// `perturbation` of their norm ([`TwinState::perturbed`]), through the end of the step's
+/// record window, on `jobs` threads. A step that starts with the recording (from rest) gets
+/// no ensemble.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EnsembleOptions {
+    /// Members besides the twin's own run (0: none).
+    pub members: usize,
+    /// Relative size of a member's perturbation.
+    pub perturbation: f64,
+    /// Threads (>= 1).
+    pub jobs: usize,
+}
+
+impl EnsembleOptions {
+    /// No ensemble.
+    pub const NONE: EnsembleOptions = EnsembleOptions {
+        members: 0,
+        perturbation: 1e-3,
+        jobs: 1,
+    };
+
+    /// The ensemble of `[twin]` (`spec`) on `jobs` threads.
+    pub fn of(spec: &TwinSpec, jobs: usize) -> EnsembleOptions {
+        EnsembleOptions {
+            members: spec.ensemble_members,
+            perturbation: spec.ensemble_perturbation,
+            jobs: jobs.max(1),
+        }
+    }
+}
+
+/// The ensemble's runner: one twin per thread, the recording, the clearances from the start.
+struct Ensemble<'r> {
+    rec: &'r Recording,
+    schedule: ClearanceSchedule,
+    observation: Observation,
+    tolerance: ComparisonTolerance,
+    options: EnsembleOptions,
+    twins: Vec<Twin>,
+}
+
+impl<'r> Ensemble<'r> {
+    fn new(
+        rec: &'r Recording,
+        model: &TwinModel<'_>,
+        spec: &TwinSpec,
+        schedule: &ClearanceSchedule,
+        options: EnsembleOptions,
+    ) -> Result<Ensemble<'r>, TwinReplayError> {
+        let threads = if options.members == 0 {
+            0
+        } else {
+            options.jobs.clamp(1, options.members)
+        };
+        let twins = (0..threads)
+            .map(|_| Twin::new(model, spec, &rec.layout, schedule.first().unwrap_or(0.0)))
+            .collect::<Result<Vec<_>, _>>()?;
+        let observation = match twins.first() {
+            Some(t) => t.observation().clone(),
+            None => Observation::nominal(&model.circuit, model.contact_threshold_v),
+        };
+        Ok(Ensemble {
+            rec,
+            schedule: schedule.clone(),
+            observation,
+            tolerance: spec.tolerance,
+            options,
+            twins,
+        })
+    }
+
+    /// `c` (the twin's comparison over the record window of `info`) with the model spread of
+    /// the ensemble started from `state`.
+    fn apply(
+        &mut self,
+        info: &StepInfo,
+        state: &TwinState,
+        c: TwinComparison,
+    ) -> Result<TwinComparison, TwinReplayError> {
+        if self.twins.is_empty() {
+            return Ok(c);
+        }
+        let mut channels: Vec<&str> = Vec::new();
+        for f in &c.features {
+            if f.channel != CONTACT_CHANNEL && !channels.contains(&f.channel.as_str()) {
+                channels.push(&f.channel);
+            }
+        }
+        let threads = self.twins.len();
+        let members = self.options.members;
+        let (rec, schedule, o, tolerance, relative) = (
+            self.rec,
+            &self.schedule,
+            &self.observation,
+            self.tolerance,
+            self.options.perturbation,
+        );
+        let channels = &channels;
+        let runs: Vec<Result<Vec<MemberRun>, TwinReplayError>> = std::thread::scope(|scope| {
+            let handles: Vec<_> = self
+                .twins
+                .iter_mut()
+                .enumerate()
+                .map(|(j, twin)| {
+                    scope.spawn(move || {
+                        (1..=members)
+                            .skip(j)
+                            .step_by(threads)
+                            .map(|m| {
+                                let s = state.perturbed(
+                                    &info.test,
+                                    info.step,
+                                    info.record_attempt,
+                                    m,
+                                    relative,
+                                );
+                                let f = run_member(
+                                    twin, rec, schedule, &s, info, o, tolerance, channels,
+                                )?;
+                                Ok((m, f))
+                            })
+                            .collect()
+                    })
+                })
+                .collect();
+            handles
+                .into_iter()
+                .map(|h| h.join().expect("an ensemble thread panicked"))
+                .collect()
+        });
+        let mut all = Vec::with_capacity(members);
+        for r in runs {
+            all.extend(r?);
+        }
+        // Member order, whatever thread ran it: the result does not depend on `jobs`.
+        all.sort_by_key(|(m, _)| *m);
+        let features: Vec<Vec<Feature>> = all.into_iter().filter_map(|(_, f)| f).collect();
+        Ok(c.with_ensemble(&features, &self.tolerance))
+    }
+}
+
+/// An ensemble member (1, 2, ...) and its features over the window (`None`: the recording
+/// does not hold the block its state starts at).
+type MemberRun = (usize, Option<Vec<Feature>>);
+
+/// One run of `twin` from `state` through the end of the record window of `info`: its
+/// features over the window (`None` if the recording does not hold the state's block).
+#[allow(clippy::too_many_arguments)]
+fn run_member(
+    twin: &mut Twin,
+    rec: &Recording,
+    schedule: &ClearanceSchedule,
+    state: &TwinState,
+    info: &StepInfo,
+    o: &Observation,
+    tolerance: ComparisonTolerance,
+    channels: &[&str],
+) -> Result<Option<Vec<Feature>>, TwinReplayError> {
+    let start = rec
+        .blocks
+        .partition_point(|b| b.first_sample < state.next_sample);
+    if rec.blocks.get(start).map(|b| b.first_sample) != Some(state.next_sample) {
+        return Ok(None);
+    }
+    twin.reset();
+    twin.set_state(state)?;
+    let mut clearances = schedule.clone();
+    while clearances.next_due(state.next_sample).is_some() {}
+    let mut out = TwinWindows::new(o, tolerance);
+    for b in &rec.blocks[start..] {
+        if b.first_sample >= info.record_end_sample() {
+            break;
+        }
+        while let Some(c) = clearances.next_due(b.first_sample) {
+            twin.set_clearance(c)?;
+        }
+        out.push(&twin.push_block(b)?);
+    }
+    match out.features(info, rec.layout.dt(), channels) {
+        Some(Ok(f)) => Ok(Some(f)),
+        Some(Err(source)) => Err(TwinReplayError::Metrics {
+            test: info.test.clone(),
+            step: info.step,
+            source,
+        }),
+        None => Ok(None),
+    }
+}
+
 /// Where a twin replay's output goes besides the summary (e.g. a copy of the session log,
 /// [`TwinLogCopy`]). `()` keeps nothing.
 pub trait TwinSink {
@@ -148,14 +340,15 @@ impl TwinSink for () {
 /// Runs the twin (`model`: ROM, `[model]` extensions, contact observation; settings `spec`;
 /// beam length `beam_length` m for the plan's clearances) over the recording `rec` and writes each step's comparison into `summary`
 /// (`tests[].steps[].twin`, in the order of the recording's record windows; `summary` is the
-/// replayed summary of the same recording). Every output block and comparison also goes to
-/// `sink`.
+/// replayed summary of the same recording), each with the model spread of the ensemble
+/// `ensemble`. Every output block and comparison also goes to `sink`.
 pub fn replay_twin(
     rec: &Recording,
     summary: &mut SessionSummary,
     model: &TwinModel<'_>,
     spec: &TwinSpec,
     beam_length: f64,
+    ensemble: EnsembleOptions,
     sink: &mut dyn TwinSink,
 ) -> Result<TwinReplayStats, TwinReplayError> {
     if !rec.gaps.is_empty() {
@@ -181,15 +374,21 @@ pub fn replay_twin(
         .collect();
     let mut results: Vec<Option<TwinComparison>> = Vec::new();
     let o = twin.observation();
-    let mut out = TwinWindows::new(o.upper, o.lower);
+    let mut out = TwinWindows::new(o, spec.tolerance);
     let mut stats = TwinReplayStats::default();
-    let take = |done: Vec<Completed>,
-                results: &mut Vec<Option<TwinComparison>>,
-                sink: &mut dyn TwinSink|
+    let mut members = Ensemble::new(rec, model, spec, &clearances, ensemble)?;
+    let mut starts: HashMap<(String, usize), TwinState> = HashMap::new();
+    let mut take = |done: Vec<Completed>,
+                    starts: &HashMap<(String, usize), TwinState>,
+                    results: &mut Vec<Option<TwinComparison>>,
+                    sink: &mut dyn TwinSink|
      -> Result<(), TwinReplayError> {
         for (info, c) in done {
             let c = match c {
-                Some(Ok(c)) => Some(c),
+                Some(Ok(c)) => match starts.get(&(info.test.clone(), info.step)) {
+                    Some(state) => Some(members.apply(&info, state, c)?),
+                    None => Some(c),
+                },
                 Some(Err(source)) => {
                     return Err(TwinReplayError::Metrics {
                         test: info.test,
@@ -210,7 +409,11 @@ pub fn replay_twin(
         }
         if let Some((test, step)) = step_starts.next_due(b.first_sample) {
             if let Some(state) = twin.state() {
-                sink.state(&TwinStateMessage { test, step, state })?;
+                let message = TwinStateMessage { test, step, state };
+                sink.state(&message)?;
+                if ensemble.members > 0 {
+                    starts.insert((message.test, message.step), message.state);
+                }
             }
         }
         let tb = twin.push_block(b)?;
@@ -218,9 +421,11 @@ pub fn replay_twin(
         stats.solver_failures += tb.solver_failure_count();
         sink.block(&tb)?;
         out.push(&tb);
-        take(out.complete(&mut pending, dt, false), &mut results, sink)?;
+        let done = out.complete(&mut pending, dt, false);
+        take(done, &starts, &mut results, sink)?;
     }
-    take(out.complete(&mut pending, dt, true), &mut results, sink)?;
+    let done = out.complete(&mut pending, dt, true);
+    take(done, &starts, &mut results, sink)?;
     stats.steps_compared = summary.attach_twin(results);
     stats.wall_per_rig_second =
         wall.elapsed().as_secs_f64() / rec.rig_seconds().max(f64::MIN_POSITIVE);
@@ -323,6 +528,7 @@ impl StepSelection {
 /// into `summary` (the other steps get none). With the model the states were logged with, each
 /// comparison equals, bit for bit, the one the whole session's twin (live or replayed) made.
 /// Arguments as for [`replay_twin`]; only the comparisons go to `sink`.
+#[allow(clippy::too_many_arguments)]
 pub fn replay_twin_steps(
     rec: &Recording,
     summary: &mut SessionSummary,
@@ -330,6 +536,7 @@ pub fn replay_twin_steps(
     spec: &TwinSpec,
     beam_length: f64,
     select: &StepSelection,
+    ensemble: EnsembleOptions,
     sink: &mut dyn TwinSink,
 ) -> Result<TwinReplayStats, TwinReplayError> {
     let unmatched = select.unmatched(rec);
@@ -361,8 +568,8 @@ pub fn replay_twin_steps(
         first_schedule.first().unwrap_or(0.0),
     )?;
     let dt = rec.layout.dt();
-    let o = twin.observation();
-    let (upper, lower) = (o.upper, o.lower);
+    let o = twin.observation().clone();
+    let mut members = Ensemble::new(rec, model, spec, &first_schedule, ensemble)?;
     let mut stats = TwinReplayStats::default();
     let mut rig_seconds = 0.0;
     let mut results = Vec::new();
@@ -403,7 +610,7 @@ pub fn replay_twin_steps(
                 states: rec.twin_states.len(),
             });
         };
-        let mut out = TwinWindows::new(upper, lower);
+        let mut out = TwinWindows::new(&o, spec.tolerance);
         for b in &rec.blocks[start..] {
             if b.first_sample >= info.record_end_sample() {
                 break;
@@ -418,7 +625,10 @@ pub fn replay_twin_steps(
             out.push(&tb);
         }
         let c = match out.compare(info, measured, dt) {
-            Some(Ok(c)) => Some(c),
+            Some(Ok(c)) => match logged {
+                Some(m) => Some(members.apply(info, &m.state, c)?),
+                None => Some(c),
+            },
             Some(Err(source)) => {
                 return Err(TwinReplayError::Metrics {
                     test: info.test.clone(),

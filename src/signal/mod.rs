@@ -14,6 +14,7 @@
 pub mod contact_activity;
 pub mod demod;
 mod error;
+pub mod features;
 mod fft;
 pub mod integrate;
 pub mod metrics;
@@ -28,6 +29,7 @@ pub use contact_activity::{
 };
 pub use demod::{demodulate, Demodulator, Harmonic, PeriodHarmonic};
 pub use error::SignalError;
+pub use features::{ensemble_features, window_features, Feature, FeatureWindow};
 pub use integrate::integrate_periodic;
 pub use metrics::{step_metrics, MetricsParams, StepMetrics, StepRecord};
 pub use periods::PeriodGrid;

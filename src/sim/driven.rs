@@ -30,8 +30,14 @@ pub const BEAM_SENSORS: [&str; 4] = ["lower_tip", "lower_mid", "upper_tip", "upp
 /// Index of the lower tip in [`BEAM_SENSORS`].
 pub const LOWER_TIP: usize = 0;
 
+/// Index of the lower beam's middle in [`BEAM_SENSORS`].
+pub const LOWER_MID: usize = 1;
+
 /// Index of the upper tip in [`BEAM_SENSORS`] (the vibrometer's spot).
 pub const UPPER_TIP: usize = 2;
+
+/// Index of the upper beam's middle in [`BEAM_SENSORS`].
+pub const UPPER_MID: usize = 3;
 
 /// The provisional time step of [`DrivenRom::provisional`]: far inside any stability limit,
 /// so that the integrator can check the ROM and compute its limits before the real step is

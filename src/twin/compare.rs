@@ -9,14 +9,21 @@ use std::collections::VecDeque;
 
 use serde::{Deserialize, Serialize};
 
+use crate::control::summary::COMPARED_CHANNELS;
 use crate::control::{StepInfo, StepSummary};
+use crate::rig::channels::{
+    LOWER_TIP as LOWER_TIP_CHANNEL, UPPER_MID as UPPER_MID_CHANNEL, UPPER_TIP as UPPER_TIP_CHANNEL,
+    VIBROMETER,
+};
+use crate::signal::features::CONTACT_CHANNEL;
 use crate::signal::{
-    integrate_periodic, spectrum_distance_db, PeriodGrid, SignalError, StepMetrics, StepRecord,
+    ensemble_features, integrate_periodic, spectrum_distance_db, window_features, Feature,
+    FeatureWindow, PeriodGrid, SignalError, StepMetrics, StepRecord,
 };
 // The lower and upper tip's indices in the twin's sensors (`TWIN_SENSORS`).
-use crate::sim::driven::{LOWER_TIP, UPPER_TIP};
+use crate::sim::driven::{LOWER_MID, LOWER_TIP, UPPER_MID, UPPER_TIP};
 
-use super::observe::TipObservation;
+use super::observe::{Observation, TipObservation};
 use super::TwinBlock;
 
 /// The twin over one record window, against the measurement.
@@ -40,6 +47,138 @@ pub struct TwinComparison {
     /// were measured).
     #[serde(default)]
     pub spectrum_distance_db: Option<f64>,
+    /// Every compared feature of every channel the measurement has, with the measurement's
+    /// and the model's spread and the score ([`FeatureComparison`]); empty in summaries
+    /// written before they existed.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub features: Vec<FeatureComparison>,
+    /// The largest score of `features` (`None` without features).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_score: Option<f64>,
+    /// Runs of the model from perturbed initial states behind the model spread besides the
+    /// twin's own run ([`TwinComparison::with_ensemble`]); 0: the model spread is that of the
+    /// twin's own sub-windows.
+    #[serde(default)]
+    pub ensemble_members: usize,
+}
+
+/// One compared feature of one channel: the measurement and the model, each with its spread
+/// ([`crate::signal::features`]), and how far apart they are in units of the combined spread.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
+pub struct FeatureComparison {
+    /// The channel (`vibrometer`, `upper_tip`, `upper_mid`, `lower_tip`, `lower_mid`,
+    /// `contact`).
+    pub channel: String,
+    /// The feature (`rms`, `amp_p10`, `amp_p50`, `amp_p90`; `contact_fraction`,
+    /// `impacts_per_period`).
+    pub feature: String,
+    /// The measured value (velocities normalised by `Omega q`), -.
+    pub measured: f64,
+    /// Its spread from the record window's sub-windows; `None` for a window too short.
+    pub measured_spread: Option<f64>,
+    /// The model's value (the twin as it ran).
+    pub model: f64,
+    /// Its spread: the twin's sub-windows, and the ensemble's scatter when there is one.
+    pub model_spread: Option<f64>,
+    /// `|model - measured| / sqrt(measured_spread^2 + model_spread^2 + tolerance^2)`, with
+    /// the comparison's tolerance ([`ComparisonTolerance`]).
+    pub score: f64,
+}
+
+pub use crate::config::twin::ComparisonTolerance;
+
+/// The features of the measurement against the model's, matched by channel and feature
+/// (a feature one side lacks is left out).
+fn score(
+    measured: &[Feature],
+    model: &[Feature],
+    tolerance: &ComparisonTolerance,
+) -> Vec<FeatureComparison> {
+    measured
+        .iter()
+        .filter_map(|m| {
+            let x = model
+                .iter()
+                .find(|x| x.channel == m.channel && x.feature == m.feature)?;
+            let t = tolerance.of(&m.feature, m.value, x.value);
+            let var = m.spread.unwrap_or(0.0).powi(2) + x.spread.unwrap_or(0.0).powi(2) + t * t;
+            let diff = (x.value - m.value).abs();
+            let score = if var > 0.0 {
+                diff / var.sqrt()
+            } else if diff == 0.0 {
+                0.0
+            } else {
+                f64::INFINITY
+            };
+            Some(FeatureComparison {
+                channel: m.channel.clone(),
+                feature: m.feature.clone(),
+                measured: m.value,
+                measured_spread: m.spread,
+                model: x.value,
+                model_spread: x.spread,
+                score,
+            })
+        })
+        .collect()
+}
+
+/// The largest score (NaN scores, from broken windows, count as the largest).
+fn max_score(features: &[FeatureComparison]) -> Option<f64> {
+    features.iter().map(|f| f.score).reduce(|a, b| {
+        if a.is_nan() || b.is_nan() {
+            f64::NAN
+        } else {
+            a.max(b)
+        }
+    })
+}
+
+impl TwinComparison {
+    /// The comparison with the model spread of an ensemble: `members` are the features of
+    /// runs of the model over the same window from perturbed initial states
+    /// ([`TwinWindows::features`]); each feature's model spread becomes the larger of the
+    /// twin's own sub-window spread and the scatter across the twin and the members
+    /// ([`crate::signal::ensemble_features`]), and the scores are recomputed with the floor
+    /// `tolerance`. Members whose
+    /// features do not line up with the comparison's are an error of the caller: the
+    /// comparison is returned unchanged.
+    pub fn with_ensemble(
+        mut self,
+        members: &[Vec<Feature>],
+        tolerance: &ComparisonTolerance,
+    ) -> TwinComparison {
+        let own: Vec<Feature> = self
+            .features
+            .iter()
+            .map(|f| Feature {
+                channel: f.channel.clone(),
+                feature: f.feature.clone(),
+                value: f.model,
+                spread: f.model_spread,
+            })
+            .collect();
+        let measured: Vec<Feature> = self
+            .features
+            .iter()
+            .map(|f| Feature {
+                channel: f.channel.clone(),
+                feature: f.feature.clone(),
+                value: f.measured,
+                spread: f.measured_spread,
+            })
+            .collect();
+        let runs: Vec<Vec<Feature>> = std::iter::once(own)
+            .chain(members.iter().cloned())
+            .collect();
+        let Some(model) = ensemble_features(&runs) else {
+            return self;
+        };
+        self.features = score(&measured, &model, tolerance);
+        self.max_score = max_score(&self.features);
+        self.ensemble_members = members.len();
+        self
+    }
 }
 
 /// The twin's output samples from `first` on, to cut record windows from.
@@ -47,10 +186,18 @@ pub struct TwinComparison {
 pub struct TwinWindows {
     /// How the step summary sees the upper and lower tip (sensor sensitivities).
     observe: [TipObservation; 2],
+    /// How the comparison sees each compared beam channel ([`COMPARED_CHANNELS`] order).
+    beams: [TipObservation; 5],
+    /// The scores' floor.
+    tolerance: ComparisonTolerance,
     first: u64,
     base: VecDeque<f64>,
     upper: VecDeque<f64>,
     lower: VecDeque<f64>,
+    /// The twin's beam sensors ([`super::TWIN_SENSORS`]) for the channels not in `upper` and
+    /// `lower`: the lower mid and the upper mid.
+    lower_mid: VecDeque<f64>,
+    upper_mid: VecDeque<f64>,
     contact: VecDeque<bool>,
     normal: VecDeque<f64>,
     /// Sample ranges `[from, to)` the twin did not see (input gaps).
@@ -60,20 +207,27 @@ pub struct TwinWindows {
 impl Default for TwinWindows {
     /// Windows for nominal sensors.
     fn default() -> Self {
-        TwinWindows::new(TipObservation::IDENTITY, TipObservation::IDENTITY)
+        TwinWindows::new(
+            &Observation::nominal(&crate::config::ContactCircuitSpec::default(), 0.0),
+            ComparisonTolerance::default(),
+        )
     }
 }
 
 impl TwinWindows {
-    /// Windows whose upper and lower tip velocities the step summary sees through `upper` and
-    /// `lower` (see [`super::observe`]).
-    pub fn new(upper: TipObservation, lower: TipObservation) -> TwinWindows {
+    /// Windows whose channels the step summary and the comparison see through the sensor
+    /// sensitivities of `o` (see [`super::observe`]), scored with the floor `tolerance`.
+    pub fn new(o: &Observation, tolerance: ComparisonTolerance) -> TwinWindows {
         TwinWindows {
-            observe: [upper, lower],
+            observe: [o.upper, o.lower],
+            beams: o.beams,
+            tolerance,
             first: 0,
             base: VecDeque::new(),
             upper: VecDeque::new(),
             lower: VecDeque::new(),
+            lower_mid: VecDeque::new(),
+            upper_mid: VecDeque::new(),
             contact: VecDeque::new(),
             normal: VecDeque::new(),
             gaps: Vec::new(),
@@ -96,6 +250,8 @@ impl TwinWindows {
                 self.base.extend(std::iter::repeat_n(f64::NAN, pad));
                 self.upper.extend(std::iter::repeat_n(f64::NAN, pad));
                 self.lower.extend(std::iter::repeat_n(f64::NAN, pad));
+                self.lower_mid.extend(std::iter::repeat_n(f64::NAN, pad));
+                self.upper_mid.extend(std::iter::repeat_n(f64::NAN, pad));
                 self.contact.extend(std::iter::repeat_n(false, pad));
                 self.normal.extend(std::iter::repeat_n(f64::NAN, pad));
             }
@@ -103,6 +259,8 @@ impl TwinWindows {
         self.base.extend(&b.base_acceleration);
         self.upper.extend(b.sensor(UPPER_TIP));
         self.lower.extend(b.sensor(LOWER_TIP));
+        self.lower_mid.extend(b.sensor(LOWER_MID));
+        self.upper_mid.extend(b.sensor(UPPER_MID));
         self.contact.extend(&b.contact);
         self.normal.extend(&b.normal_force);
     }
@@ -118,10 +276,83 @@ impl TwinWindows {
         self.base.drain(..n);
         self.upper.drain(..n);
         self.lower.drain(..n);
+        self.lower_mid.drain(..n);
+        self.upper_mid.drain(..n);
         self.contact.drain(..n);
         self.normal.drain(..n);
         self.first += n as u64;
         self.gaps.retain(|&(_, to)| to > self.first);
+    }
+
+    /// The twin's observed channels over the record window of `info` (samples `dt` s apart):
+    /// `None` while the window is not complete, or when the twin missed samples of it (an
+    /// input gap).
+    fn window(&self, info: &StepInfo, dt: f64) -> Option<Result<Window, SignalError>> {
+        let (from, to) = (info.record_first_sample, info.record_end_sample());
+        if from < self.first || to > self.end() {
+            return None;
+        }
+        if self.gaps.iter().any(|&(a, b)| a < to && b > from) {
+            return None;
+        }
+        let range = (from - self.first) as usize..(to - self.first) as usize;
+        let take = |x: &VecDeque<f64>| -> Vec<f64> { x.range(range.clone()).copied().collect() };
+        let mut upper = take(&self.upper);
+        let mut lower = take(&self.lower);
+        let sensor = |name: &str| match name {
+            VIBROMETER | UPPER_TIP_CHANNEL => &self.upper,
+            UPPER_MID_CHANNEL => &self.upper_mid,
+            LOWER_TIP_CHANNEL => &self.lower,
+            _ => &self.lower_mid,
+        };
+        let mut beams: Vec<(&'static str, Vec<f64>)> = COMPARED_CHANNELS
+            .iter()
+            .map(|&name| (name, take(sensor(name))))
+            .collect();
+        let identity = self.observe.iter().all(TipObservation::is_identity)
+            && self.beams.iter().all(TipObservation::is_identity);
+        if !identity {
+            let base = take(&self.base);
+            let v_base = match PeriodGrid::new(base.len(), dt, info.omega)
+                .and_then(|grid| integrate_periodic(&base, dt, &grid))
+            {
+                Ok(v) => v,
+                Err(e) => return Some(Err(e)),
+            };
+            let apply = |o: &TipObservation, v: &mut Vec<f64>| {
+                for (x, vb) in v.iter_mut().zip(&v_base) {
+                    *x = o.gain * *x + o.base_weight * vb;
+                }
+            };
+            apply(&self.observe[0], &mut upper);
+            apply(&self.observe[1], &mut lower);
+            for (o, (_, v)) in self.beams.iter().zip(beams.iter_mut()) {
+                apply(o, v);
+            }
+        }
+        Some(Ok(Window {
+            upper,
+            lower,
+            beams,
+            contact: self.contact.range(range.clone()).copied().collect(),
+            normal: self.normal.range(range).copied().collect(),
+        }))
+    }
+
+    /// The twin's compared features over the record window of `info` (samples `dt` s apart),
+    /// with the spreads of its own sub-windows, for the channels `channels` (the measurement's):
+    /// `None` as for [`TwinWindows::compare`]. An ensemble member's contribution to the
+    /// comparison's model spread ([`TwinComparison::with_ensemble`]).
+    pub fn features(
+        &self,
+        info: &StepInfo,
+        dt: f64,
+        channels: &[&str],
+    ) -> Option<Result<Vec<Feature>, SignalError>> {
+        Some(
+            self.window(info, dt)?
+                .and_then(|w| w.features(info, dt, channels)),
+        )
     }
 
     /// The twin over the record window of `info` (samples `dt` s apart), against `measured`:
@@ -132,43 +363,73 @@ impl TwinWindows {
         info: &StepInfo,
         measured: &StepSummary,
         dt: f64,
-    ) -> Option<Result<TwinComparison, crate::signal::SignalError>> {
-        let (from, to) = (info.record_first_sample, info.record_end_sample());
-        if from < self.first || to > self.end() {
-            return None;
-        }
-        if self.gaps.iter().any(|&(a, b)| a < to && b > from) {
-            return None;
-        }
-        let range = (from - self.first) as usize..(to - self.first) as usize;
-        let mut upper: Vec<f64> = self.upper.range(range.clone()).copied().collect();
-        let mut lower: Vec<f64> = self.lower.range(range.clone()).copied().collect();
-        if !self.observe.iter().all(TipObservation::is_identity) {
-            let base: Vec<f64> = self.base.range(range.clone()).copied().collect();
-            if let Err(e) = observe_tips(
-                &self.observe,
-                &base,
-                dt,
-                info.omega,
-                [&mut upper, &mut lower],
-            ) {
-                return Some(Err(e));
-            }
-        }
-        let contact: Vec<bool> = self.contact.range(range.clone()).copied().collect();
-        let normal: Vec<f64> = self.normal.range(range).copied().collect();
+    ) -> Option<Result<TwinComparison, SignalError>> {
+        let w = match self.window(info, dt)? {
+            Ok(w) => w,
+            Err(e) => return Some(Err(e)),
+        };
         let metrics = StepRecord {
             dt,
             omega: info.omega,
             base_level: info.base_amp_target,
-            tip_velocity_upper: &upper,
-            tip_velocity_lower: &lower,
-            contact_closed: &contact,
-            normal_force: Some(&normal),
+            tip_velocity_upper: &w.upper,
+            tip_velocity_lower: &w.lower,
+            contact_closed: &w.contact,
+            normal_force: Some(&w.normal),
         }
         .metrics();
-        Some(metrics.map(|m| compare(m, &measured.metrics)))
+        let channels = measured_channels(&measured.features);
+        let features = w.features(info, dt, &channels);
+        Some(metrics.and_then(|m| {
+            let mut c = compare(m, &measured.metrics);
+            c.features = score(&measured.features, &features?, &self.tolerance);
+            c.max_score = max_score(&c.features);
+            Ok(c)
+        }))
     }
+}
+
+/// The twin's observed channels over one record window.
+struct Window {
+    upper: Vec<f64>,
+    lower: Vec<f64>,
+    beams: Vec<(&'static str, Vec<f64>)>,
+    contact: Vec<bool>,
+    normal: Vec<f64>,
+}
+
+impl Window {
+    fn features(
+        &self,
+        info: &StepInfo,
+        dt: f64,
+        channels: &[&str],
+    ) -> Result<Vec<Feature>, SignalError> {
+        let beams: Vec<(&'static str, &[f64])> = self
+            .beams
+            .iter()
+            .filter(|(n, _)| channels.contains(n))
+            .map(|(n, v)| (*n, v.as_slice()))
+            .collect();
+        window_features(&FeatureWindow {
+            dt,
+            omega: info.omega,
+            base_level: info.base_amp_target,
+            channels: &beams,
+            contact: &self.contact,
+        })
+    }
+}
+
+/// The beam channels of a measurement's features, in order.
+fn measured_channels(features: &[Feature]) -> Vec<&str> {
+    let mut out: Vec<&str> = Vec::new();
+    for f in features {
+        if f.channel != CONTACT_CHANNEL && !out.contains(&f.channel.as_str()) {
+            out.push(&f.channel);
+        }
+    }
+    out
 }
 
 /// A completed record window: the step, and the twin over it (`None`: the twin missed part
@@ -210,25 +471,6 @@ impl TwinWindows {
     }
 }
 
-/// Applies the tip observations to the window's relative velocities, with the base velocity
-/// integrated from `base` (m/s^2) over whole periods like the step summary does.
-fn observe_tips(
-    observe: &[TipObservation; 2],
-    base: &[f64],
-    dt: f64,
-    omega: f64,
-    tips: [&mut Vec<f64>; 2],
-) -> Result<(), SignalError> {
-    let grid = PeriodGrid::new(base.len(), dt, omega)?;
-    let v_base = integrate_periodic(base, dt, &grid)?;
-    for (o, v) in observe.iter().zip(tips) {
-        for (x, vb) in v.iter_mut().zip(&v_base) {
-            *x = o.gain * *x + o.base_weight * vb;
-        }
-    }
-    Ok(())
-}
-
 fn compare(twin: StepMetrics, measured: &StepMetrics) -> TwinComparison {
     TwinComparison {
         rms_error_upper: twin.rms_upper / measured.rms_upper - 1.0,
@@ -241,5 +483,8 @@ fn compare(twin: StepMetrics, measured: &StepMetrics) -> TwinComparison {
         ))
         .filter(|d| d.is_finite()),
         metrics: twin,
+        features: Vec::new(),
+        max_score: None,
+        ensemble_members: 0,
     }
 }

@@ -42,7 +42,7 @@ pub mod state;
 pub mod task;
 
 pub use clearance::ClearanceSchedule;
-pub use compare::{Completed, TwinComparison, TwinWindows};
+pub use compare::{ComparisonTolerance, Completed, FeatureComparison, TwinComparison, TwinWindows};
 pub use engine::{Twin, TwinCounters};
 pub use error::{BlockError, LayoutError, TaskError, TwinError};
 pub use input::{InputMap, TwinInput};

@@ -65,6 +65,10 @@ pub struct Observation {
     pub upper: TipObservation,
     /// See `upper`.
     pub lower: TipObservation,
+    /// Every compared beam channel as the comparison derives it
+    /// ([`crate::control::summary::COMPARED_CHANNELS`] order; the identity for a channel the
+    /// layout lacks).
+    pub beams: [TipObservation; 5],
 }
 
 impl Observation {
@@ -105,6 +109,13 @@ impl Observation {
         };
         let upper = tip(map.vibrometer.or(map.upper_tip));
         let lower = tip(map.lower_tip);
+        let beams = [
+            tip(map.vibrometer),
+            tip(map.upper_tip),
+            tip(map.upper_mid),
+            tip(map.lower_tip),
+            tip(map.lower_mid),
+        ];
         // The identity exactly when every gain involved is 1 (the subtraction above is exact).
         Ok(Observation {
             circuit: circuit.clone(),
@@ -112,6 +123,7 @@ impl Observation {
             platform_gains,
             upper,
             lower,
+            beams,
         })
     }
 
@@ -123,6 +135,7 @@ impl Observation {
             platform_gains: Vec::new(),
             upper: TipObservation::IDENTITY,
             lower: TipObservation::IDENTITY,
+            beams: [TipObservation::IDENTITY; 5],
         }
     }
 }

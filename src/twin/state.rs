@@ -39,6 +39,43 @@ pub struct TwinState {
     pub contact_voltage: f64,
 }
 
+impl TwinState {
+    /// The state of ensemble member `member` (1, 2, ...) of the step of `test` / `step`
+    /// (`record_attempt`, counted from 1): this state with its modal velocities perturbed by
+    /// `relative` of their norm ([`crate::sim::State::perturb_velocities`]), from a seed of the
+    /// step and the member only, so every run of the same session (and every hypothesis a
+    /// diagnosis tries) draws the same perturbations.
+    pub fn perturbed(
+        &self,
+        test: &str,
+        step: usize,
+        record_attempt: u32,
+        member: usize,
+        relative: f64,
+    ) -> TwinState {
+        let mut s = self.clone();
+        s.rom
+            .perturb_velocities(member_seed(test, step, record_attempt, member), relative);
+        s
+    }
+}
+
+/// FNV-1a over the step's name and numbers: a seed that depends on nothing else.
+fn member_seed(test: &str, step: usize, record_attempt: u32, member: usize) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    let bytes = test
+        .bytes()
+        .chain([0xff])
+        .chain((step as u64).to_le_bytes())
+        .chain(u64::from(record_attempt).to_le_bytes())
+        .chain((member as u64).to_le_bytes());
+    for b in bytes {
+        h ^= u64::from(b);
+        h = h.wrapping_mul(0x0100_0000_01b3);
+    }
+    h
+}
+
 /// Why a [`TwinState`] cannot be restored.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum StateError {

@@ -152,6 +152,33 @@ impl State {
         self.counters
     }
 
+    /// Adds to the modal velocities a random vector of norm `relative` times theirs, drawn
+    /// from the seed `seed` (deterministic: the same seed gives the same bits); a state at
+    /// rest is left unchanged. An ensemble member's initial state.
+    ///
+    // NOTE: the direction is uniform in the cube [-1, 1]^n, normalised: not isotropic, which
+    // does not matter for a perturbation whose only job is to be small, reproducible and to
+    // excite every mode.
+    pub fn perturb_velocities(&mut self, seed: u64, relative: f64) {
+        use rand::{Rng, SeedableRng};
+        let norm = self.eta_dot.iter().map(|v| v * v).sum::<f64>().sqrt();
+        if norm == 0.0 || !norm.is_finite() {
+            return;
+        }
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        let d: Vec<f64> = (0..self.eta_dot.len())
+            .map(|_| rng.gen_range(-1.0..=1.0))
+            .collect();
+        let dn = d.iter().map(|v| v * v).sum::<f64>().sqrt();
+        if dn == 0.0 {
+            return;
+        }
+        let scale = relative * norm / dn;
+        for (v, d) in self.eta_dot.iter_mut().zip(d) {
+            *v += scale * d;
+        }
+    }
+
     /// Checks that the state fits a ROM of `n_modes` modes and `n_pairs` contact pairs and is
     /// finite (a state read back from a log, before it replaces a run's).
     pub fn check(&self, n_modes: usize, n_pairs: usize) -> Result<(), StateMismatch> {

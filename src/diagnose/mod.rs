@@ -1,0 +1,32 @@
+//! The diagnosis: from "the twin does not match" to "this physics was missing". This module
+//! owns the identification stage, the estimators that read a recorded session
+//! ([`crate::session::replay::Recording`]) and return physical evidence and first parameter
+//! estimates, without the twin: synchronous numerics, no I/O, deterministic.
+//!
+//! In the order in which effects confound each other (DESIGN.md, "Signatures and order"):
+//! - [`sensors`]: sensor sensitivities from redundant channels (the platform accelerometers
+//!   see one base, the vibrometer and the upper-tip accelerometer one spot);
+//! - [`linear`]: linear natural frequency and damping of 1FL and 1FU from the impact-free
+//!   steps of each test (reference section 3.2), and their dependence on the amplitude across
+//!   levels (the clamp's friction);
+//! - [`clearance`]: the clearance per test from the relative tip displacement before the
+//!   first impact (reference section 4, Table 2), and its trend over the session (wear).
+//!
+//! Every estimator works on [`evidence::SessionEvidence`], the fundamental complex amplitudes
+//! and contact state of every record window, built once per recording (optionally with
+//! sensor-gain corrections applied). An estimator never reads the simulated rig's hidden
+//! physics (`[truth]`, `[truth.variants]`, the log's `truth_variants`): it sees the DAQ
+//! counts, the layout and the session's events only. What a session cannot tell is a typed
+//! error ([`EvidenceError`]) or an explicit "undecided" in the result, never a guess.
+
+pub mod clearance;
+mod error;
+pub mod evidence;
+pub mod linear;
+pub mod sensors;
+
+pub use clearance::{clearance_per_test, ClearanceEvidence, ClearanceOptions, TestClearance};
+pub use error::EvidenceError;
+pub use evidence::{session_evidence, SessionEvidence, WindowEvidence};
+pub use linear::{linear_modes, LinearEvidence, LinearOptions, ModeFit};
+pub use sensors::{sensor_sensitivities, SensorEvidence, SensorOptions};

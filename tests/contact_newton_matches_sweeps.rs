@@ -148,3 +148,51 @@ fn auto_uses_sweeps_for_small_impacts_and_newton_for_large_held_contact() {
         "{s:?}"
     );
 }
+
+#[test]
+fn a_sliding_held_contact_takes_chord_steps_and_matches_the_sweeps() {
+    // Every pair pressed closed and driven tangentially (most pairs slip), the drive turning a
+    // little from step to step: the states repeat while the slip directions move, so the
+    // kept factorisation serves as a chord step (fewer LUs than Newton iterations), and each
+    // step's forces still match the sweeps' within the tolerance.
+    let base = held(physical_problem(7, 192), 1.0);
+    let n = base.n_pairs();
+    let scale = base.c.iter().map(|x| x.abs()).fold(0.0, f64::max);
+    let mut solver = ContactSolver::new(&base.w, &base.mu, params(NewtonUse::Always)).unwrap();
+    let (mut lambda, mut gamma) = (vec![0.0; 3 * n], vec![0.0; 3 * n]);
+    let (mut iterations, mut factorisations, mut slipping) = (0, 0, 0);
+    for step in 0..6 {
+        let angle = 0.02 * step as f64;
+        let mut p = base.clone();
+        for k in 0..n {
+            p.c[3 * k + 1] = 0.8 * scale * angle.cos();
+            p.c[3 * k + 2] = 0.8 * scale * angle.sin();
+        }
+        let s = solver.solve(&p.c, None, &mut lambda, &mut gamma).unwrap();
+        assert!(
+            s.converged && s.path == SolvePath::Newton,
+            "step {step}: {s:?}"
+        );
+        let (sweeps, s0) = solve_problem(&p, &params(NewtonUse::Never), None).unwrap();
+        assert!(s0.converged, "step {step}: sweeps {s0:?}");
+        let e = rel_diff(&lambda, &sweeps.lambda);
+        assert!(e < 1e-8, "step {step}: Newton vs sweeps {e:e}");
+        let v = law_violation(&p, &lambda);
+        assert!(v < 1e-9, "step {step}: law violation {v:e}");
+        iterations += s.newton_iterations;
+        factorisations += s.factorisations;
+        slipping += s.slip;
+    }
+    println!(
+        "{iterations} Newton iterations, {factorisations} LUs, {slipping} slipping pair-steps"
+    );
+    assert!(
+        slipping > 6 * n / 2,
+        "mostly slipping: {slipping} of {}",
+        6 * n
+    );
+    assert!(
+        factorisations < iterations,
+        "no chord step: {factorisations} LUs in {iterations} iterations"
+    );
+}

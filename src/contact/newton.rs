@@ -10,25 +10,38 @@
 //! - slip: the step sets `gamma_n,k = 0` and the linearised tangential row
 //!   `(I - r Q) lambda_t + r eps_t Q gamma_t - mu t lambda_n = 0` with `t = x_t / |x_t|`,
 //!   `r = mu x_n / |x_t| < 1`, `Q = I - t t^T` (exact at a slipping solution, where
-//!   `Q lambda_t = Q gamma_t = 0` and `lambda_t = mu lambda_n t`). A frictionless pair with
-//!   a normal force is a slip pair with `r = 0`: `lambda_t = 0`.
+//!   `Q lambda_t = Q gamma_t = 0` and `lambda_t = mu lambda_n t`). In the tangent plane
+//!   `Q = s s^T` with `s` the unit vector normal to `t`, so the row splits into
+//!   `t . lambda_t = mu lambda_n` (local) and `(1 - r) s . lambda_t + r eps_t s . gamma_t = 0`:
+//!   a slipping pair has two unknowns, `lambda_n` and `b = s . lambda_t`, with
+//!   `lambda_t = mu lambda_n t + b s`. A frictionless pair with a normal force has one
+//!   (`lambda_t = 0`).
 //!
 //! Open and stick rows are linear, so with no slipping pair one Newton step solves the
 //! linear complementarity piece exactly, and the iteration stops when the states repeat.
 //! Each step is one dense linear system, solved in the cheaper of two equivalent forms:
-//! - direct: the unknowns are the forces of the closed pairs (`q = 3 closed`), the matrix the
-//!   closed rows and columns of `W` (modified on slip rows), LU-factorised;
+//! - direct: the unknowns are the forces of the closed pairs (3 per sticking pair, 2 per
+//!   slipping one), the matrix made of the closed rows and columns of `W`, LU-factorised;
 //! - complement (Woodbury): with `K = W^-1` of all pairs (Cholesky, once per solver), every
 //!   row whose gap velocity is not forced to zero is released: `W lambda + c = P z`, so
 //!   `lambda = K (P z - c)` and the open / slip rows give `k = 3 (n - closed) + 2 slip`
 //!   equations for `z` (`z` is the released gap velocity). Held contact closes most pairs, so
 //!   `k` is small where `q` is large.
 //!
-//! The factorisation is kept while the system is the same (same active pairs, same open/stick
-//! states, no slipping pair), so a held contact that sticks costs one forward/back solve per
-//! step. Like Siconos' `FC3D_NSN_AC`, the step is damped by a backtracking line search on
-//! `||F||^2`; an attempt that does not converge within the limit returns the iterate with the smallest residual and the caller falls back
-//! to sweeps from it.
+//! `W` is read in place (rows of the full matrix by pair index), never gathered into an
+//! active block, and gap velocities are updated from the columns of the nonzero forces only.
+//!
+//! The factorisation of the last fresh step is kept with its pattern (form, active pairs,
+//! open/stick/slip state of each). A later step with the same pattern (in the same solve or a
+//! later one) is a *chord* step: the current system is assembled (O(q^2)) but solved by defect
+//! correction with the kept factors instead of a new LU (O(q^3)); only the slip directions
+//! and ratios `r` differ, which is what the late iterations of a solve and a held contact that
+//! keeps its states look like. A chord step must cut `||F||` at least in half; otherwise the
+//! step is redone with a fresh factorisation (the safeguard), so the iteration is the Newton
+//! iteration whenever the kept factors are not good enough. Like Siconos' `FC3D_NSN_AC`, the
+//! step is damped by a backtracking line search on `||F||^2`; an attempt that does not
+//! converge within the limit returns the iterate with the smallest residual and the caller
+//! falls back to sweeps from it.
 
 use std::mem::MaybeUninit;
 
@@ -40,27 +53,24 @@ use faer::{Mat, MatMut, MatRef, Par, Side};
 use super::kernels::{axpy, matvec};
 use super::projection::project_pair;
 
-/// Slipping pairs with `r = mu x_n / |x_t|` below this enter the direct system with their
-/// normal force only, the tangential force fixed along the current slip direction.
-// NOTE: the exact Alart–Curnier row `(I - r Q) lambda_t + r eps_t Q gamma_t - mu t lambda_n = 0`
-// tends to `lambda_t = mu t lambda_n` as r -> 0; using that limit removes two unknowns per
-// slipping pair (a 3x smaller system on a sliding patch) at the price of a fixed-point update
-// of the slip direction. Measured on the touching-probes case (issue 16) with 0.5: the LU per
-// iteration got cheaper but the iterations rose from 7 to 11 per solve and some attempts fell
-// back to sweeps, no net gain; so it is off (0: every slipping pair keeps the exact rows).
-const REDUCED_SLIP_R: f64 = 0.0;
+/// A chord step is kept when it brings `||F||^2` down to this fraction of its value before
+/// the step (`||F||` halved); otherwise the step is redone with a fresh factorisation.
+// NOTE: the fresh Newton step converges quadratically once the pattern is right, so a chord
+// step that does not even halve the residual means the kept factors are stale (the slip
+// directions moved too much); redoing it costs one O(q^2) assembly more than a plain Newton
+// step, accepting it could cost several iterations.
+const CHORD_DECREASE: f64 = 0.25;
 
-/// Unknowns of closed pair `i` of the direct system (3, or 1 for a reduced slipping pair).
-fn unknown_width(offset: &[usize], i: usize, q: usize) -> usize {
-    offset.get(i + 1).copied().unwrap_or(q) - offset[i]
-}
+/// Defect-correction passes of one chord step at most (each one O(q^2)).
+const CHORD_PASSES: usize = 4;
 
 /// State of an active pair at the current iterate (from the trial point `x`).
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Class {
     Open,
     Stick,
-    /// Slipping: unit slip direction of the trial point and `r = mu x_n / |x_t|`.
+    /// Slipping: unit slip direction of the trial point and `r = mu x_n / |x_t|` (`t` zero
+    /// and `r = 0` for a frictionless pair).
     Slip {
         t: [f64; 2],
         r: f64,
@@ -68,7 +78,7 @@ enum Class {
 }
 
 impl Class {
-    /// The part of the state that the system matrix depends on when nobody slips.
+    /// The part of the state that the structure of the system depends on.
     fn key(self) -> u8 {
         match self {
             Class::Open => 0,
@@ -91,8 +101,6 @@ pub(crate) struct NewtonInput<'a> {
     pub w: &'a [f64],
     /// Active pairs, ascending.
     pub active: &'a [usize],
-    /// Active block of `W`, row-major `m x m`.
-    pub w_act: &'a [f64],
     /// Free gap velocity, friction coefficients and step sizes of the active pairs.
     pub c_act: &'a [f64],
     pub mu_act: &'a [f64],
@@ -108,7 +116,7 @@ pub(crate) struct NewtonOutcome {
     pub converged: bool,
     pub iterations: usize,
     pub relative_change: f64,
-    /// LU factorisations done (the rest of the iterations reused one).
+    /// LU factorisations done (the other iterations were chord steps on kept factors).
     pub factorisations: usize,
 }
 
@@ -126,17 +134,29 @@ pub(crate) struct Newton {
     slot_of: Vec<usize>,
     /// Direct: active slots of the closed pairs; complement: released global components.
     unknowns: Vec<usize>,
-    /// Direct: first unknown of each closed pair (in `unknowns` order); scratch row.
+    /// Direct: first unknown of each closed pair (in `unknowns` order) and the force
+    /// directions of its unknowns (`lambda_pair = sum_j x_j basis[j]`).
     offset: Vec<usize>,
-    row_buf: Vec<f64>,
+    basis: Vec<[[f64; 3]; 3]>,
     /// Complement: position of a global component in `unknowns` (`usize::MAX`: not released).
     released_at: Vec<usize>,
-    /// System matrix, column-major `q x q`, LU-factorised in place, and its right-hand side.
-    mat: Vec<f64>,
+    /// The current system `A` (row-major `q x q`, i.e. `A^T` column-major), its right-hand
+    /// side, the unknowns at the current iterate and the solution.
+    a_cur: Vec<f64>,
     rhs: Vec<f64>,
+    x0: Vec<f64>,
+    x: Vec<f64>,
+    defect: Vec<f64>,
+    zeros: Vec<f64>,
+    /// Direct: the number of unknowns of the assembled system.
+    q_direct: usize,
+    /// LU factors of a system like `a_cur` (same layout) and its permutation.
+    lu: Vec<f64>,
     perm: Vec<usize>,
     perm_inv: Vec<usize>,
     stack: Vec<MaybeUninit<u8>>,
+    /// `W lambda` over all components (scratch of the gap-velocity update).
+    w_lambda: Vec<f64>,
     /// Complement: `-K c` over all components.
     lam0: Vec<f64>,
     lam_new: Vec<f64>,
@@ -144,8 +164,8 @@ pub(crate) struct Newton {
     trial_l: Vec<f64>,
     trial_y: Vec<f64>,
     best: Vec<f64>,
-    /// The factorisation in `mat`: its form, active pairs and states (valid only without slip).
-    cached: Option<System>,
+    /// The pattern of the factors in `lu`: form, size, active pairs and states.
+    cached: Option<(System, usize)>,
     cached_active: Vec<usize>,
     cached_keys: Vec<u8>,
 }
@@ -166,13 +186,20 @@ impl Newton {
             slot_of: vec![usize::MAX; n],
             unknowns: Vec::with_capacity(d),
             offset: Vec::with_capacity(n),
-            row_buf: vec![0.0; d],
+            basis: Vec::with_capacity(n),
             released_at: vec![usize::MAX; d],
-            mat: Vec::new(),
+            a_cur: Vec::new(),
             rhs: vec![0.0; d],
+            x0: vec![0.0; d],
+            x: vec![0.0; d],
+            defect: vec![0.0; d],
+            zeros: vec![0.0; d],
+            q_direct: 0,
+            lu: Vec::new(),
             perm: vec![0; d],
             perm_inv: vec![0; d],
             stack: vec![MaybeUninit::uninit(); req.unaligned_bytes_required()],
+            w_lambda: vec![0.0; d],
             lam0: vec![0.0; d],
             lam_new: vec![0.0; d],
             y_new: vec![0.0; d],
@@ -201,17 +228,18 @@ impl Newton {
     ) -> NewtonOutcome {
         let na = inp.active.len();
         let m = 3 * na;
-        // NOTE: the matrix buffer is sized at the first Newton solve, not in `new`: most
-        // solvers (open flight, impacts) never need it.
-        if self.mat.is_empty() {
+        // NOTE: the matrix buffers are sized at the first Newton solve, not in `new`: most
+        // solvers (open flight, impacts) never need them.
+        if self.lu.is_empty() {
             let d = 3 * self.n;
-            self.mat = vec![0.0; d * d];
+            self.lu = vec![0.0; d * d];
+            self.a_cur = vec![0.0; d * d];
         }
         self.slot_of.fill(usize::MAX);
         for (slot, &p) in inp.active.iter().enumerate() {
             self.slot_of[p] = slot;
         }
-        matvec(&inp.w_act[..m * m], &lam[..m], &inp.c_act[..m], &mut y[..m]);
+        gap_velocities(inp, &lam[..m], &mut self.w_lambda, &mut y[..m]);
         let mut lam0_ready = false;
         let mut res = merit(inp, lam, y);
         let mut best_res = res;
@@ -229,37 +257,47 @@ impl Newton {
                 return out;
             }
             out.iterations += 1;
-            let (closed, slipping) = self.classify(inp, lam, y);
-            let q = 3 * closed;
+            let (closed, slipping, frictionless) = self.classify(inp, lam, y);
+            let q = 3 * closed - slipping - frictionless;
             let k = 3 * (self.n - closed) + 2 * slipping;
             let complement = k < q && self.ensure_inverse(inp.w);
-            let system = if complement {
-                System::Complement
-            } else {
-                System::Direct
-            };
-            let reuse = slipping == 0 && self.same_system(system, inp.active);
-            let ok = if complement {
+            let (system, size) = if complement {
                 if !lam0_ready {
                     self.form_lam0(inp);
                     lam0_ready = true;
                 }
-                self.complement_step(inp, reuse)
+                self.assemble_complement(inp, y);
+                (System::Complement, k)
             } else {
-                self.direct_step(inp, reuse)
+                self.assemble_direct(inp, lam, q);
+                (System::Direct, q)
             };
-            if !reuse {
-                out.factorisations += 1;
-                self.remember(system, inp.active, slipping == 0);
+            // A chord step on the kept factors when the pattern repeats, kept if it at least
+            // halves ||F|| (see CHORD_DECREASE) or is converged (a step below the tolerance:
+            // the current forces solve the current system; the residual may then be at its
+            // round-off and not halve); a fresh factorisation otherwise.
+            let mut step = None;
+            if self.same_pattern(system, size, inp.active) && self.chord(size) {
+                self.map_solution(system, inp);
+                let change = relative_step(&lam[..m], &self.lam_new[..m]);
+                let r = merit(inp, &self.lam_new[..m], &self.y_new[..m]);
+                let converged = change.0 <= inp.tolerance * inp.tolerance * change.1;
+                if r <= CHORD_DECREASE * res || converged {
+                    step = Some(change);
+                }
             }
-            if !ok {
-                break;
-            }
-            let (mut d2, mut n2) = (0.0, 0.0);
-            for (l, &ln) in lam[..m].iter().zip(&self.lam_new[..m]) {
-                d2 += (ln - l) * (ln - l);
-                n2 += ln * ln;
-            }
+            let (d2, n2) = match step {
+                Some(change) => change,
+                None => {
+                    out.factorisations += 1;
+                    if !self.factor_and_solve(size) {
+                        break;
+                    }
+                    self.remember(system, size, inp.active);
+                    self.map_solution(system, inp);
+                    relative_step(&lam[..m], &self.lam_new[..m])
+                }
+            };
             if !(d2.is_finite() && n2.is_finite()) {
                 break;
             }
@@ -309,9 +347,9 @@ impl Newton {
     }
 
     /// States of the active pairs at `(lam, y)`; returns the number of closed (stick or slip)
-    /// pairs and of slipping ones.
-    fn classify(&mut self, inp: &NewtonInput<'_>, lam: &[f64], y: &[f64]) -> (usize, usize) {
-        let (mut closed, mut slipping) = (0, 0);
+    /// pairs, of slipping ones, and of closed frictionless ones (counted as slipping too).
+    fn classify(&mut self, inp: &NewtonInput<'_>, lam: &[f64], y: &[f64]) -> (usize, usize, usize) {
+        let (mut closed, mut slipping, mut frictionless) = (0, 0, 0);
         for (slot, &mu) in inp.mu_act[..inp.active.len()].iter().enumerate() {
             let b = 3 * slot;
             let x = [
@@ -333,6 +371,7 @@ impl Newton {
                         r: radius / nt,
                     }
                 } else {
+                    frictionless += 1;
                     Class::Slip {
                         t: [0.0, 0.0],
                         r: 0.0,
@@ -349,12 +388,12 @@ impl Newton {
             }
             self.class[slot] = class;
         }
-        (closed, slipping)
+        (closed, slipping, frictionless)
     }
 
-    /// Whether the kept factorisation is the one of `system` for the current states.
-    fn same_system(&self, system: System, active: &[usize]) -> bool {
-        self.cached == Some(system)
+    /// Whether the kept factors are of a system with the current pattern.
+    fn same_pattern(&self, system: System, size: usize, active: &[usize]) -> bool {
+        self.cached == Some((system, size))
             && self.cached_active == active
             && self.cached_keys.len() == active.len()
             && self
@@ -364,12 +403,8 @@ impl Newton {
                 .all(|(&k, c)| k == c.key())
     }
 
-    fn remember(&mut self, system: System, active: &[usize], reusable: bool) {
-        if !reusable {
-            self.cached = None;
-            return;
-        }
-        self.cached = Some(system);
+    fn remember(&mut self, system: System, size: usize, active: &[usize]) {
+        self.cached = Some((system, size));
         self.cached_active.clear();
         self.cached_active.extend_from_slice(active);
         self.cached_keys.clear();
@@ -426,126 +461,106 @@ impl Newton {
         }
     }
 
-    /// One Newton step in the direct form (unknowns: forces of the closed pairs; a slipping
-    /// pair below [`REDUCED_SLIP_R`] contributes only its normal force, see the NOTE there).
-    fn direct_step(&mut self, inp: &NewtonInput<'_>, reuse: bool) -> bool {
+    /// The direct system (`q` unknowns: the forces of the closed pairs in their bases) into
+    /// `a_cur`, `rhs`, and the unknowns at the current forces `lam` into `x0`.
+    fn assemble_direct(&mut self, inp: &NewtonInput<'_>, lam: &[f64], q: usize) {
         let na = inp.active.len();
-        let m = 3 * na;
+        let d = 3 * self.n;
         self.unknowns.clear();
         self.offset.clear();
-        let mut q = 0;
+        self.basis.clear();
+        let mut o = 0;
         for s in 0..na {
-            let width = match self.class[s] {
+            let b = 3 * s;
+            let (width, basis, x0) = match self.class[s] {
                 Class::Open => continue,
-                Class::Stick => 3,
-                Class::Slip { r, .. } => {
-                    if r < REDUCED_SLIP_R {
-                        1
-                    } else {
-                        3
-                    }
+                Class::Stick => (
+                    3,
+                    [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+                    [lam[b], lam[b + 1], lam[b + 2]],
+                ),
+                Class::Slip { t, .. } if inp.mu_act[s] > 0.0 => {
+                    let mu = inp.mu_act[s];
+                    (
+                        2,
+                        [[1.0, mu * t[0], mu * t[1]], [0.0, -t[1], t[0]], [0.0; 3]],
+                        [lam[b], -t[1] * lam[b + 1] + t[0] * lam[b + 2], 0.0],
+                    )
+                }
+                Class::Slip { .. } => {
+                    (1, [[1.0, 0.0, 0.0], [0.0; 3], [0.0; 3]], [lam[b], 0.0, 0.0])
                 }
             };
             self.unknowns.push(s);
-            self.offset.push(q);
-            q += width;
+            self.offset.push(o);
+            self.basis.push(basis);
+            self.x0[o..o + width].copy_from_slice(&x0[..width]);
+            o += width;
         }
-        let w = inp.w_act;
+        debug_assert_eq!(o, q);
+        self.q_direct = q;
         let c = inp.c_act;
-        // NOTE: the matrix is written row by row into a column-major buffer of its transpose
-        // (contiguous writes); the LU is of A^T and the solve uses the transposed solve.
-        for (i, &p) in self.unknowns.iter().enumerate() {
-            let class = self.class[p];
+        let w = inp.w;
+        for (i, &s) in self.unknowns.iter().enumerate() {
+            let p = inp.active[s];
+            let oi = self.offset[i];
             let width = unknown_width(&self.offset, i, q);
             for a in 0..width {
-                let row = self.offset[i] + a;
-                let slip_row = match class {
-                    Class::Slip { t, r } if a > 0 => Some((t, r)),
-                    _ => None,
+                let row = oi + a;
+                // The row as a combination `alpha` of the pair's three rows of W, the
+                // right-hand side, and an extra term on the pair's own unknown.
+                let (alpha, rhs, own) = match self.class[s] {
+                    Class::Slip { t, r } if a == 1 => {
+                        let re = r * inp.eps[3 * s + 1];
+                        let (s0, s1) = (-t[1], t[0]);
+                        (
+                            [0.0, re * s0, re * s1],
+                            -re * (s0 * c[3 * s + 1] + s1 * c[3 * s + 2]),
+                            Some(1.0 - r),
+                        )
+                    }
+                    _ => {
+                        let mut e = [0.0; 3];
+                        e[a] = 1.0;
+                        (e, -c[3 * s + a], None)
+                    }
                 };
-                match slip_row {
-                    None => {
-                        self.rhs[row] = -c[3 * p + a];
-                        if !reuse {
-                            self.row_buf[..m]
-                                .copy_from_slice(&w[(3 * p + a) * m..(3 * p + a + 1) * m]);
-                            fill_row(
-                                &mut self.mat[row * q..(row + 1) * q],
-                                &self.row_buf,
-                                &self.unknowns,
-                                &self.offset,
-                                &self.class,
-                                inp.mu_act,
-                            );
+                self.rhs[row] = rhs;
+                let rows: [&[f64]; 3] = [
+                    &w[3 * p * d..(3 * p + 1) * d],
+                    &w[(3 * p + 1) * d..(3 * p + 2) * d],
+                    &w[(3 * p + 2) * d..(3 * p + 3) * d],
+                ];
+                let out = &mut self.a_cur[row * q..(row + 1) * q];
+                for (j, &sj) in self.unknowns.iter().enumerate() {
+                    let pj = 3 * inp.active[sj];
+                    let mut v = [0.0; 3];
+                    for (al, r) in alpha.iter().zip(&rows) {
+                        if *al != 0.0 {
+                            v[0] += al * r[pj];
+                            v[1] += al * r[pj + 1];
+                            v[2] += al * r[pj + 2];
                         }
                     }
-                    Some((t, r)) => {
-                        let al = a - 1;
-                        let qm = [
-                            [1.0 - t[0] * t[0], -t[0] * t[1]],
-                            [-t[1] * t[0], 1.0 - t[1] * t[1]],
-                        ];
-                        let re = r * inp.eps[3 * p + 1];
-                        let (g0, g1) = (re * qm[al][0], re * qm[al][1]);
-                        self.rhs[row] = -(g0 * c[3 * p + 1] + g1 * c[3 * p + 2]);
-                        let r1 = &w[(3 * p + 1) * m..(3 * p + 2) * m];
-                        let r2 = &w[(3 * p + 2) * m..(3 * p + 3) * m];
-                        for ((v, &x1), &x2) in self.row_buf[..m].iter_mut().zip(r1).zip(r2) {
-                            *v = g0 * x1 + g1 * x2;
-                        }
-                        fill_row(
-                            &mut self.mat[row * q..(row + 1) * q],
-                            &self.row_buf,
-                            &self.unknowns,
-                            &self.offset,
-                            &self.class,
-                            inp.mu_act,
-                        );
-                        let own = self.offset[i];
-                        self.mat[row * q + own] -= inp.mu_act[p] * t[al];
-                        for (be, &qb) in qm[al].iter().enumerate() {
-                            let ident = if al == be { 1.0 } else { 0.0 };
-                            self.mat[row * q + own + 1 + be] += ident - r * qb;
-                        }
+                    let oj = self.offset[j];
+                    let wj = unknown_width(&self.offset, j, q);
+                    for (col, bas) in out[oj..oj + wj].iter_mut().zip(&self.basis[j]) {
+                        *col = bas[0] * v[0] + bas[1] * v[1] + bas[2] * v[2];
                     }
+                }
+                if let Some(own) = own {
+                    out[oi + 1] += own;
                 }
             }
         }
-        if q > 0 && !self.factor_and_solve(q, reuse) {
-            return false;
-        }
-        self.lam_new[..m].fill(0.0);
-        for (i, &p) in self.unknowns.iter().enumerate() {
-            let o = self.offset[i];
-            if unknown_width(&self.offset, i, q) == 3 {
-                self.lam_new[3 * p..3 * p + 3].copy_from_slice(&self.rhs[o..o + 3]);
-            } else {
-                let (ln, mu) = (self.rhs[o], inp.mu_act[p]);
-                let t = match self.class[p] {
-                    Class::Slip { t, .. } => t,
-                    _ => [0.0, 0.0],
-                };
-                self.lam_new[3 * p..3 * p + 3].copy_from_slice(&[
-                    ln,
-                    mu * ln * t[0],
-                    mu * ln * t[1],
-                ]);
-            }
-        }
-        matvec(
-            &w[..m * m],
-            &self.lam_new[..m],
-            &c[..m],
-            &mut self.y_new[..m],
-        );
-        true
     }
 
-    /// One Newton step in the complement form (unknowns: released gap velocities, all pairs).
-    fn complement_step(&mut self, inp: &NewtonInput<'_>, reuse: bool) -> bool {
+    /// The complement system (unknowns: released gap velocities, all pairs) into `a_cur`,
+    /// `rhs`, and the released gap velocities at the current iterate into `x0` (`y` on the
+    /// active pairs, `W lambda` on the others, whose `c` the form takes as zero).
+    fn assemble_complement(&mut self, inp: &NewtonInput<'_>, y: &[f64]) {
         let n = self.n;
         let d = 3 * n;
-        let m = 3 * inp.active.len();
         self.unknowns.clear();
         self.released_at.fill(usize::MAX);
         for g in 0..n {
@@ -562,6 +577,11 @@ impl Newton {
             };
             for a in first..3 {
                 self.released_at[3 * g + a] = self.unknowns.len();
+                self.x0[self.unknowns.len()] = if slot == usize::MAX {
+                    self.w_lambda[3 * g + a]
+                } else {
+                    y[3 * slot + a]
+                };
                 self.unknowns.push(3 * g + a);
             }
         }
@@ -582,11 +602,9 @@ impl Newton {
             match class {
                 Class::Open => {
                     self.rhs[row] = -self.lam0[comp];
-                    if !reuse {
-                        let krow = &kinv[comp * d..(comp + 1) * d];
-                        for (j, &cj) in self.unknowns.iter().enumerate() {
-                            self.mat[row * k + j] = krow[cj];
-                        }
+                    let krow = &kinv[comp * d..(comp + 1) * d];
+                    for (j, &cj) in self.unknowns.iter().enumerate() {
+                        self.a_cur[row * k + j] = krow[cj];
                     }
                     row += 1;
                 }
@@ -609,67 +627,207 @@ impl Newton {
                         self.rhs[rr] = -(a0 * self.lam0[3 * g + 1] + a1 * self.lam0[3 * g + 2])
                             + tn * self.lam0[3 * g];
                         for (j, &cj) in self.unknowns.iter().enumerate() {
-                            self.mat[rr * k + j] = a0 * k1[cj] + a1 * k2[cj] - tn * kn[cj];
+                            self.a_cur[rr * k + j] = a0 * k1[cj] + a1 * k2[cj] - tn * kn[cj];
                         }
-                        self.mat[rr * k + row] += re * qm[al][0];
-                        self.mat[rr * k + row + 1] += re * qm[al][1];
+                        self.a_cur[rr * k + row] += re * qm[al][0];
+                        self.a_cur[rr * k + row + 1] += re * qm[al][1];
                     }
                     row += 2;
                 }
                 Class::Stick => unreachable!("stick components are not released"),
             }
         }
-        if k > 0 && !self.factor_and_solve(k, reuse) {
-            return false;
-        }
-        let kinv = &self.k_inv;
-        // lambda = lam0 + K P z on the closed active pairs; open ones are exactly zero.
-        // gamma = z on the released components, zero on the others.
-        for (slot, &g) in inp.active.iter().enumerate() {
-            let b = 3 * slot;
-            if self.class[slot] == Class::Open {
-                self.lam_new[b..b + 3].fill(0.0);
-            } else {
-                for a in 0..3 {
-                    let comp = 3 * g + a;
-                    let krow = &kinv[comp * d..(comp + 1) * d];
-                    let mut v = self.lam0[comp];
-                    for (&cj, &z) in self.unknowns.iter().zip(&self.rhs[..k]) {
-                        v += krow[cj] * z;
-                    }
-                    self.lam_new[b + a] = v;
-                }
-            }
-            for a in 0..3 {
-                let at = self.released_at[3 * g + a];
-                self.y_new[b + a] = if at == usize::MAX { 0.0 } else { self.rhs[at] };
-            }
-        }
-        debug_assert!(m <= self.lam_new.len());
-        true
     }
 
-    /// LU-factorises `mat` (the transpose of the system matrix `A`, `q x q`, column-major,
-    /// i.e. `A` row-major) unless `reuse`, then solves `A x = rhs` in place. False if the solution is not finite (singular system).
-    fn factor_and_solve(&mut self, q: usize, reuse: bool) -> bool {
-        let stack = MemStack::new(&mut self.stack);
-        if !reuse {
-            let a = MatMut::from_column_major_slice_mut(&mut self.mat[..q * q], q, q);
-            lu_factor::lu_in_place(
-                a,
-                &mut self.perm[..q],
-                &mut self.perm_inv[..q],
-                Par::Seq,
-                stack,
-                Default::default(),
-            );
+    /// The forces `lam_new` and gap velocities `y_new` of the active pairs from the solution
+    /// `x` of the system.
+    fn map_solution(&mut self, system: System, inp: &NewtonInput<'_>) {
+        let m = 3 * inp.active.len();
+        match system {
+            System::Direct => {
+                let q = self.q_direct;
+                self.lam_new[..m].fill(0.0);
+                for (i, &s) in self.unknowns.iter().enumerate() {
+                    let o = self.offset[i];
+                    let width = unknown_width(&self.offset, i, q);
+                    let mut l = [0.0; 3];
+                    for (xj, bas) in self.x[o..o + width].iter().zip(&self.basis[i]) {
+                        l[0] += xj * bas[0];
+                        l[1] += xj * bas[1];
+                        l[2] += xj * bas[2];
+                    }
+                    self.lam_new[3 * s..3 * s + 3].copy_from_slice(&l);
+                }
+                gap_velocities(
+                    inp,
+                    &self.lam_new[..m],
+                    &mut self.w_lambda,
+                    &mut self.y_new[..m],
+                );
+            }
+            System::Complement => {
+                let d = 3 * self.n;
+                let k = self.unknowns.len();
+                let kinv = &self.k_inv;
+                // lambda = lam0 + K P z on the closed active pairs; open ones are exactly
+                // zero. gamma = z on the released components, zero on the others.
+                for (slot, &g) in inp.active.iter().enumerate() {
+                    let b = 3 * slot;
+                    if self.class[slot] == Class::Open {
+                        self.lam_new[b..b + 3].fill(0.0);
+                    } else {
+                        for a in 0..3 {
+                            let comp = 3 * g + a;
+                            let krow = &kinv[comp * d..(comp + 1) * d];
+                            let mut v = self.lam0[comp];
+                            for (&cj, &z) in self.unknowns.iter().zip(&self.x[..k]) {
+                                v += krow[cj] * z;
+                            }
+                            self.lam_new[b + a] = v;
+                        }
+                    }
+                    for a in 0..3 {
+                        let at = self.released_at[3 * g + a];
+                        self.y_new[b + a] = if at == usize::MAX { 0.0 } else { self.x[at] };
+                    }
+                }
+            }
         }
-        let lu = MatRef::from_column_major_slice(&self.mat[..q * q], q, q);
-        let perm = PermRef::new_checked(&self.perm[..q], &self.perm_inv[..q], q);
-        let rhs = MatMut::from_column_major_slice_mut(&mut self.rhs[..q], q, 1);
-        lu_solve::solve_transpose_in_place(lu, lu, perm, rhs, Par::Seq, stack);
-        self.rhs[..q].iter().all(|x| x.is_finite())
     }
+
+    /// LU-factorises the current system (`a_cur`, `size x size`) into `lu` and solves it for
+    /// `x`. False if the solution is not finite (singular system).
+    fn factor_and_solve(&mut self, size: usize) -> bool {
+        if size == 0 {
+            return true;
+        }
+        self.lu[..size * size].copy_from_slice(&self.a_cur[..size * size]);
+        let stack = MemStack::new(&mut self.stack);
+        let a = MatMut::from_column_major_slice_mut(&mut self.lu[..size * size], size, size);
+        lu_factor::lu_in_place(
+            a,
+            &mut self.perm[..size],
+            &mut self.perm_inv[..size],
+            Par::Seq,
+            stack,
+            Default::default(),
+        );
+        self.x[..size].copy_from_slice(&self.rhs[..size]);
+        self.lu_solve(size);
+        self.x[..size].iter().all(|v| v.is_finite())
+    }
+
+    /// Solves `A x = x` in place with the kept factors (`lu` holds the LU of `A^T`,
+    /// column-major, i.e. of `A` row-major: the transposed solve).
+    fn lu_solve_in(&mut self, size: usize, which: Buffer) {
+        let stack = MemStack::new(&mut self.stack);
+        let lu = MatRef::from_column_major_slice(&self.lu[..size * size], size, size);
+        let perm = PermRef::new_checked(&self.perm[..size], &self.perm_inv[..size], size);
+        let v = match which {
+            Buffer::X => &mut self.x[..size],
+            Buffer::Defect => &mut self.defect[..size],
+        };
+        let rhs = MatMut::from_column_major_slice_mut(v, size, 1);
+        lu_solve::solve_transpose_in_place(lu, lu, perm, rhs, Par::Seq, stack);
+    }
+
+    fn lu_solve(&mut self, size: usize) {
+        self.lu_solve_in(size, Buffer::X);
+    }
+
+    /// A chord step: the solution `x` of the current system by defect correction from `x0`
+    /// with the kept factors (`x <- x + LU^-1 (rhs - A x)`, at most [`CHORD_PASSES`] times,
+    /// until the correction is below 1e-3 of the step or at the round-off of `x`). False if
+    /// the corrections do not shrink (the kept factors are too far from the current system)
+    /// or are not finite.
+    fn chord(&mut self, size: usize) -> bool {
+        if size == 0 {
+            return true;
+        }
+        self.x[..size].copy_from_slice(&self.x0[..size]);
+        let mut last = f64::INFINITY;
+        for _ in 0..CHORD_PASSES {
+            // defect = rhs - A x
+            matvec(
+                &self.a_cur[..size * size],
+                &self.x[..size],
+                &self.zeros[..size],
+                &mut self.defect[..size],
+            );
+            for (dv, &r) in self.defect[..size].iter_mut().zip(&self.rhs[..size]) {
+                *dv = r - *dv;
+            }
+            self.lu_solve_in(size, Buffer::Defect);
+            let (mut d2, mut s2, mut x2) = (0.0, 0.0, 0.0);
+            for ((xi, &di), &x0i) in self.x[..size]
+                .iter_mut()
+                .zip(&self.defect[..size])
+                .zip(&self.x0[..size])
+            {
+                *xi += di;
+                d2 += di * di;
+                s2 += (*xi - x0i) * (*xi - x0i);
+                x2 += *xi * *xi;
+            }
+            if !(d2.is_finite() && s2.is_finite()) {
+                return false;
+            }
+            // A correction at the round-off of x: solved as well as the factors can.
+            if d2 <= 1e-28 * x2 {
+                break;
+            }
+            if d2 > 0.25 * last {
+                return false;
+            }
+            last = d2;
+            if d2 <= 1e-6 * s2 {
+                break;
+            }
+        }
+        true
+    }
+}
+
+/// Which workspace vector a kept-factor solve works on.
+#[derive(Clone, Copy)]
+enum Buffer {
+    X,
+    Defect,
+}
+
+/// Unknowns of closed pair `i` of the direct system.
+fn unknown_width(offset: &[usize], i: usize, q: usize) -> usize {
+    offset.get(i + 1).copied().unwrap_or(q) - offset[i]
+}
+
+/// Gap velocities `y = W lambda + c` of the active pairs from the columns of `W` of the
+/// nonzero forces (rows, by symmetry), with `W lambda` over all components left in `w_lambda`.
+fn gap_velocities(inp: &NewtonInput<'_>, lam: &[f64], w_lambda: &mut [f64], y: &mut [f64]) {
+    let d = w_lambda.len();
+    w_lambda.fill(0.0);
+    for (slot, &p) in inp.active.iter().enumerate() {
+        for a in 0..3 {
+            let f = lam[3 * slot + a];
+            if f != 0.0 {
+                axpy(f, &inp.w[(3 * p + a) * d..(3 * p + a + 1) * d], w_lambda);
+            }
+        }
+    }
+    for (slot, &p) in inp.active.iter().enumerate() {
+        for a in 0..3 {
+            y[3 * slot + a] = inp.c_act[3 * slot + a] + w_lambda[3 * p + a];
+        }
+    }
+}
+
+/// `(||lambda_new - lambda||^2, ||lambda_new||^2)`.
+fn relative_step(lam: &[f64], lam_new: &[f64]) -> (f64, f64) {
+    let (mut d2, mut n2) = (0.0, 0.0);
+    for (l, &ln) in lam.iter().zip(lam_new) {
+        d2 += (ln - l) * (ln - l);
+        n2 += ln * ln;
+    }
+    (d2, n2)
 }
 
 /// `||F(lambda)||^2 = ||lambda - proj_C(lambda - eps .* gamma)||^2` over the active pairs.
@@ -690,29 +848,160 @@ fn merit(inp: &NewtonInput<'_>, lam: &[f64], y: &[f64]) -> f64 {
     res2
 }
 
-/// Writes one row of the direct system (`out`, q entries) from a row `v` over the active
-/// components: a full pair takes its three entries, a reduced slipping pair the combination
-/// along its force direction `(1, mu t)`.
-fn fill_row(
-    out: &mut [f64],
-    v: &[f64],
-    unknowns: &[usize],
-    offset: &[usize],
-    class: &[Class],
-    mu_act: &[f64],
-) {
-    let q = out.len();
-    for (i, &s) in unknowns.iter().enumerate() {
-        let o = offset[i];
-        let b = 3 * s;
-        if unknown_width(offset, i, q) == 3 {
-            out[o..o + 3].copy_from_slice(&v[b..b + 3]);
-        } else {
-            let t = match class[s] {
-                Class::Slip { t, .. } => t,
-                _ => [0.0, 0.0],
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `W`, `c`, `mu`, `eps` and the active pairs of a test problem.
+    type Problem = (Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>, Vec<usize>);
+
+    /// A held contact on `n` pairs with an SPD, coupled `W` (3n x 3n) whose even pairs stick
+    /// at the solution `lambda* = (1 + k/10, 0, 0)` and odd ones separate (`c = -W lambda*`,
+    /// plus an opening velocity on the odd pairs): the direct form (`q = k`). Also the step
+    /// sizes of the Gauss-Seidel rule and the active set of all pairs.
+    fn sticking(n: usize) -> Problem {
+        let d = 3 * n;
+        let mut w = vec![0.0; d * d];
+        for i in 0..d {
+            for j in 0..d {
+                let dist = (i as f64 - j as f64).abs();
+                w[i * d + j] = 0.5 / (1.0 + dist) + if i == j { 1.0 } else { 0.0 };
+            }
+        }
+        let target: Vec<f64> = (0..d)
+            .map(|i| {
+                if i % 3 == 0 && (i / 3) % 2 == 0 {
+                    1.0 + (i / 3) as f64 * 0.1
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        let c: Vec<f64> = (0..d)
+            .map(|i| {
+                let open = if i % 3 == 0 && (i / 3) % 2 == 1 {
+                    1.0
+                } else {
+                    0.0
+                };
+                open - (0..d).map(|j| w[i * d + j] * target[j]).sum::<f64>()
+            })
+            .collect();
+        let mut eps = vec![0.0; d];
+        for i in 0..d {
+            let b = 3 * (i / 3);
+            eps[i] = 1.0
+                / w[i * d + b..i * d + b + 3]
+                    .iter()
+                    .map(|x| x.abs())
+                    .sum::<f64>();
+        }
+        for k in 0..n {
+            let t = eps[3 * k + 1].min(eps[3 * k + 2]);
+            eps[3 * k + 1] = t;
+            eps[3 * k + 2] = t;
+        }
+        (w, c, vec![0.4; n], eps, (0..n).collect())
+    }
+
+    #[test]
+    fn stale_kept_factors_are_rejected_and_the_step_redone_fresh() {
+        let n = 10;
+        let d = 3 * n;
+        let (w, c, mu, eps, active) = sticking(n);
+        let inp = NewtonInput {
+            w: &w,
+            active: &active,
+            c_act: &c,
+            mu_act: &mu,
+            eps: &eps,
+            tolerance: 1e-12,
+            max_iterations: 30,
+        };
+        let mut newton = Newton::new(n);
+        let (mut lam, mut y) = (vec![0.0; d], vec![0.0; d]);
+        let first = newton.solve(&inp, &mut lam, &mut y);
+        assert!(first.converged && first.factorisations >= 1, "{first:?}");
+        let solution = lam.clone();
+
+        // The same problem from a perturbed start: the states repeat, so the kept factors
+        // serve as chord steps and no LU is needed.
+        let start: Vec<f64> = solution.iter().map(|x| x * 1.01).collect();
+        let mut good = newton.clone();
+        let mut l = start.clone();
+        let o = good.solve(&inp, &mut l, &mut y);
+        assert!(o.converged && o.factorisations == 0, "{o:?}");
+        for (a, b) in l.iter().zip(&solution) {
+            assert!((a - b).abs() <= 1e-10 * b.abs().max(1.0), "{a} vs {b}");
+        }
+
+        // Stale factors with the same pattern (the kept LU replaced by the identity): the
+        // chord step does not halve the residual, so the safeguard refactorises, and the answer
+        // is the same.
+        let mut stale = newton.clone();
+        let q = match stale.cached {
+            Some((System::Direct, q)) => q,
+            other => panic!("expected kept direct factors, found {other:?}"),
+        };
+        assert_eq!(q, 3 * n / 2);
+        stale.lu[..q * q].fill(0.0);
+        for i in 0..q {
+            stale.lu[i * q + i] = 1.0;
+            stale.perm[i] = i;
+            stale.perm_inv[i] = i;
+        }
+        let mut l = start;
+        let o = stale.solve(&inp, &mut l, &mut y);
+        assert!(
+            o.converged && o.factorisations >= 1,
+            "safeguard not taken: {o:?}"
+        );
+        for (a, b) in l.iter().zip(&solution) {
+            assert!((a - b).abs() <= 1e-10 * b.abs().max(1.0), "{a} vs {b}");
+        }
+    }
+
+    #[test]
+    fn a_slipping_pair_has_two_unknowns_and_frictionless_one() {
+        // Two pairs pushed closed and driven sideways: both slip; the direct system has two
+        // unknowns per pair with friction and one without.
+        let n = 2;
+        let d = 3 * n;
+        let mut w = vec![0.0; d * d];
+        for i in 0..d {
+            w[i * d + i] = 1.0;
+        }
+        w[1] = 0.2;
+        w[d] = 0.2;
+        let c = vec![-1.0, 5.0, 1.0, -1.0, -3.0, 2.0];
+        for (mu, width) in [(0.4, 2), (0.0, 1)] {
+            let mu_act = vec![mu; n];
+            let eps = vec![1.0; d];
+            let active = [0, 1];
+            let inp = NewtonInput {
+                w: &w,
+                active: &active,
+                c_act: &c,
+                mu_act: &mu_act,
+                eps: &eps,
+                tolerance: 1e-12,
+                max_iterations: 30,
             };
-            out[o] = v[b] + mu_act[s] * (t[0] * v[b + 1] + t[1] * v[b + 2]);
+            let mut newton = Newton::new(n);
+            let (mut lam, mut y) = (vec![0.0; d], vec![0.0; d]);
+            let o = newton.solve(&inp, &mut lam, &mut y);
+            assert!(o.converged, "{o:?}");
+            assert_eq!(newton.q_direct, width * n, "mu {mu}");
+            // On the rim of the friction disk (or without tangential force).
+            for k in 0..n {
+                let lt = lam[3 * k + 1].hypot(lam[3 * k + 2]);
+                assert!(lam[3 * k] > 0.0);
+                assert!(
+                    (lt - mu * lam[3 * k]).abs() <= 1e-10,
+                    "pair {k}: {lt} vs {}",
+                    mu * lam[3 * k]
+                );
+            }
         }
     }
 }

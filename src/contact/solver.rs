@@ -234,7 +234,8 @@ pub struct SolveStats {
     pub iterations: usize,
     /// Newton iterations done (each one dense linear solve).
     pub newton_iterations: usize,
-    /// LU factorisations of the Newton iterations (the others reused a kept one).
+    /// LU factorisations of the Newton iterations (the others were chord steps on kept
+    /// factors; see `newton.rs`).
     pub factorisations: usize,
     /// Which method produced the forces.
     pub path: SolvePath,
@@ -279,6 +280,9 @@ pub struct ContactSolver {
     active: Vec<usize>,
     candidate: Vec<usize>,
     block_valid: bool,
+    /// Whether `w_act` holds the active block. It is gathered only when the sweeps run (or the
+    /// Jacobi step sizes need it): a Newton solve reads `W` in place.
+    block_gathered: bool,
     /// Active block of W, row-major `m x m` with m = 3 * active.len() (capacity for all pairs).
     w_act: Vec<f64>,
     mu_act: Vec<f64>,
@@ -319,6 +323,7 @@ impl ContactSolver {
             active: Vec::with_capacity(n),
             candidate: Vec::with_capacity(n),
             block_valid: false,
+            block_gathered: false,
             w_act: vec![0.0; dim * dim],
             mu_act: vec![0.0; n],
             eps: vec![0.0; dim],
@@ -367,9 +372,24 @@ impl ContactSolver {
     /// cross-checks (allocates; not for the hot path).
     pub fn last_active_problem(&self, label: &str) -> (ContactProblem, ContactSolution) {
         let m = 3 * self.active.len();
+        let dim = 3 * self.n_pairs;
+        let w = if self.block_gathered {
+            self.w_act[..m * m].to_vec()
+        } else {
+            let mut w = Vec::with_capacity(m * m);
+            for &p in &self.active {
+                for a in 0..3 {
+                    let row = &self.w[(3 * p + a) * dim..(3 * p + a + 1) * dim];
+                    for &q in &self.active {
+                        w.extend_from_slice(&row[3 * q..3 * q + 3]);
+                    }
+                }
+            }
+            w
+        };
         (
             ContactProblem {
-                w: self.w_act[..m * m].to_vec(),
+                w,
                 c: self.c_act[..m].to_vec(),
                 mu: self.mu_act[..self.active.len()].to_vec(),
                 label: label.to_string(),
@@ -433,7 +453,13 @@ impl ContactSolver {
         let active_set_changed = !self.block_valid || self.candidate != self.active;
         if active_set_changed {
             std::mem::swap(&mut self.active, &mut self.candidate);
-            self.gather_block();
+            for (slot, &p) in self.active.iter().enumerate() {
+                self.mu_act[slot] = self.mu[p];
+            }
+            self.block_gathered = false;
+            if self.params.method != SweepMethod::GaussSeidel {
+                self.gather_block();
+            }
             self.compute_step_sizes();
             self.block_valid = true;
         }
@@ -515,13 +541,23 @@ impl ContactSolver {
             self.lam[..m].fill(0.0);
         }
 
-        // 3. Gap velocities, residual and states of the active pairs.
-        matvec(
-            &self.w_act[..m * m],
-            &self.lam[..m],
-            &self.c_act[..m],
-            &mut self.y[..m],
-        );
+        // 3. Gap velocities, residual and states of the active pairs. Without a gathered block
+        // (a Newton solve) the gap velocities of all pairs come first, from the rows of W of
+        // the nonzero forces (step 4), and the active ones are read from them.
+        let gathered = self.block_gathered;
+        if gathered {
+            matvec(
+                &self.w_act[..m * m],
+                &self.lam[..m],
+                &self.c_act[..m],
+                &mut self.y[..m],
+            );
+        } else {
+            self.all_gap_velocities(c, lambda, gamma);
+            for (slot, &p) in self.active.iter().enumerate() {
+                self.y[3 * slot..3 * slot + 3].copy_from_slice(&gamma[3 * p..3 * p + 3]);
+            }
+        }
         let (mut res2, mut lam2, mut ec2) = (0.0, 0.0, 0.0);
         let (mut stick, mut slip) = (0, 0);
         self.states.fill(PairState::Open);
@@ -556,22 +592,12 @@ impl ContactSolver {
             residual / scale
         };
 
-        // 4. Outputs for all pairs: gamma = c + W lambda, using the symmetry of W (row j is
-        // column j), so only the rows of nonzero forces are read.
-        lambda.fill(0.0);
-        gamma.copy_from_slice(c);
-        for (slot, &p) in self.active.iter().enumerate() {
-            for a in 0..3 {
-                let f = self.lam[3 * slot + a];
-                lambda[3 * p + a] = f;
-                if f != 0.0 {
-                    let row = &self.w[(3 * p + a) * dim..(3 * p + a + 1) * dim];
-                    axpy(f, row, gamma);
-                }
+        // 4. Outputs for all pairs (done in step 3 without a gathered block).
+        if gathered {
+            self.all_gap_velocities(c, lambda, gamma);
+            for (slot, &p) in self.active.iter().enumerate() {
+                gamma[3 * p..3 * p + 3].copy_from_slice(&self.y[3 * slot..3 * slot + 3]);
             }
-        }
-        for (slot, &p) in self.active.iter().enumerate() {
-            gamma[3 * p..3 * p + 3].copy_from_slice(&self.y[3 * slot..3 * slot + 3]);
         }
 
         Ok(SolveStats {
@@ -593,8 +619,30 @@ impl ContactSolver {
         })
     }
 
+    /// The forces of all pairs into `lambda` (zero outside the active set) and
+    /// `gamma = c + W lambda` for all pairs, using the symmetry of W (row j is column j), so
+    /// only the rows of nonzero forces are read.
+    fn all_gap_velocities(&self, c: &[f64], lambda: &mut [f64], gamma: &mut [f64]) {
+        let dim = 3 * self.n_pairs;
+        lambda.fill(0.0);
+        gamma.copy_from_slice(c);
+        for (slot, &p) in self.active.iter().enumerate() {
+            for a in 0..3 {
+                let f = self.lam[3 * slot + a];
+                lambda[3 * p + a] = f;
+                if f != 0.0 {
+                    let row = &self.w[(3 * p + a) * dim..(3 * p + a + 1) * dim];
+                    axpy(f, row, gamma);
+                }
+            }
+        }
+    }
+
     /// Sweeps from the current iterate until converged or `*iterations` reaches `until`.
     fn run_sweeps(&mut self, m: usize, until: usize, iterations: &mut usize) -> SweepRun {
+        if !self.block_gathered {
+            self.gather_block();
+        }
         let tol2 = self.params.tolerance * self.params.tolerance;
         let mut momentum = 1.0;
         self.ext[..m].copy_from_slice(&self.lam[..m]);
@@ -635,7 +683,6 @@ impl ContactSolver {
         let input = NewtonInput {
             w: &self.w,
             active: &self.active,
-            w_act: &self.w_act[..m * m],
             c_act: &self.c_act[..m],
             mu_act: &self.mu_act[..m / 3],
             eps: &self.eps[..m],
@@ -728,7 +775,6 @@ impl ContactSolver {
         let dim = 3 * self.n_pairs;
         let m = 3 * self.active.len();
         for (ra, &p) in self.active.iter().enumerate() {
-            self.mu_act[ra] = self.mu[p];
             for a in 0..3 {
                 let src = &self.w[(3 * p + a) * dim..(3 * p + a + 1) * dim];
                 let dst = &mut self.w_act[(3 * ra + a) * m..(3 * ra + a + 1) * m];
@@ -737,6 +783,7 @@ impl ContactSolver {
                 }
             }
         }
+        self.block_gathered = true;
     }
 
     /// Step sizes `eps` of the active components for the configured method and rule.
@@ -752,9 +799,12 @@ impl ContactSolver {
                 // NOTE: a Gauss-Seidel update moves one pair with the others fixed, so only the
                 // pair's own 3x3 block matters: its row sums bound the block's largest
                 // eigenvalue and make each update a convergent projected step.
+                // Read from the full W (the block may not be gathered): the same entries.
+                let dim = 3 * self.n_pairs;
                 for (i, s) in scale.iter_mut().enumerate() {
-                    let b = 3 * (i / 3);
-                    *s = w[i * m + b..i * m + b + 3].iter().map(|x| x.abs()).sum();
+                    let p = self.active[i / 3];
+                    let row = (3 * p + i % 3) * dim + 3 * p;
+                    *s = self.w[row..row + 3].iter().map(|x| x.abs()).sum();
                 }
             }
             SweepMethod::Jacobi | SweepMethod::AcceleratedJacobi => {

@@ -3,6 +3,7 @@
 //! convergence studies ([`convergence`](mod@convergence)); `panel.rs` is the shared x-y panel.
 
 pub mod convergence;
+pub mod diagnosis;
 pub mod frequency;
 mod panel;
 pub mod scalogram;

@@ -1,0 +1,431 @@
+//! Guards the figures of a diagnosis (`rigtwin::report::figures::diagnosis::draw_diagnosis`):
+//! a synthetic diagnosis with every kind of data writes the mismatch maps (before and after),
+//! the linear, clearance and sensor evidence and the before/after response, each as a PNG of
+//! the default size and a well-formed SVG; missing evidence, non-finite values and
+//! uncompared steps leave a figure out or a cell grey, never an error or a panic; an empty
+//! diagnosis writes nothing. The figures of the full diagnosis and of a degenerate one are
+//! kept in `$CARGO_TARGET_TMPDIR/report_diagnosis_figures*/` for inspection.
+
+use std::path::{Path, PathBuf};
+
+use rigtwin::config::PhysicsSpec;
+use rigtwin::diagnose::clearance::TestClearance;
+use rigtwin::diagnose::clearance::{ClearanceEvidence, ClearanceOptions, ClearanceTrend};
+use rigtwin::diagnose::linear::Trend;
+use rigtwin::diagnose::linear::{AmplitudeDependence, LinearEvidence, LinearOptions, ModeFit};
+use rigtwin::diagnose::outcome::{
+    Diagnosis, DiagnosisCost, EffectResult, Regime, SetError, StepScores, Verdict,
+};
+use rigtwin::diagnose::sensors::SensorOptions;
+use rigtwin::diagnose::sensors::{ChannelSensitivity, SensitivityStatus, SensorEvidence};
+use rigtwin::report::figures::diagnosis::draw_diagnosis;
+use rigtwin::twin::FeatureComparison;
+
+const MOTION: [&str; 5] = [
+    "vibrometer",
+    "upper_tip",
+    "upper_mid",
+    "lower_tip",
+    "lower_mid",
+];
+
+/// Tests of the synthetic session: (name, base level / l).
+const TESTS: [(&str, f64); 3] = [("low-up", 1e-5), ("mid-up", 2e-5), ("high-up", 4e-5)];
+
+/// Steps per test and their Omega / omega_2.
+fn omega(step: usize) -> f64 {
+    0.90 + 0.01 * step as f64
+}
+
+/// A resonance of 1FU at `f0` (Omega / omega_2) with an impact cap at high level, scaled by
+/// the channel's `gain`.
+fn response(w: f64, f0: f64, level: f64, gain: f64) -> f64 {
+    let lin = 1.0 / ((1.0 - (w / f0).powi(2)).powi(2) + 0.03f64.powi(2)).sqrt();
+    gain * lin.min(3e-4 / level)
+}
+
+fn comparison(channel: &str, feature: &str, measured: f64, model: f64) -> FeatureComparison {
+    let spread = 0.02 * measured.abs() + 0.01;
+    FeatureComparison {
+        channel: channel.into(),
+        feature: feature.into(),
+        measured,
+        measured_spread: Some(spread),
+        model,
+        model_spread: Some(spread),
+        score: (model - measured).abs() / (2.0f64.sqrt() * spread),
+    }
+}
+
+/// The steps of every test, the model's 1FU at `f0` and its lower-tip gain `gain`.
+fn scores(f0: f64, gain: f64) -> Vec<StepScores> {
+    let mut out = Vec::new();
+    for (ti, &(name, level)) in TESTS.iter().enumerate() {
+        for step in 0..21 {
+            let w = omega(step);
+            let impacts = level > 1e-5 && (0.97..1.03).contains(&w);
+            let mut features = Vec::new();
+            for (c, channel) in MOTION.iter().enumerate() {
+                let shape = 1.0 - 0.1 * c as f64;
+                let measured = response(w, 0.99, level, shape * if c == 3 { 1.04 } else { 1.0 });
+                let model = response(w, f0, level, shape * if c == 3 { gain } else { 1.0 });
+                features.push(comparison(channel, "rms", measured, model));
+                for (feature, k) in [("amp_p10", 1.2), ("amp_p50", 1.4), ("amp_p90", 1.6)] {
+                    let spread = (k - 1.4) * if impacts { 2.0 } else { 0.1 };
+                    features.push(comparison(
+                        channel,
+                        feature,
+                        measured * (1.4 + spread),
+                        model * (1.4 + 0.8 * spread),
+                    ));
+                }
+            }
+            let cf = if impacts { 0.05 } else { 0.0 };
+            features.push(comparison("contact", "contact_fraction", cf, 0.8 * cf));
+            features.push(comparison(
+                "contact",
+                "impacts_per_period",
+                10.0 * cf,
+                8.0 * cf,
+            ));
+            // The model missed one step of the first test: nothing compared there.
+            if ti == 0 && step == 7 {
+                features.clear();
+            }
+            // A non-finite value among the features: drawn around, not through.
+            if ti == 1 && step == 4 {
+                features[0].measured = f64::NAN;
+                features[0].score = f64::NAN;
+            }
+            out.push(StepScores {
+                test: name.into(),
+                test_index: ti,
+                step,
+                omega_ratio: w,
+                regime: match (impacts, level > 1e-5) {
+                    (true, _) => Regime::Impacts,
+                    (false, false) => Regime::ImpactFreeLow,
+                    (false, true) => Regime::ImpactFreeHigh,
+                },
+                level,
+                features,
+            });
+        }
+    }
+    out
+}
+
+fn trend(intercept: f64, slope: f64, se: f64) -> Trend {
+    Trend {
+        intercept,
+        slope,
+        slope_standard_error: se,
+        significant: (slope / se).abs() > 3.0,
+    }
+}
+
+fn linear() -> LinearEvidence {
+    let mut fits = Vec::new();
+    for (mode, f, amp) in [("1FU", 100.0, 2e-4), ("1FL", 92.0, 1.5e-4)] {
+        for (ti, &(name, level)) in TESTS.iter().enumerate() {
+            let a = amp * (level / 1e-5);
+            fits.push(ModeFit {
+                mode: mode.into(),
+                test: name.into(),
+                test_index: ti,
+                level,
+                base_amplitude_m: level * 0.3,
+                steps: 8,
+                omega_ratio_range: [0.95, 1.0],
+                frequency_hz: f - 2000.0 * a,
+                frequency_hz_standard_error: 0.05,
+                frequency_ratio: (f - 2000.0 * a) / 100.0,
+                damping_ratio: 0.002 + 2.0 * a,
+                // A standard error the fit could not give: the marker without a bar.
+                damping_ratio_standard_error: if ti == 1 { f64::NAN } else { 1e-4 },
+                participation: [1.0, 0.0],
+                residual_terms: [0.0, 0.0],
+                peak_tip_amplitude_m: a,
+                relative_residual: 0.01,
+                transient_share: 0.02,
+            });
+        }
+    }
+    let dep = |mode: &str, f: f64| AmplitudeDependence {
+        mode: mode.into(),
+        tests: TESTS.iter().map(|t| t.0.to_string()).collect(),
+        levels: 3,
+        frequency_vs_amplitude: trend(f, -2000.0, 50.0),
+        damping_vs_amplitude: trend(0.002, 2.0, 0.2),
+        frequency_vs_session_order: None,
+        damping_vs_session_order: None,
+        clamp_friction_signature: true,
+    };
+    LinearEvidence {
+        options: LinearOptions::default(),
+        fits,
+        skipped: Vec::new(),
+        amplitude_dependence: vec![dep("1FU", 100.0), dep("1FL", 92.0)],
+        amplitude_dependence_undecided: Vec::new(),
+    }
+}
+
+fn clearance() -> ClearanceEvidence {
+    let test = |ti: usize, c: Option<f64>| {
+        let (name, level) = TESTS[ti];
+        TestClearance {
+            test: name.into(),
+            test_index: ti,
+            level,
+            start_s: 100.0 * ti as f64,
+            plan_clearance_m: 2.33e-3,
+            clearance_m: c,
+            clearance_l: c.map(|c| c / 0.3),
+            uncertainty_m: c.map(|_| 5e-5),
+            lower_bound_m: c.map(|c| c - 5e-5),
+            upper_bound_m: c,
+            lower_bound_omega_ratio: c.map(|_| 0.96),
+            first_contact_omega_ratio: c.map(|_| 0.97),
+            impact_free_windows: 7,
+            accumulated_contact_work_j: None,
+            note: String::new(),
+        }
+    };
+    ClearanceEvidence {
+        options: ClearanceOptions {
+            beam_length: 0.3,
+            contact_over_sensor: 1.0,
+            static_offset: 0.0,
+        },
+        // The first test never touched: no estimate.
+        tests: vec![test(0, None), test(1, Some(2.45e-3)), test(2, Some(2.5e-3))],
+        trend: Some(ClearanceTrend {
+            against: "session order".into(),
+            intercept_m: 2.4e-3,
+            slope_m: 5e-5,
+            slope_standard_error_m: 1e-5,
+            tests: 2,
+        }),
+    }
+}
+
+fn sensors() -> SensorEvidence {
+    let channel = |name: &str, status, gain: Option<f64>| ChannelSensitivity {
+        channel: name.into(),
+        status,
+        gain,
+        spread: gain.map(|_| 0.002),
+        standard_error: gain.map(|_| 0.001),
+        reason: String::new(),
+    };
+    SensorEvidence {
+        windows: 40,
+        options: SensorOptions::default(),
+        platform_ratios: Vec::new(),
+        upper_tip_over_vibrometer: None,
+        channels: vec![
+            channel("lower_tip", SensitivityStatus::Off, Some(1.04)),
+            channel("lower_mid", SensitivityStatus::Nominal, Some(1.0)),
+            channel("vibrometer", SensitivityStatus::Undecided, None),
+        ],
+    }
+}
+
+fn empty() -> Diagnosis {
+    Diagnosis {
+        verdict: Verdict::NoSignificantMismatch,
+        threshold: 3.0,
+        located: Vec::new(),
+        scores_before: Vec::new(),
+        scores_after: Vec::new(),
+        regimes_before: Vec::new(),
+        regimes_after: Vec::new(),
+        effects: Vec::new(),
+        undecided: Vec::new(),
+        model_before: PhysicsSpec::default(),
+        model_after: PhysicsSpec::default(),
+        model: None,
+        validation_tests: Vec::new(),
+        sensors: None,
+        linear: None,
+        clearance: None,
+        cost: DiagnosisCost::default(),
+        wall_seconds: 0.0,
+    }
+}
+
+fn full() -> Diagnosis {
+    let effect = EffectResult {
+        effect: "clamp_friction".into(),
+        rank: 1,
+        accepted: true,
+        parameters: serde_json::json!({}),
+        alternatives: Vec::new(),
+        evidence: serde_json::json!({}),
+        reason: "validated".into(),
+        train_tests: vec!["low-up".into(), "mid-up".into()],
+        validation_tests: vec!["high-up".into()],
+        error_before: Some(SetError {
+            train: 8.0,
+            validation: 9.0,
+        }),
+        error_after: Some(SetError {
+            train: 1.0,
+            validation: 1.2,
+        }),
+    };
+    Diagnosis {
+        verdict: Verdict::Mismatch,
+        scores_before: scores(1.01, 1.0),
+        scores_after: scores(0.991, 1.04),
+        effects: vec![effect],
+        validation_tests: vec!["high-up".into()],
+        sensors: Some(sensors()),
+        linear: Some(linear()),
+        clearance: Some(clearance()),
+        ..empty()
+    }
+}
+
+fn out_dir(name: &str) -> PathBuf {
+    let d = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(name);
+    let _ = std::fs::remove_dir_all(&d);
+    d
+}
+
+/// A PNG: the signature, the default 1600 x 1000 px in its header, a final IEND chunk and
+/// more bytes than a blank image compresses to.
+fn assert_png(path: &Path) {
+    let bytes = std::fs::read(path).unwrap();
+    let name = path.display();
+    assert!(bytes.len() > 10_000, "{name}: only {} bytes", bytes.len());
+    assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n", "{name}");
+    assert_eq!(&bytes[12..16], b"IHDR", "{name}");
+    let be = |b: &[u8]| u32::from_be_bytes([b[0], b[1], b[2], b[3]]);
+    assert_eq!(
+        (be(&bytes[16..20]), be(&bytes[20..24])),
+        (1600, 1000),
+        "{name}"
+    );
+    assert_eq!(&bytes[bytes.len() - 8..bytes.len() - 4], b"IEND", "{name}");
+}
+
+fn assert_svg(path: &Path, labels: &[&str]) {
+    let svg = std::fs::read_to_string(path).unwrap();
+    let name = path.display();
+    assert!(svg.starts_with("<svg"), "{name}");
+    assert!(svg.trim_end().ends_with("</svg>"), "{name}");
+    assert!(!svg.contains("NaN"), "{name}: a non-finite coordinate");
+    for l in labels {
+        assert!(svg.contains(l), "{name}: no {l:?}");
+    }
+}
+
+#[test]
+fn a_diagnosis_draws_every_figure_as_png_and_svg() {
+    let dir = out_dir("report_diagnosis_figures");
+    let written = draw_diagnosis(&full(), &dir).unwrap();
+    let figures: [(&str, &[&str]); 6] = [
+        (
+            "mismatch-map",
+            &["Mismatch map", "upper_tip", "contact", "high-up"],
+        ),
+        ("mismatch-map-after", &["clamp_friction", "lower_mid"]),
+        ("evidence-linear", &["1FU", "1FL", "ζ", "mid-up"]),
+        (
+            "evidence-clearance",
+            &["clearance (mm)", "high-up", "plan clearance"],
+        ),
+        ("evidence-sensors", &["lower_tip", "RMS measured"]),
+        ("before-after", &["high-up", "model as given", "contact"]),
+    ];
+    let expected: Vec<PathBuf> = (figures.iter())
+        .flat_map(|(f, _)| ["png", "svg"].map(|e| dir.join(format!("{f}.{e}"))))
+        .collect();
+    assert_eq!(written, expected);
+    for (f, labels) in figures {
+        assert_png(&dir.join(format!("{f}.png")));
+        assert_svg(&dir.join(format!("{f}.svg")), labels);
+    }
+}
+
+#[test]
+fn an_empty_diagnosis_draws_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    assert_eq!(
+        draw_diagnosis(&empty(), dir.path()).unwrap(),
+        Vec::<PathBuf>::new()
+    );
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
+}
+
+#[test]
+fn missing_data_leaves_figures_out() {
+    let dir = tempfile::tempdir().unwrap();
+    // Scores before only, evidence without anything to show, a threshold that is not finite.
+    let mut d = full();
+    d.scores_after.clear();
+    d.threshold = f64::NAN;
+    d.sensors = None;
+    if let Some(l) = &mut d.linear {
+        l.fits
+            .iter_mut()
+            .for_each(|f| f.peak_tip_amplitude_m = f64::NAN);
+    }
+    if let Some(c) = &mut d.clearance {
+        c.tests.iter_mut().for_each(|t| t.clearance_m = None);
+    }
+    let names: Vec<String> = (draw_diagnosis(&d, dir.path()).unwrap().iter())
+        .map(|p| p.file_name().unwrap().to_string_lossy().into_owned())
+        .collect();
+    assert_eq!(
+        names,
+        [
+            "mismatch-map.png",
+            "mismatch-map.svg",
+            "evidence-sensors.png",
+            "evidence-sensors.svg"
+        ]
+    );
+    // Steps with nothing finite: no figure at all.
+    let mut d = full();
+    for s in d.scores_before.iter_mut().chain(&mut d.scores_after) {
+        s.omega_ratio = f64::NAN;
+        s.features.iter_mut().for_each(|f| f.score = f64::NAN);
+    }
+    d.linear = None;
+    d.clearance = None;
+    let dir = tempfile::tempdir().unwrap();
+    assert_eq!(
+        draw_diagnosis(&d, dir.path()).unwrap(),
+        Vec::<PathBuf>::new()
+    );
+}
+
+#[test]
+fn single_and_extreme_values_draw() {
+    // One step with an infinite score, one fit per mode, one clearance against contact work,
+    // a threshold below 1: degenerate ranges are widened, nothing panics.
+    let mut d = full();
+    d.threshold = 0.5;
+    d.scores_before.truncate(1);
+    d.scores_before[0].features[0].score = f64::INFINITY;
+    d.scores_after.truncate(1);
+    d.validation_tests = vec!["low-up".into()];
+    if let Some(l) = &mut d.linear {
+        l.fits.retain(|f| f.test_index == 2);
+        l.amplitude_dependence.clear();
+    }
+    if let Some(c) = &mut d.clearance {
+        c.tests.retain(|t| t.test_index == 2);
+        c.tests[0].accumulated_contact_work_j = Some(12.5);
+    }
+    let dir = out_dir("report_diagnosis_figures_degenerate");
+    let written = draw_diagnosis(&d, &dir).unwrap();
+    assert_eq!(written.len(), 12, "{written:?}");
+    for p in written.iter().filter(|p| p.extension().unwrap() == "png") {
+        assert_png(p);
+    }
+    let svg = dir.join("evidence-clearance.svg");
+    assert_svg(&svg, &["contact work accumulated before the test (J)"]);
+}

@@ -4,6 +4,7 @@
 //! tests never parse the human-readable text.
 
 mod demo;
+mod diagnose;
 mod fe;
 mod firmware_sim;
 mod hw;
@@ -54,6 +55,9 @@ pub enum Command {
     Replay(replay::ReplayArgs),
     /// The paper-style figures of a recorded session.
     Report(report::ReportArgs),
+    /// Where a recorded session and its model differ, the physics the model left out, fitted
+    /// and validated on tests it was not fitted on.
+    Diagnose(diagnose::DiagnoseArgs),
 }
 
 /// A command whose output goes into a closed pipe (`rigtwin rom info FILE | head`) ends
@@ -101,6 +105,7 @@ pub fn main() -> std::process::ExitCode {
         Command::FirmwareSim(a) => firmware_sim::run(a),
         Command::Replay(a) => replay::run(a),
         Command::Report(a) => report::run(a),
+        Command::Diagnose(a) => diagnose::run(a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

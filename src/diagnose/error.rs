@@ -98,3 +98,30 @@ pub enum EvidenceError {
     #[error("beam length {0} m: expected a length > 0")]
     BadBeamLength(f64),
 }
+
+/// Why a diagnosis cannot be made or failed.
+#[derive(Debug, thiserror::Error)]
+pub enum DiagnoseError {
+    /// The recording cannot give the evidence (no record windows, a damaged log, ...).
+    #[error("cannot diagnose: {0}")]
+    Evidence(#[from] EvidenceError),
+    /// The model cannot run (bad model, non-finite input, ...).
+    #[error("the model: {0}")]
+    Twin(#[from] crate::twin::TwinError),
+    /// The whole-session re-run of the model failed.
+    #[error("the model's re-run: {0}")]
+    Replay(#[from] crate::session::twin_replay::TwinReplayError),
+    /// The model's metrics over a record window failed.
+    #[error("the model's metrics of step {step} of test {test}: {source}")]
+    Metrics {
+        /// Test name.
+        test: String,
+        /// Step index.
+        step: usize,
+        /// What failed.
+        source: crate::signal::SignalError,
+    },
+    /// A model run's thread panicked (a bug: reported, never hidden).
+    #[error("a model run's thread panicked")]
+    Panicked,
+}

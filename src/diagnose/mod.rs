@@ -23,10 +23,15 @@ pub mod clearance;
 mod error;
 pub mod evidence;
 pub mod linear;
+pub mod outcome;
+pub mod pipeline;
+pub mod rerun;
 pub mod sensors;
 
 pub use clearance::{clearance_per_test, ClearanceEvidence, ClearanceOptions, TestClearance};
-pub use error::EvidenceError;
+pub use error::{DiagnoseError, EvidenceError};
 pub use evidence::{session_evidence, SessionEvidence, WindowEvidence};
 pub use linear::{linear_modes, LinearEvidence, LinearOptions, ModeFit};
+pub use outcome::{Diagnosis, Verdict};
+pub use pipeline::{diagnose, DiagnoseInput, DiagnoseOptions, DiagnoseProgress};
 pub use sensors::{sensor_sensitivities, SensorEvidence, SensorOptions};

@@ -1,0 +1,209 @@
+//! What a diagnosis returns ([`Diagnosis`]): where the model and the recording differ, the
+//! effects tried in the order in which they confound each other, each with its parameters,
+//! evidence and its error on the tests it was fitted on and on the tests it was validated on,
+//! and what the session cannot decide. Serialised as `rigtwin diagnose --json`.
+
+use serde::{Deserialize, Serialize};
+
+use crate::config::PhysicsSpec;
+use crate::twin::FeatureComparison;
+
+use super::clearance::ClearanceEvidence;
+use super::linear::LinearEvidence;
+use super::sensors::SensorEvidence;
+
+/// The verdict of a diagnosis.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Verdict {
+    /// The model misses physics the session shows (an effect was accepted, or mismatches
+    /// beyond the null spread remain where the comparison is reliable).
+    Mismatch,
+    /// Model and recording agree within the comparison's spread.
+    NoSignificantMismatch,
+}
+
+/// The regime of a step, from the measurement.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Regime {
+    /// No contact in the record window, at the session's lowest level.
+    ImpactFreeLow,
+    /// No contact in the record window, at a higher level.
+    ImpactFreeHigh,
+    /// Contact in the record window (the impact band: non-periodic, compared as
+    /// distributions).
+    Impacts,
+}
+
+/// One compared feature of one step whose score exceeds the threshold.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Located {
+    /// Test name.
+    pub test: String,
+    /// Step, counted from 0.
+    pub step: usize,
+    /// Omega / omega_2.
+    pub omega_ratio: f64,
+    /// The regime of the step.
+    pub regime: Regime,
+    /// Channel.
+    pub channel: String,
+    /// Feature (`rms`, `amp_p10`, ...).
+    pub feature: String,
+    /// `|model - measured| / combined spread`.
+    pub score: f64,
+    /// Measured value (velocities normalised by `Omega q`).
+    pub measured: f64,
+    /// Model value.
+    pub model: f64,
+}
+
+/// One step compared: every feature of every compared channel, measured and model with their
+/// spreads and scores (the map of the mismatch, the before/after figures).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StepScores {
+    /// Test name.
+    pub test: String,
+    /// Index of the test in the session, from 0.
+    pub test_index: usize,
+    /// Step, counted from 0.
+    pub step: usize,
+    /// Omega / omega_2.
+    pub omega_ratio: f64,
+    /// The regime of the step.
+    pub regime: Regime,
+    /// Base level of the test / l.
+    pub level: f64,
+    /// The compared features (none when the model missed part of the window).
+    pub features: Vec<FeatureComparison>,
+}
+
+impl StepScores {
+    /// The largest score of channel `channel`'s features (None: not compared).
+    pub fn channel_score(&self, channel: &str) -> Option<f64> {
+        self.features
+            .iter()
+            .filter(|f| f.channel == channel)
+            .map(|f| f.score)
+            .reduce(f64::max)
+    }
+
+    /// The largest score of the step (None: nothing compared).
+    pub fn max_score(&self) -> Option<f64> {
+        self.features.iter().map(|f| f.score).reduce(f64::max)
+    }
+}
+
+/// Scores per regime: how much of the session mismatches and where.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RegimeScores {
+    /// The regime.
+    pub regime: Regime,
+    /// Steps in the regime.
+    pub steps: usize,
+    /// Steps with a feature above the threshold.
+    pub steps_above: usize,
+    /// Median over the steps of the step's largest score.
+    pub median_max_score: f64,
+}
+
+/// An error on a set of steps: the RMS of the compared features' scores.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SetError {
+    /// Error on the steps the effect was fitted on, -.
+    pub train: f64,
+    /// Error on the steps it was validated on, -.
+    pub validation: f64,
+}
+
+/// One effect tried.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct EffectResult {
+    /// `linear_frequency`, `linear_damping`, `clamp_friction`, `clearance`, `wear`, `tilt`,
+    /// `sensor_gain` or `discretisation`.
+    pub effect: String,
+    /// Rank among the effects (1: the first named), in the order of identification; accepted
+    /// effects rank before rejected ones.
+    pub rank: usize,
+    /// Whether the effect is in the fixed model.
+    pub accepted: bool,
+    /// The fitted parameters, with the `[model]` key names.
+    pub parameters: serde_json::Value,
+    /// Other effects that explain the evidence as well (the channels cannot tell them apart),
+    /// with why.
+    pub alternatives: Vec<String>,
+    /// The evidence, in words and numbers.
+    pub evidence: serde_json::Value,
+    /// Why accepted or rejected.
+    pub reason: String,
+    /// Tests fitted on.
+    pub train_tests: Vec<String>,
+    /// Tests validated on.
+    pub validation_tests: Vec<String>,
+    /// Error of the model without the effect (with the effects accepted before it).
+    pub error_before: Option<SetError>,
+    /// Error of the model with the effect.
+    pub error_after: Option<SetError>,
+}
+
+/// What a session cannot decide, and why.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Undecided {
+    /// The effect.
+    pub effect: String,
+    /// Why the session cannot tell.
+    pub reason: String,
+}
+
+/// The work a diagnosis did.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct DiagnosisCost {
+    /// Model runs (whole or per test).
+    pub model_runs: usize,
+    /// Rig seconds the model re-ran, s.
+    pub model_rig_seconds: f64,
+    /// Wall seconds in model runs, s.
+    pub model_wall_seconds: f64,
+}
+
+/// The result of a diagnosis (`rigtwin diagnose --json`).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Diagnosis {
+    /// The verdict.
+    pub verdict: Verdict,
+    /// Score above which a feature counts as a mismatch, -.
+    pub threshold: f64,
+    /// Features above the threshold with the model as given, largest first.
+    pub located: Vec<Located>,
+    /// Every step's largest score per channel, before (model as given).
+    pub scores_before: Vec<StepScores>,
+    /// The same with the accepted effects.
+    pub scores_after: Vec<StepScores>,
+    /// Per regime, before.
+    pub regimes_before: Vec<RegimeScores>,
+    /// Per regime, after.
+    pub regimes_after: Vec<RegimeScores>,
+    /// The effects tried, by rank.
+    pub effects: Vec<EffectResult>,
+    /// What the session cannot decide.
+    pub undecided: Vec<Undecided>,
+    /// The model's extensions as given (`[model]`).
+    pub model_before: PhysicsSpec,
+    /// The model's extensions with the accepted effects (`[model]` of the fixed model).
+    pub model_after: PhysicsSpec,
+    /// Path of the written rig description (set by the caller).
+    pub model: Option<String>,
+    /// Tests any effect was validated on (the before/after figures' tests).
+    pub validation_tests: Vec<String>,
+    /// The sensor-sensitivity evidence (None: the session has no record window for it).
+    pub sensors: Option<SensorEvidence>,
+    /// The linear fits of 1FL and 1FU per test and their amplitude dependence.
+    pub linear: Option<LinearEvidence>,
+    /// The clearance per test and its trend.
+    pub clearance: Option<ClearanceEvidence>,
+    /// Model runs and their cost.
+    pub cost: DiagnosisCost,
+    /// Wall time, s (set by the caller).
+    pub wall_seconds: f64,
+}

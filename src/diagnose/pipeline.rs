@@ -1,0 +1,1077 @@
+//! The diagnosis ([`diagnose`]): locate the mismatch, name the physics the model left out, fit
+//! it, keep it only if it predicts tests it was not fitted on (DESIGN.md, "Diagnosis").
+//!
+//! 1. **Locate**: the twin (the model as given) re-run over the whole session, every step's
+//!    features scored against the measurement with both spreads
+//!    ([`crate::twin::TwinComparison`]), grouped by regime.
+//! 2. **Identify and fit**, in the order in which effects confound each other, each on top
+//!    of the effects accepted before it:
+//!    - `sensor_gain`: the redundant channels' ratios ([`super::sensors`]); for a channel
+//!      without a redundant partner, the measured/model ratio over the impact-free steps:
+//!      flat in frequency and different from its beam's other channel;
+//!    - `linear_frequency`, `linear_damping` of 1FU and 1FL: the impact-free fits
+//!      ([`super::linear`]) at the lowest level (at zero amplitude where the clamp's friction
+//!      shows);
+//!    - `clamp_friction`: the frequency falling and the damping rising with the amplitude; the
+//!      slopes fix the ratio of the joint's stiffness share to its slip amplitude, model runs
+//!      over a few stiffness shares fix the rest;
+//!    - `clearance`: the clearance per test before the first impact ([`super::clearance`]),
+//!      as an offset to the plan's when the tests agree.
+//! 3. **Select**: each candidate is fitted on some tests (`train`) and judged on others
+//!    (`validation`) by model runs with and without it ([`ModelRunner`]); the error is the RMS
+//!    of the compared features' scores over the regime the effect shows in. It is accepted
+//!    only if the validation error falls by more than the null spread plus a penalty per
+//!    parameter; rejected candidates are reported with the reason.
+//!
+//! A diagnosis never reads the simulated rig's hidden physics: its inputs are the recording
+//! (DAQ counts, layout, events), its replayed summary and the model; the caller strips
+//! `[truth]` from the rig description.
+
+use std::collections::HashMap;
+use std::f64::consts::PI;
+
+use serde_json::json;
+
+use crate::config::{Beam, ClampFrictionSpec};
+use crate::config::{ClearanceSpec, ModalCorrectionSpec, PhysicsSpec, RigConfig, SensorGainSpec};
+use crate::rom::Rom;
+use crate::session::replay::Recording;
+use crate::session::summary::SessionSummary;
+use crate::session::twin_replay::{replay_twin, EnsembleOptions};
+use crate::twin::{TwinModel, TwinSpec};
+
+use super::clearance::{clearance_per_test_of, ClearanceOptions};
+use super::evidence::{session_evidence, SessionEvidence};
+use super::linear::{linear_modes_of, LinearEvidence, LinearOptions, ModeFit};
+use super::outcome::{
+    Diagnosis, DiagnosisCost, EffectResult, Located, Regime, RegimeScores, SetError, StepScores,
+    Undecided, Verdict,
+};
+use super::rerun::{ModelRunner, SessionSteps};
+use super::sensors::{sensor_sensitivities_of, SensitivityStatus, SensorOptions};
+use super::{DiagnoseError, EvidenceError};
+
+/// Settings of a diagnosis.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DiagnoseOptions {
+    /// Score above which a feature counts as a mismatch, -. Default 3.
+    pub threshold: f64,
+    /// The error's spread when the model is right (RMS score units): a candidate must lower
+    /// the validation error by more than this, -. Default 0.3.
+    pub null_spread: f64,
+    /// Further validation improvement asked per fitted parameter, -. Default 0.1.
+    pub parameter_penalty: f64,
+    /// And by at least this share of the error before, -. Default 0.2.
+    pub min_relative_improvement: f64,
+    /// Threads for model runs.
+    pub jobs: usize,
+}
+
+impl Default for DiagnoseOptions {
+    fn default() -> Self {
+        DiagnoseOptions {
+            threshold: 3.0,
+            null_spread: 0.3,
+            parameter_penalty: 0.1,
+            min_relative_improvement: 0.2,
+            jobs: 1,
+        }
+    }
+}
+
+/// What a diagnosis works on.
+pub struct DiagnoseInput<'a> {
+    /// The recording.
+    pub rec: &'a Recording,
+    /// Its replayed summary (the measurement).
+    pub summary: &'a SessionSummary,
+    /// The model's rig description (`[truth]` stripped by the caller).
+    pub cfg: &'a RigConfig,
+    /// Its ROM.
+    pub rom: &'a Rom,
+}
+
+/// Progress of a diagnosis, for the terminal.
+#[derive(Clone, Debug, PartialEq)]
+pub enum DiagnoseProgress {
+    /// A stage begins.
+    Stage(String),
+    /// A model run for a hypothesis.
+    Evaluation(String),
+    /// What a stage found, in words.
+    Note(String),
+}
+
+/// Which steps an error covers.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Steps {
+    /// Impact-free steps, motion channels.
+    ImpactFree,
+    /// Steps with contact, every channel.
+    Impacts,
+}
+
+/// RMS score of the features of the steps of `tests` in `which`; None without any.
+fn set_error(scores: &[StepScores], tests: &[usize], which: Steps) -> Option<f64> {
+    let (mut sum, mut n) = (0.0, 0usize);
+    for s in scores.iter().filter(|s| tests.contains(&s.test_index)) {
+        let keep = match which {
+            Steps::ImpactFree => s.regime != Regime::Impacts,
+            Steps::Impacts => s.regime == Regime::Impacts,
+        };
+        if !keep {
+            continue;
+        }
+        for f in &s.features {
+            if which == Steps::ImpactFree && f.channel == "contact" {
+                continue;
+            }
+            sum += f.score * f.score;
+            n += 1;
+        }
+    }
+    (n > 0).then(|| (sum / n as f64).sqrt())
+}
+
+/// A candidate effect.
+struct Candidate {
+    effect: &'static str,
+    /// The model with the candidate on top of the accepted effects.
+    ext: PhysicsSpec,
+    parameters: serde_json::Value,
+    n_params: usize,
+    evidence: serde_json::Value,
+    alternatives: Vec<String>,
+    train: Vec<usize>,
+    validation: Vec<usize>,
+    steps: Steps,
+}
+
+/// The diagnosis state: the runner, the model so far, the results.
+struct Work<'a> {
+    runner: ModelRunner<'a>,
+    steps: &'a SessionSteps,
+    opts: DiagnoseOptions,
+    accepted: PhysicsSpec,
+    effects: Vec<EffectResult>,
+    undecided: Vec<Undecided>,
+    cache: HashMap<(String, Vec<usize>), Vec<StepScores>>,
+    progress: &'a mut dyn FnMut(DiagnoseProgress),
+}
+
+impl Work<'_> {
+    fn scores(
+        &mut self,
+        ext: &PhysicsSpec,
+        tests: &[usize],
+    ) -> Result<Vec<StepScores>, DiagnoseError> {
+        let key = (ext.to_json(), tests.to_vec());
+        if let Some(s) = self.cache.get(&key) {
+            return Ok(s.clone());
+        }
+        let s = self.runner.run(ext, tests)?;
+        self.cache.insert(key, s.clone());
+        Ok(s)
+    }
+
+    fn names(&self, tests: &[usize]) -> Vec<String> {
+        tests.iter().map(|&t| self.steps.tests[t].clone()).collect()
+    }
+
+    /// The errors of the model `ext` on the candidate's tests.
+    fn errors(
+        &mut self,
+        ext: &PhysicsSpec,
+        c: &Candidate,
+    ) -> Result<Option<SetError>, DiagnoseError> {
+        let mut all: Vec<usize> = c.train.iter().chain(&c.validation).copied().collect();
+        all.sort_unstable();
+        all.dedup();
+        let s = self.scores(ext, &all)?;
+        Ok(
+            match (
+                set_error(&s, &c.train, c.steps),
+                set_error(&s, &c.validation, c.steps),
+            ) {
+                (Some(train), Some(validation)) => Some(SetError { train, validation }),
+                _ => None,
+            },
+        )
+    }
+
+    /// Judges candidate `c` against the accepted model; accepts it if it predicts its
+    /// validation tests better beyond the null spread. Returns whether accepted.
+    fn judge(&mut self, c: Candidate) -> Result<bool, DiagnoseError> {
+        let line = format!(
+            "{} {} (fit on {}, validated on {})",
+            c.effect,
+            c.parameters,
+            self.names(&c.train).join(", "),
+            self.names(&c.validation).join(", ")
+        );
+        (self.progress)(DiagnoseProgress::Evaluation(line));
+        let accepted = self.accepted.clone();
+        let before = self.errors(&accepted, &c)?;
+        let after = self.errors(&c.ext, &c)?;
+        let (ok, reason) = match (before, after) {
+            (Some(b), Some(a)) => {
+                let gain = b.validation - a.validation;
+                let needed =
+                    self.opts.null_spread + self.opts.parameter_penalty * c.n_params as f64;
+                if a.validation >= b.validation {
+                    (
+                        false,
+                        format!(
+                            "the validation error does not fall ({:.3} -> {:.3})",
+                            b.validation, a.validation
+                        ),
+                    )
+                } else if gain <= needed
+                    || a.validation > (1.0 - self.opts.min_relative_improvement) * b.validation
+                {
+                    (false, format!(
+                        "the validation error falls by {gain:.3} ({:.3} -> {:.3}), within the null spread and the penalty for {} parameter(s) ({needed:.3}) or by less than {:.0} %",
+                        b.validation, a.validation, c.n_params, 100.0 * self.opts.min_relative_improvement
+                    ))
+                } else {
+                    (true, format!(
+                        "the validation error falls {:.1}x ({:.3} -> {:.3}), beyond the null spread and the penalty ({needed:.3})",
+                        b.validation / a.validation.max(1e-12), b.validation, a.validation
+                    ))
+                }
+            }
+            _ => (
+                false,
+                "no compared step of the regime on the train or validation tests: cannot be judged"
+                    .to_string(),
+            ),
+        };
+        if ok {
+            self.accepted = c.ext.clone();
+        }
+        self.effects.push(EffectResult {
+            effect: c.effect.to_string(),
+            rank: 0,
+            accepted: ok,
+            parameters: c.parameters,
+            alternatives: c.alternatives,
+            evidence: c.evidence,
+            reason,
+            train_tests: self.names(&c.train),
+            validation_tests: self.names(&c.validation),
+            error_before: before,
+            error_after: after,
+        });
+        Ok(ok)
+    }
+
+    fn undecided(&mut self, effect: &str, reason: impl Into<String>) {
+        self.undecided.push(Undecided {
+            effect: effect.to_string(),
+            reason: reason.into(),
+        });
+    }
+}
+
+/// Tests split alternately: positions 0, 2, ... train, 1, 3, ... validation.
+fn alternate(tests: &[usize]) -> (Vec<usize>, Vec<usize>) {
+    let train = tests.iter().step_by(2).copied().collect();
+    let validation = tests.iter().skip(1).step_by(2).copied().collect();
+    (train, validation)
+}
+
+/// Tests (indices) with at least one step of regime other than `Impacts` (`impact_free`) or
+/// of `Impacts`.
+fn tests_with(steps: &SessionSteps, impact_free: bool) -> Vec<usize> {
+    let mut t: Vec<usize> = steps
+        .steps
+        .iter()
+        .filter(|s| s.impact_free() == impact_free)
+        .map(|s| s.test_index)
+        .collect();
+    t.dedup();
+    t
+}
+
+/// Per regime: steps, steps above the threshold, median largest score.
+fn regimes(scores: &[StepScores], threshold: f64) -> Vec<RegimeScores> {
+    [
+        Regime::ImpactFreeLow,
+        Regime::ImpactFreeHigh,
+        Regime::Impacts,
+    ]
+    .into_iter()
+    .filter_map(|r| {
+        let mut max: Vec<f64> = scores
+            .iter()
+            .filter(|s| s.regime == r)
+            .filter_map(StepScores::max_score)
+            .collect();
+        if max.is_empty() {
+            return None;
+        }
+        max.sort_by(f64::total_cmp);
+        Some(RegimeScores {
+            regime: r,
+            steps: max.len(),
+            steps_above: max.iter().filter(|&&m| m > threshold).count(),
+            median_max_score: max[max.len() / 2],
+        })
+    })
+    .collect()
+}
+
+/// The whole session re-run with extensions `ext` (the `replay --twin` of the fixed model).
+fn whole_session(
+    input: &DiagnoseInput<'_>,
+    steps: &SessionSteps,
+    ext: &PhysicsSpec,
+) -> Result<Vec<StepScores>, DiagnoseError> {
+    let mut summary = input.summary.clone();
+    let mut model = TwinModel::of_config(input.rom, input.cfg);
+    model.extensions = ext.clone();
+    let mut spec: TwinSpec = input.cfg.twin.clone();
+    spec.ensemble_members = 0;
+    replay_twin(
+        input.rec,
+        &mut summary,
+        &model,
+        &spec,
+        input.cfg.rig.beam_length,
+        EnsembleOptions::NONE,
+        &mut (),
+    )?;
+    Ok(steps
+        .steps
+        .iter()
+        .zip(summary.steps())
+        .map(|(s, r)| StepScores {
+            test: s.info.test.clone(),
+            test_index: s.test_index,
+            step: s.info.step,
+            omega_ratio: s.info.omega_ratio,
+            regime: s.regime,
+            level: s.level,
+            features: r
+                .twin
+                .as_ref()
+                .map(|t| t.features.clone())
+                .unwrap_or_default(),
+        })
+        .collect())
+}
+
+/// Diagnoses the recording of `input` (module docs); `progress` hears of stages and model
+/// runs.
+pub fn diagnose(
+    input: &DiagnoseInput<'_>,
+    opts: &DiagnoseOptions,
+    progress: &mut dyn FnMut(DiagnoseProgress),
+) -> Result<Diagnosis, DiagnoseError> {
+    let rec = input.rec;
+    if rec.record_windows().next().is_none() {
+        return Err(EvidenceError::NoRecordWindows.into());
+    }
+    let steps = SessionSteps::of(rec, input.summary);
+    let given = input.cfg.model.clone();
+
+    progress(DiagnoseProgress::Stage(format!(
+        "locate: the model as given over the whole session ({} steps)",
+        steps.steps.len()
+    )));
+    let t0 = std::time::Instant::now();
+    let before = whole_session(input, &steps, &given)?;
+    let mut cost = DiagnosisCost {
+        model_runs: 1,
+        model_rig_seconds: rec.rig_seconds(),
+        model_wall_seconds: t0.elapsed().as_secs_f64(),
+    };
+    let mut located: Vec<Located> = before
+        .iter()
+        .flat_map(|s| {
+            s.features
+                .iter()
+                .filter(|f| f.score > opts.threshold)
+                .map(|f| Located {
+                    test: s.test.clone(),
+                    step: s.step,
+                    omega_ratio: s.omega_ratio,
+                    regime: s.regime,
+                    channel: f.channel.clone(),
+                    feature: f.feature.clone(),
+                    score: f.score,
+                    measured: f.measured,
+                    model: f.model,
+                })
+        })
+        .collect();
+    located.sort_by(|a, b| b.score.total_cmp(&a.score));
+
+    let mut base = TwinModel::of_config(input.rom, input.cfg);
+    base.extensions = given.clone();
+    let runner = ModelRunner::new(
+        rec,
+        &steps,
+        base,
+        &input.cfg.twin,
+        input.cfg.rig.beam_length,
+        opts.jobs,
+    );
+    let mut work = Work {
+        runner,
+        steps: &steps,
+        opts: opts.clone(),
+        accepted: given.clone(),
+        effects: Vec::new(),
+        undecided: Vec::new(),
+        cache: HashMap::new(),
+        progress,
+    };
+
+    // 1. Sensor sensitivities.
+    (work.progress)(DiagnoseProgress::Stage(
+        "identify: sensor sensitivities".into(),
+    ));
+    let ev = session_evidence(rec, &[])?;
+    let sensors = sensor_stage(&mut work, &ev, &before)?;
+
+    // 2. Linear frequency and damping of 1FU and 1FL.
+    (work.progress)(DiagnoseProgress::Stage(
+        "identify: linear frequency and damping of 1FU and 1FL (impact-free steps)".into(),
+    ));
+    let gains: Vec<(String, f64)> = work
+        .accepted
+        .sensor_gains
+        .iter()
+        .map(|g| (g.channel.clone(), g.gain))
+        .collect();
+    let ev = session_evidence(rec, &gains)?;
+    let linear = match linear_modes_of(&ev, &LinearOptions::default()) {
+        Ok(l) => Some(l),
+        Err(e) => {
+            work.undecided("linear_frequency", e.to_string());
+            work.undecided("linear_damping", e.to_string());
+            work.undecided("clamp_friction", e.to_string());
+            None
+        }
+    };
+    if let Some(lin) = &linear {
+        linear_stage(&mut work, input.rom, lin)?;
+        (work.progress)(DiagnoseProgress::Stage(
+            "identify: amplitude dependence without contact (the clamp's friction)".into(),
+        ));
+        clamp_stage(&mut work, input.rom, lin)?;
+    }
+
+    // 4. Clearance per test.
+    (work.progress)(DiagnoseProgress::Stage(
+        "identify: clearance per test before the first impact".into(),
+    ));
+    let clearance = clearance_stage(&mut work, input.cfg, &ev)?;
+    work.undecided(
+        "tilt",
+        "not identified: the contact-regime statistics that would separate a tilt from the clearance are not compared yet",
+    );
+
+    // Show: the whole session with the accepted effects.
+    let any = work.effects.iter().any(|e| e.accepted);
+    let after = if any {
+        (work.progress)(DiagnoseProgress::Stage(
+            "show: the fixed model over the whole session".into(),
+        ));
+        let t = std::time::Instant::now();
+        let s = whole_session(input, &steps, &work.accepted)?;
+        cost.model_runs += 1;
+        cost.model_rig_seconds += rec.rig_seconds();
+        cost.model_wall_seconds += t.elapsed().as_secs_f64();
+        s
+    } else {
+        before.clone()
+    };
+    let regimes_before = regimes(&before, opts.threshold);
+    let regimes_after = regimes(&after, opts.threshold);
+    // The twin's own truncation: impact-band mismatches where the impact-free steps match.
+    let free_ok = regimes_after
+        .iter()
+        .filter(|r| r.regime != Regime::Impacts)
+        .all(|r| r.median_max_score <= opts.threshold);
+    if let Some(r) = regimes_after.iter().find(|r| r.regime == Regime::Impacts) {
+        if r.steps_above > 0 && free_ok {
+            work.effects.push(EffectResult {
+                effect: "discretisation".into(),
+                rank: 0,
+                accepted: false,
+                parameters: json!({}),
+                alternatives: vec!["tilt".into(), "clearance".into()],
+                evidence: json!({
+                    "impact_steps": r.steps,
+                    "impact_steps_above_threshold": r.steps_above,
+                    "median_max_score": r.median_max_score,
+                }),
+                reason: format!(
+                    "{} of {} impact-band steps score above {} while the impact-free steps match: the twin's modal truncation and time step (the null case of the nominal twin shows about a third of the impact-band steps above 3) or contact physics the session cannot separate; not a model extension",
+                    r.steps_above, r.steps, opts.threshold
+                ),
+                train_tests: Vec::new(),
+                validation_tests: Vec::new(),
+                error_before: None,
+                error_after: None,
+            });
+        }
+    }
+
+    // Impact-free steps are periodic and their spread is small: a regime whose typical step
+    // scores above the threshold is a mismatch even when no effect explains it.
+    let free_mismatch = regimes_after
+        .iter()
+        .filter(|r| r.regime != Regime::Impacts)
+        .any(|r| r.median_max_score > opts.threshold);
+    let verdict = if any || free_mismatch {
+        Verdict::Mismatch
+    } else {
+        Verdict::NoSignificantMismatch
+    };
+    // Ranks: accepted first, in identification order, then the rest.
+    let mut effects = std::mem::take(&mut work.effects);
+    effects.sort_by_key(|e| !e.accepted);
+    for (i, e) in effects.iter_mut().enumerate() {
+        e.rank = i + 1;
+    }
+    let mut validation_tests: Vec<String> = effects
+        .iter()
+        .filter(|e| e.accepted)
+        .flat_map(|e| e.validation_tests.clone())
+        .collect();
+    validation_tests.sort();
+    validation_tests.dedup();
+    cost.model_runs += work.runner.cost.runs;
+    cost.model_rig_seconds += work.runner.cost.rig_seconds;
+    cost.model_wall_seconds += work.runner.cost.wall_seconds;
+    Ok(Diagnosis {
+        verdict,
+        threshold: opts.threshold,
+        located,
+        scores_before: before,
+        scores_after: if any { after } else { Vec::new() },
+        regimes_before,
+        regimes_after,
+        effects,
+        undecided: work.undecided,
+        model_before: given,
+        model_after: work.accepted,
+        model: None,
+        validation_tests,
+        sensors,
+        linear,
+        clearance,
+        cost,
+        wall_seconds: 0.0,
+    })
+}
+
+/// The measured/model ratio of feature `rms` of `channel` over the impact-free steps of
+/// `tests`, robustly (a few steps near a resonance the model places slightly off must not
+/// hide a flat ratio): (median, its standard error, spread of the per-step ratios from their
+/// median absolute deviation).
+fn channel_ratio(scores: &[StepScores], channel: &str, tests: &[usize]) -> Option<(f64, f64, f64)> {
+    let mut r: Vec<f64> = scores
+        .iter()
+        .filter(|s| s.regime != Regime::Impacts && tests.contains(&s.test_index))
+        .filter_map(|s| {
+            s.features
+                .iter()
+                .find(|f| f.channel == channel && f.feature == "rms")
+                .filter(|f| f.model > 0.0 && f.measured > 0.0)
+                .map(|f| f.measured / f.model)
+        })
+        .collect();
+    if r.len() < 3 {
+        return None;
+    }
+    let median = |v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        let n = v.len();
+        if n % 2 == 1 {
+            v[n / 2]
+        } else {
+            0.5 * (v[n / 2 - 1] + v[n / 2])
+        }
+    };
+    let m = median(&mut r);
+    let mut dev: Vec<f64> = r.iter().map(|x| (x - m).abs()).collect();
+    // NOTE: 1.4826 MAD estimates the standard deviation of normal scatter; the median's
+    // standard error is 1.2533 sigma / sqrt(n).
+    let sd = 1.4826 * median(&mut dev);
+    Some((m, 1.2533 * sd / (r.len() as f64).sqrt(), sd))
+}
+
+fn with_gain(ext: &PhysicsSpec, channel: &str, gain: f64) -> PhysicsSpec {
+    let mut e = ext.clone();
+    e.sensor_gains.retain(|g| g.channel != channel);
+    e.sensor_gains.push(SensorGainSpec {
+        channel: channel.to_string(),
+        gain,
+    });
+    e
+}
+
+/// Stage 1: sensor sensitivities.
+fn sensor_stage(
+    work: &mut Work<'_>,
+    ev: &SessionEvidence,
+    before: &[StepScores],
+) -> Result<Option<super::sensors::SensorEvidence>, DiagnoseError> {
+    let all: Vec<usize> = (0..work.steps.tests.len()).collect();
+    let (train, validation) = alternate(&all);
+    // The redundant channels' estimate on the train tests only.
+    let train_names = work.names(&train);
+    let mut ev_train = ev.clone();
+    ev_train.windows.retain(|w| train_names.contains(&w.test));
+    let opts = SensorOptions::default();
+    let sens = if ev_train.windows.is_empty() {
+        None
+    } else {
+        Some(sensor_sensitivities_of(&ev_train, &opts))
+    };
+    let free = tests_with(work.steps, true);
+    let free_train: Vec<usize> = free.iter().copied().filter(|t| train.contains(t)).collect();
+    let free_validation: Vec<usize> = free
+        .iter()
+        .copied()
+        .filter(|t| validation.contains(t))
+        .collect();
+    if validation.is_empty() {
+        work.undecided(
+            "sensor_gain",
+            "a single test: nothing to validate a gain on",
+        );
+        return Ok(sens);
+    }
+    let Some(sens) = sens else {
+        return Ok(None);
+    };
+    for c in &sens.channels {
+        if c.status == SensitivityStatus::Off {
+            let gain = c.gain.unwrap_or(1.0);
+            let cand = Candidate {
+                effect: "sensor_gain",
+                ext: with_gain(&work.accepted, &c.channel, gain),
+                parameters: json!({"channel": c.channel, "gain": gain}),
+                n_params: 1,
+                evidence: json!({"redundant_channels": c.reason, "standard_error": c.standard_error}),
+                alternatives: Vec::new(),
+                train: train.clone(),
+                validation: validation.clone(),
+                steps: Steps::ImpactFree,
+            };
+            work.judge(cand)?;
+        }
+    }
+    // The vibrometer and the upper-tip accelerometer disagree: the model tells which.
+    if let Some(r) = &sens.upper_tip_over_vibrometer {
+        if !r.is_one(&opts) && !free_train.is_empty() && !free_validation.is_empty() {
+            let mut tried = Vec::new();
+            for (channel, gain) in [("upper_tip", r.ratio), ("vibrometer", 1.0 / r.ratio)] {
+                let ext = with_gain(&work.accepted, channel, gain);
+                let mut all_t: Vec<usize> = free.clone();
+                all_t.sort_unstable();
+                let s = work.scores(&ext, &all_t)?;
+                tried.push((
+                    channel,
+                    gain,
+                    set_error(&s, &free_train, Steps::ImpactFree).unwrap_or(f64::INFINITY),
+                ));
+            }
+            tried.sort_by(|a, b| a.2.total_cmp(&b.2));
+            let (channel, gain, best) = tried[0];
+            let (other, _, second) = tried[1];
+            let alternatives = if second - best <= work.opts.null_spread {
+                vec![format!("sensor_gain of {other}: the train error is within the null spread ({best:.3} vs {second:.3})")]
+            } else {
+                Vec::new()
+            };
+            let cand = Candidate {
+                effect: "sensor_gain",
+                ext: with_gain(&work.accepted, channel, gain),
+                parameters: json!({"channel": channel, "gain": gain}),
+                n_params: 1,
+                evidence: json!({"upper_tip_over_vibrometer": r.ratio, "standard_error": r.standard_error, "train_error_upper_tip": tried.iter().find(|t| t.0 == "upper_tip").map(|t| t.2), "train_error_vibrometer": tried.iter().find(|t| t.0 == "vibrometer").map(|t| t.2)}),
+                alternatives,
+                train: free_train.clone(),
+                validation: free_validation.clone(),
+                steps: Steps::ImpactFree,
+            };
+            work.judge(cand)?;
+        }
+    }
+    // Channels without a redundant partner: measured over model, flat in frequency, and
+    // unlike the beam's other channel.
+    if free_train.is_empty() || free_validation.is_empty() {
+        work.undecided(
+            "sensor_gain",
+            "the beams' channels without a redundant partner need impact-free steps in two tests (one to fit, one to validate)",
+        );
+        return Ok(Some(sens));
+    }
+    let partner = |c: &str| match c {
+        "lower_tip" => Some("lower_mid"),
+        "lower_mid" => Some("lower_tip"),
+        "upper_mid" => Some("upper_tip"),
+        _ => None,
+    };
+    for channel in ["lower_tip", "lower_mid", "upper_mid"] {
+        let Some((ratio, se, sd)) = channel_ratio(before, channel, &free_train) else {
+            continue;
+        };
+        let Some(p) = partner(channel) else { continue };
+        let Some((pr, pse, _)) = channel_ratio(before, p, &free_train) else {
+            continue;
+        };
+        let off = (ratio - 1.0).abs() > 0.01 && (ratio - 1.0).abs() > 4.0 * se;
+        let flat = sd < 0.02 * ratio;
+        let unlike =
+            (ratio - pr).abs() > 0.01 && (ratio - pr).abs() > 4.0 * (se * se + pse * pse).sqrt();
+        if off && flat && unlike {
+            let cand = Candidate {
+                effect: "sensor_gain",
+                ext: with_gain(&work.accepted, channel, ratio),
+                parameters: json!({"channel": channel, "gain": ratio}),
+                n_params: 1,
+                evidence: json!({"measured_over_model": ratio, "standard_error": se, "spread_over_steps": sd, "partner": p, "partner_measured_over_model": pr}),
+                alternatives: Vec::new(),
+                train: free_train.clone(),
+                validation: free_validation.clone(),
+                steps: Steps::ImpactFree,
+            };
+            work.judge(cand)?;
+        }
+    }
+    Ok(Some(sens))
+}
+
+/// The model's natural frequency (Hz) and damping ratio of mode `label` under `ext`.
+fn model_mode(rom: &Rom, ext: &PhysicsSpec, label: &str) -> Option<(f64, f64)> {
+    let i = rom.labels.iter().position(|l| l == label)?;
+    let mut f = rom.omega[i] / (2.0 * PI);
+    let mut z = rom.damping_ratio[i];
+    if let Some(m) = ext.modes.iter().find(|m| m.mode == label) {
+        f = m.frequency_hz.unwrap_or(f);
+        z = m.damping_ratio.unwrap_or(z);
+    }
+    Some((f, z))
+}
+
+fn with_mode(ext: &PhysicsSpec, label: &str, f: Option<f64>, z: Option<f64>) -> PhysicsSpec {
+    let mut e = ext.clone();
+    match e.modes.iter_mut().find(|m| m.mode == label) {
+        Some(m) => {
+            if f.is_some() {
+                m.frequency_hz = f;
+            }
+            if z.is_some() {
+                m.damping_ratio = z;
+            }
+        }
+        None => e.modes.push(ModalCorrectionSpec {
+            mode: label.to_string(),
+            frequency_hz: f,
+            damping_ratio: z,
+        }),
+    }
+    e
+}
+
+/// The linear (zero-amplitude) frequency and damping of a mode from its fits on tests
+/// `train`, with standard errors: the fits' weighted mean at the lowest level, or the
+/// intercept of the amplitude dependence when it is significant.
+fn linear_values(
+    fits: &[&ModeFit],
+    lin: &LinearEvidence,
+    mode: &str,
+) -> Option<(f64, f64, f64, f64)> {
+    let dep = lin.amplitude_dependence.iter().find(|d| d.mode == mode);
+    let lowest = fits.iter().map(|f| f.level).fold(f64::INFINITY, f64::min);
+    let low: Vec<&&ModeFit> = fits
+        .iter()
+        .filter(|f| f.level <= lowest * (1.0 + 1e-9))
+        .collect();
+    if low.is_empty() {
+        return None;
+    }
+    let wmean = |v: &dyn Fn(&ModeFit) -> (f64, f64)| {
+        let (mut s, mut w) = (0.0, 0.0);
+        for f in &low {
+            let (x, se) = v(f);
+            let wi = 1.0 / (se * se).max(1e-300);
+            s += wi * x;
+            w += wi;
+        }
+        (s / w, (1.0 / w).sqrt())
+    };
+    let (mut f, fse) = wmean(&|m| (m.frequency_hz, m.frequency_hz_standard_error));
+    let (mut z, zse) = wmean(&|m| (m.damping_ratio, m.damping_ratio_standard_error));
+    if let Some(d) = dep.filter(|d| d.clamp_friction_signature) {
+        f = d.frequency_vs_amplitude.intercept;
+        z = d.damping_vs_amplitude.intercept;
+    }
+    Some((f, fse, z, zse))
+}
+
+/// Stage 2: linear frequency and damping per mode.
+fn linear_stage(work: &mut Work<'_>, rom: &Rom, lin: &LinearEvidence) -> Result<(), DiagnoseError> {
+    for mode in ["1FU", "1FL"] {
+        let fits: Vec<&ModeFit> = lin.fits_of(mode).collect();
+        let mut tests: Vec<usize> = fits.iter().map(|f| f.test_index).collect();
+        tests.dedup();
+        if tests.len() < 2 {
+            work.undecided(
+                "linear_frequency",
+                format!(
+                    "{mode}: fitted in {} test(s); one to fit and one to validate are needed",
+                    tests.len()
+                ),
+            );
+            continue;
+        }
+        // Fit on the lowest-level tests but one; validate on the rest.
+        let lowest = fits.iter().map(|f| f.level).fold(f64::INFINITY, f64::min);
+        let low: Vec<usize> = fits
+            .iter()
+            .filter(|f| f.level <= lowest * (1.0 + 1e-9))
+            .map(|f| f.test_index)
+            .collect();
+        let train = vec![low[0]];
+        let validation: Vec<usize> = tests.iter().copied().filter(|t| *t != low[0]).collect();
+        let train_fits: Vec<&ModeFit> = fits
+            .iter()
+            .copied()
+            .filter(|f| f.test_index == low[0])
+            .collect();
+        let Some((f, fse, z, zse)) = linear_values(&train_fits, lin, mode) else {
+            continue;
+        };
+        let Some((f0, z0)) = model_mode(rom, &work.accepted, mode) else {
+            work.undecided("linear_frequency", format!("the model has no mode {mode}"));
+            continue;
+        };
+        (work.progress)(DiagnoseProgress::Note(format!(
+            "{mode} on {}: {f:.4} +- {fse:.4} Hz, damping {z:.5} +- {zse:.5}; the model: {f0:.4} Hz, {z0:.5}",
+            work.steps.tests[low[0]]
+        )));
+        let evidence = json!({"mode": mode, "measured_frequency_hz": f, "standard_error_hz": fse, "model_frequency_hz": f0, "measured_damping_ratio": z, "damping_standard_error": zse, "model_damping_ratio": z0});
+        if (f - f0).abs() > (3.0 * fse).max(1e-4 * f0) {
+            let cand = Candidate {
+                effect: "linear_frequency",
+                ext: with_mode(&work.accepted, mode, Some(f), None),
+                parameters: json!({"mode": mode, "frequency_hz": f}),
+                n_params: 1,
+                evidence: evidence.clone(),
+                alternatives: Vec::new(),
+                train: train.clone(),
+                validation: validation.clone(),
+                steps: Steps::ImpactFree,
+            };
+            work.judge(cand)?;
+        }
+        if (z - z0).abs() > (3.0 * zse).max(0.05 * z0) {
+            let cand = Candidate {
+                effect: "linear_damping",
+                ext: with_mode(&work.accepted, mode, None, Some(z)),
+                parameters: json!({"mode": mode, "damping_ratio": z}),
+                n_params: 1,
+                evidence,
+                alternatives: Vec::new(),
+                train,
+                validation,
+                steps: Steps::ImpactFree,
+            };
+            work.judge(cand)?;
+        }
+    }
+    Ok(())
+}
+
+/// `integral_0^1 (1 - g(r)) dr`, `g` the in-phase describing function of a Jenkins element
+/// over its stiffness at slip ratio `r = delta / a`: the stiffness an Iwan element with
+/// uniform slip deflections loses per unit of `a / delta_max` (module docs of
+/// [`crate::physics::iwan`]).
+fn iwan_softening_integral() -> f64 {
+    let n = 2000;
+    (0..n)
+        .map(|k| {
+            let r = (k as f64 + 0.5) / n as f64;
+            let phi = (1.0 - 2.0 * r).acos();
+            1.0 - (phi - 0.5 * (2.0 * phi).sin()) / PI
+        })
+        .sum::<f64>()
+        / n as f64
+}
+
+/// Stage 3: the clamp's friction.
+fn clamp_stage(work: &mut Work<'_>, rom: &Rom, lin: &LinearEvidence) -> Result<(), DiagnoseError> {
+    let _ = rom;
+    for u in &lin.amplitude_dependence_undecided {
+        work.undecided("clamp_friction", format!("{}: {}", u.mode, u.reason));
+    }
+    let with: Vec<_> = lin
+        .amplitude_dependence
+        .iter()
+        .filter(|d| d.clamp_friction_signature)
+        .collect();
+    if with.is_empty() {
+        return Ok(());
+    }
+    let beams: Vec<Beam> = with
+        .iter()
+        .filter_map(|d| match d.mode.as_str() {
+            "1FU" => Some(Beam::Upper),
+            "1FL" => Some(Beam::Lower),
+            _ => None,
+        })
+        .collect();
+    // Slopes: dzeta/dA = sf / (6 pi A_h), (df/dA) / f = -sf I / (4 A_h): ratio sf / A_h.
+    let i_soft = iwan_softening_integral();
+    let mut ratios = Vec::new();
+    for d in &with {
+        let z = d.damping_vs_amplitude.slope * 6.0 * PI;
+        let f = -d.frequency_vs_amplitude.slope / d.frequency_vs_amplitude.intercept * 4.0 / i_soft;
+        ratios.push((z, f));
+    }
+    let rho = ratios.iter().map(|(z, f)| 0.5 * (z + f)).sum::<f64>() / ratios.len() as f64;
+    if !(rho.is_finite() && rho > 0.0) {
+        work.undecided(
+            "clamp_friction",
+            "the slopes do not give a positive stiffness share per slip amplitude",
+        );
+        return Ok(());
+    }
+    // Train: the tests with fits of these modes; validation: the others with impact-free steps.
+    let mut train: Vec<usize> = lin
+        .fits
+        .iter()
+        .filter(|f| with.iter().any(|d| d.mode == f.mode))
+        .map(|f| f.test_index)
+        .collect();
+    train.sort_unstable();
+    train.dedup();
+    let validation: Vec<usize> = tests_with(work.steps, true)
+        .into_iter()
+        .filter(|t| !train.contains(t))
+        .collect();
+    if validation.is_empty() {
+        work.undecided("clamp_friction", "the clamp's friction shows, but no test outside the fitted ones has impact-free steps to validate it on");
+        return Ok(());
+    }
+    // The stiffness share: the fully slipped joint's softening; slopes fix only sf / A_h.
+    let mut best: Option<(f64, f64)> = None;
+    for sf in [0.02, 0.05, 0.1, 0.2, 0.4] {
+        let a_h = sf / rho;
+        let mut ext = work.accepted.clone();
+        ext.clamp_friction = Some(ClampFrictionSpec {
+            stiffness_fraction: sf,
+            half_slip_tip_amplitude: a_h,
+            sliders: 64,
+            beams: beams.clone(),
+        });
+        (work.progress)(DiagnoseProgress::Evaluation(format!("clamp_friction: stiffness_fraction {sf}, half_slip_tip_amplitude {a_h:.3e} m on the fitted tests")));
+        let s = work.scores(&ext, &train)?;
+        if let Some(e) = set_error(&s, &train, Steps::ImpactFree) {
+            if best.is_none_or(|b| e < b.1) {
+                best = Some((sf, e));
+            }
+        }
+    }
+    let Some((sf, _)) = best else { return Ok(()) };
+    let a_h = sf / rho;
+    let mut ext = work.accepted.clone();
+    let spec = ClampFrictionSpec {
+        stiffness_fraction: sf,
+        half_slip_tip_amplitude: a_h,
+        sliders: 64,
+        beams: beams.clone(),
+    };
+    ext.clamp_friction = Some(spec);
+    let cand = Candidate {
+        effect: "clamp_friction",
+        ext,
+        parameters: json!({"stiffness_fraction": sf, "half_slip_tip_amplitude": a_h, "beams": beams}),
+        n_params: 2,
+        evidence: json!({"modes": with.iter().map(|d| &d.mode).collect::<Vec<_>>(), "stiffness_fraction_over_half_slip_amplitude_per_m": rho, "from_slopes": ratios}),
+        alternatives: Vec::new(),
+        train,
+        validation,
+        steps: Steps::ImpactFree,
+    };
+    work.judge(cand)?;
+    Ok(())
+}
+
+/// Stage 4: the clearance per test, as an offset to the plan's.
+fn clearance_stage(
+    work: &mut Work<'_>,
+    cfg: &RigConfig,
+    ev: &SessionEvidence,
+) -> Result<Option<super::clearance::ClearanceEvidence>, DiagnoseError> {
+    let ce = clearance_per_test_of(ev, &ClearanceOptions::of_rig(cfg))?;
+    let bracketed: Vec<&super::clearance::TestClearance> = ce
+        .tests
+        .iter()
+        .filter(|t| t.clearance_m.is_some())
+        .collect();
+    if bracketed.len() < 2 {
+        work.undecided(
+            "clearance",
+            format!("{} test(s) bracket the clearance (impact-free steps, then contact); two are needed, one to fit and one to validate", bracketed.len()),
+        );
+        work.undecided(
+            "wear",
+            "the clearance's trend needs three or more bracketed tests",
+        );
+        return Ok(Some(ce));
+    }
+    if let Some(t) = &ce.trend {
+        if t.slope_m.abs() > 3.0 * t.slope_standard_error_m && bracketed.len() >= 3 {
+            work.undecided("wear", format!("the clearance changes over the session ({:+.3e} m per test, standard error {:.1e}): a trend is seen, but fitting the wear coefficient against the model's contact work is not built yet", t.slope_m, t.slope_standard_error_m));
+        }
+    }
+    let idx: Vec<usize> = bracketed.iter().map(|t| t.test_index).collect();
+    let (train, validation) = alternate(&idx);
+    // Offset: the train tests' estimates minus the model's current clearance of each test.
+    let current = |t: &super::clearance::TestClearance| {
+        work.accepted.test_clearance(&t.test, t.plan_clearance_m)
+    };
+    let offs: Vec<(f64, f64)> = bracketed
+        .iter()
+        .filter(|t| train.contains(&t.test_index))
+        .map(|t| {
+            let u = t.uncertainty_m.unwrap_or(0.0).max(1e-9);
+            (t.clearance_m.unwrap_or(0.0) - current(t), 1.0 / (u * u))
+        })
+        .collect();
+    let w: f64 = offs.iter().map(|o| o.1).sum();
+    let offset = offs.iter().map(|o| o.0 * o.1).sum::<f64>() / w;
+    let spread = (1.0 / w).sqrt();
+    let plan = bracketed[0].plan_clearance_m;
+    if offset.abs() <= 2.0 * spread || offset.abs() < 0.01 * plan {
+        return Ok(Some(ce));
+    }
+    let mut ext = work.accepted.clone();
+    let base_offset = ext.clearance.as_ref().map_or(0.0, |c| c.offset);
+    ext.clearance = Some(ClearanceSpec {
+        offset: base_offset + offset,
+        tests: Vec::new(),
+    });
+    let cand = Candidate {
+        effect: "clearance",
+        ext,
+        parameters: json!({"offset": base_offset + offset, "tests": bracketed.iter().map(|t| json!({"test": t.test, "clearance": t.clearance_m})).collect::<Vec<_>>()}),
+        n_params: 1,
+        evidence: json!({"offset_m": offset, "offset_standard_error_m": spread, "plan_clearance_m": plan}),
+        alternatives: vec!["tilt: a tilted face closes first at one edge, like a smaller clearance (not separated yet)".into()],
+        train,
+        validation,
+        steps: Steps::Impacts,
+    };
+    work.judge(cand)?;
+    Ok(Some(ce))
+}

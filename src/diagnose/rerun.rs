@@ -1,0 +1,319 @@
+//! The model re-run on the steps that carry the evidence ([`ModelRunner`]): a hypothesis is
+//! judged by running the twin, with the hypothesis' extensions, over the recorded base motion
+//! of some tests and comparing it with the measurement step by step, as `replay --twin` does.
+//!
+//! A run covers whole tests, each group of consecutive tests in one stretch, from rest at the
+//! start of the step before the group's first step (the lead-in: the previous test's last
+//! step, or the session's start): the twin's own state cannot be carried in from another
+//! model (a state belongs to the model that made it), and a free transient from rest decays
+//! over the lead-in step and the first step's settling (250 periods and more; e^-5 at 0.3 %
+//! damping) before the first compared record window. Groups run on separate threads; the
+//! results do not depend on the number of threads. A hypothesis that changes the clearance
+//! over the session (wear) runs the whole session in one stretch.
+
+use std::collections::VecDeque;
+
+use crate::config::PhysicsSpec;
+use crate::control::{EventKind, StepInfo, StepSummary};
+use crate::rom::Rom;
+use crate::session::replay::Recording;
+use crate::session::summary::SessionSummary;
+use crate::twin::{ClearanceSchedule, TwinModel, TwinSpec, TwinWindows};
+
+use super::outcome::{Regime, StepScores};
+use super::DiagnoseError;
+
+/// A record window of the session with its measurement and where it belongs.
+#[derive(Clone, Debug)]
+pub struct SessionStep {
+    /// The step's record window.
+    pub info: StepInfo,
+    /// The measured summary.
+    pub measured: StepSummary,
+    /// Index of the test in the session, from 0.
+    pub test_index: usize,
+    /// Base level of the test / l.
+    pub level: f64,
+    /// The step's regime (from the measurement).
+    pub regime: Regime,
+}
+
+impl SessionStep {
+    /// Whether the measured record window had no contact.
+    pub fn impact_free(&self) -> bool {
+        self.regime != Regime::Impacts
+    }
+}
+
+/// The steps of a session, in order, with the samples where the tests' steps start.
+#[derive(Clone, Debug)]
+pub struct SessionSteps {
+    /// Test names in session order.
+    pub tests: Vec<String>,
+    /// Base level / l per test.
+    pub levels: Vec<f64>,
+    /// The record windows, in session order.
+    pub steps: Vec<SessionStep>,
+    /// (test index, step, sample) of every `step_start` event, in order.
+    starts: Vec<(usize, usize, u64)>,
+}
+
+impl SessionSteps {
+    /// The steps of recording `rec` whose replayed summary is `summary`.
+    pub fn of(rec: &Recording, summary: &SessionSummary) -> SessionSteps {
+        let mut tests: Vec<String> = Vec::new();
+        let mut levels: Vec<f64> = Vec::new();
+        let mut starts = Vec::new();
+        for e in &rec.events {
+            match &e.kind {
+                EventKind::TestStart { test, level, .. } => {
+                    tests.push(test.clone());
+                    levels.push(*level);
+                }
+                EventKind::StepStart { test, step, .. } => {
+                    let ti = tests.iter().rposition(|t| t == test).unwrap_or(0);
+                    starts.push((ti, *step, e.sample));
+                }
+                _ => {}
+            }
+        }
+        let lowest = levels.iter().copied().fold(f64::INFINITY, f64::min);
+        let steps = rec
+            .record_windows()
+            .zip(summary.steps())
+            .map(|(info, s)| {
+                let test_index = tests.iter().rposition(|t| *t == info.test).unwrap_or(0);
+                let level = levels.get(test_index).copied().unwrap_or(0.0);
+                let regime = if s.measured.metrics.contact_fraction > 0.0 {
+                    Regime::Impacts
+                } else if level <= lowest * (1.0 + 1e-9) {
+                    Regime::ImpactFreeLow
+                } else {
+                    Regime::ImpactFreeHigh
+                };
+                SessionStep {
+                    info: info.clone(),
+                    measured: s.measured.clone(),
+                    test_index,
+                    level,
+                    regime,
+                }
+            })
+            .collect();
+        SessionSteps {
+            tests,
+            levels,
+            steps,
+            starts,
+        }
+    }
+
+    /// The sample where the step before test `ti`'s first step starts (the lead-in), or
+    /// `None` for the session's first step.
+    fn lead_in(&self, ti: usize) -> Option<u64> {
+        let first = self.starts.iter().position(|s| s.0 == ti)?;
+        first.checked_sub(1).map(|k| self.starts[k].2)
+    }
+}
+
+/// What a model run did.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct RunCost {
+    /// Runs (stretches of consecutive tests).
+    pub runs: usize,
+    /// Rig time run, s.
+    pub rig_seconds: f64,
+    /// Wall time, s.
+    pub wall_seconds: f64,
+}
+
+/// Runs the twin with given extensions over tests of a recording (see the module docs).
+pub struct ModelRunner<'a> {
+    rec: &'a Recording,
+    steps: &'a SessionSteps,
+    rom: &'a Rom,
+    base: TwinModel<'a>,
+    spec: TwinSpec,
+    beam_length: f64,
+    jobs: usize,
+    /// What the runs cost so far.
+    pub cost: RunCost,
+}
+
+impl<'a> ModelRunner<'a> {
+    /// A runner over `rec` (its steps `steps`) of the model `base` (ROM, contact observation;
+    /// its extensions are replaced by each run's), twin settings `spec` (no ensemble), beam
+    /// length `beam_length` m, on `jobs` threads.
+    pub fn new(
+        rec: &'a Recording,
+        steps: &'a SessionSteps,
+        base: TwinModel<'a>,
+        spec: &TwinSpec,
+        beam_length: f64,
+        jobs: usize,
+    ) -> ModelRunner<'a> {
+        let mut spec = spec.clone();
+        spec.ensemble_members = 0;
+        ModelRunner {
+            rec,
+            steps,
+            rom: base.rom,
+            base,
+            spec,
+            beam_length,
+            jobs: jobs.max(1),
+            cost: RunCost::default(),
+        }
+    }
+
+    /// The compared steps of tests `tests` (indices, any order) with extensions `ext`, in
+    /// session order; a step the model missed part of has no features.
+    pub fn run(
+        &mut self,
+        ext: &PhysicsSpec,
+        tests: &[usize],
+    ) -> Result<Vec<StepScores>, DiagnoseError> {
+        let mut wanted: Vec<usize> = tests.to_vec();
+        wanted.sort_unstable();
+        wanted.dedup();
+        let tests = wanted.clone();
+        // Stretches of consecutive tests; the whole session for wear.
+        let mut groups: Vec<Vec<usize>> = Vec::new();
+        if ext.wear.is_some() {
+            groups.push((0..self.steps.tests.len()).collect());
+        } else {
+            for t in tests {
+                match groups.last_mut() {
+                    Some(g) if g.last() == Some(&(t.wrapping_sub(1))) => g.push(t),
+                    _ => groups.push(vec![t]),
+                }
+            }
+        }
+        let wall = std::time::Instant::now();
+        let model = TwinModel {
+            rom: self.rom,
+            extensions: ext.clone(),
+            circuit: self.base.circuit.clone(),
+            contact_threshold_v: self.base.contact_threshold_v,
+        };
+        let mut results: Vec<Result<(Vec<StepScores>, f64), DiagnoseError>> = Vec::new();
+        let this: &ModelRunner<'_> = self;
+        for chunk in groups.chunks(this.jobs) {
+            let done: Vec<_> = std::thread::scope(|s| {
+                let handles: Vec<_> = chunk
+                    .iter()
+                    .map(|g| {
+                        let model = &model;
+                        s.spawn(move || this.run_group(model, g))
+                    })
+                    .collect();
+                handles
+                    .into_iter()
+                    .map(|h| h.join().unwrap_or_else(|_| Err(DiagnoseError::Panicked)))
+                    .collect()
+            });
+            results.extend(done);
+        }
+        let mut out = Vec::new();
+        for r in results {
+            let (steps, rig_seconds) = r?;
+            self.cost.runs += 1;
+            self.cost.rig_seconds += rig_seconds;
+            out.extend(steps);
+        }
+        out.sort_by_key(|s| (s.test_index, s.step));
+        out.retain(|s| wanted.contains(&s.test_index));
+        self.cost.wall_seconds += wall.elapsed().as_secs_f64();
+        Ok(out)
+    }
+
+    /// One stretch of consecutive tests `group`, from rest at its lead-in.
+    fn run_group(
+        &self,
+        model: &TwinModel<'_>,
+        group: &[usize],
+    ) -> Result<(Vec<StepScores>, f64), DiagnoseError> {
+        let rec = self.rec;
+        let Some(&first) = group.first() else {
+            return Ok((Vec::new(), 0.0));
+        };
+        let windows: Vec<&SessionStep> = self
+            .steps
+            .steps
+            .iter()
+            .filter(|s| group.contains(&s.test_index))
+            .collect();
+        let Some(last) = windows.last() else {
+            return Ok((Vec::new(), 0.0));
+        };
+        let end = last.info.record_end_sample();
+        let from = self.steps.lead_in(first).unwrap_or(0);
+        let start = rec
+            .blocks
+            .iter()
+            .position(|b| b.first_sample + b.len as u64 > from)
+            .unwrap_or(rec.blocks.len());
+        let mut clearances = ClearanceSchedule::of_events(
+            self.beam_length,
+            model.extensions.clearance.as_ref(),
+            &rec.events,
+        );
+        let begin = rec.blocks.get(start).map_or(0, |b| b.first_sample);
+        let mut clearance = clearances.first().unwrap_or(0.0);
+        while let Some(c) = clearances.next_due(begin) {
+            clearance = c;
+        }
+        let mut twin = crate::twin::Twin::new(model, &self.spec, &rec.layout, clearance)?;
+        let dt = rec.layout.dt();
+        let mut pending: VecDeque<(StepInfo, StepSummary)> = windows
+            .iter()
+            .map(|s| (s.info.clone(), s.measured.clone()))
+            .collect();
+        let mut out = TwinWindows::new(twin.observation(), self.spec.tolerance);
+        let mut compared = Vec::new();
+        let mut rig_seconds = 0.0;
+        for b in &rec.blocks[start..] {
+            if b.first_sample >= end {
+                break;
+            }
+            while let Some(c) = clearances.next_due(b.first_sample) {
+                twin.set_clearance(c)?;
+            }
+            let tb = twin.push_block(b)?;
+            rig_seconds += b.len as f64 * dt;
+            out.push(&tb);
+            compared.extend(out.complete(&mut pending, dt, false));
+        }
+        compared.extend(out.complete(&mut pending, dt, true));
+        let mut scores = Vec::new();
+        for (info, c) in compared {
+            let Some(step) = windows
+                .iter()
+                .find(|s| s.info.test == info.test && s.info.step == info.step)
+            else {
+                continue;
+            };
+            let features = match c {
+                Some(Ok(c)) => c.features,
+                Some(Err(source)) => {
+                    return Err(DiagnoseError::Metrics {
+                        test: info.test,
+                        step: info.step,
+                        source,
+                    })
+                }
+                None => Vec::new(),
+            };
+            scores.push(StepScores {
+                test: info.test.clone(),
+                test_index: step.test_index,
+                step: info.step,
+                omega_ratio: info.omega_ratio,
+                regime: step.regime,
+                level: step.level,
+                features,
+            });
+        }
+        Ok((scores, rig_seconds))
+    }
+}

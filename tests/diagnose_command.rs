@@ -1,0 +1,269 @@
+//! `rigtwin diagnose` on sessions of the simulated rig whose hidden physics
+//! (`[truth.variants]`) the model does not know, each log stripped of every trace of it
+//! before the diagnosis sees it (tests/diagnose_support). Guards, on a short plan (1FU
+//! impact-free at two levels and the low level again):
+//! - the nominal rig: `no_significant_mismatch`, nothing accepted; the log with its hidden
+//!   physics and the stripped log give the same diagnosis bit for bit;
+//! - a wrong 1FU (frequency +1.0 %, damping x1.5): `linear_frequency` and `linear_damping`
+//!   of 1FU accepted, within 0.5 % and 20 %, the validation error at least 3x lower; the
+//!   written rig description replayed gives the "after" comparison;
+//! - a lower-tip accelerometer 5 % low (no redundant channel): `sensor_gain` of `lower_tip`
+//!   named first, within 20 % (here 1 %);
+//! - bad input: not a log, a log cut before its first record window: a clear message, no
+//!   panic.
+
+mod cli_support;
+mod diagnose_support;
+
+use std::path::{Path, PathBuf};
+
+use cli_support::{default_rig_with, rigtwin, text};
+use serde_json::Value;
+
+/// 1FU impact-free at 0.1e-5 l and 0.4e-5 l, then 0.1e-5 l again: the linear fit, its
+/// validation and the amplitude dependence, in about 60 s of rig time.
+const PLAN: &str = r#"
+name = "diagnose-short"
+[defaults]
+clearance = 2.33e-3
+settle_periods = 60
+record_periods = 50
+steps_per_period = 1000
+steps = 7
+direction = "up"
+omega_start = 0.985
+omega_end = 1.015
+
+[[test]]
+name = "1fu-low"
+level = 0.1e-5
+
+[[test]]
+name = "1fu-high"
+level = 0.4e-5
+
+[[test]]
+name = "1fu-low-again"
+level = 0.1e-5
+"#;
+
+/// Runs the plan on the default rig with hidden physics `truth`, strips the log; returns
+/// (log, stripped log).
+fn session(dir: &Path, name: &str, truth: &str) -> (PathBuf, PathBuf) {
+    let sub = dir.join(name);
+    std::fs::create_dir_all(&sub).unwrap();
+    let rig = default_rig_with(&sub, truth);
+    let plan = sub.join("plan.toml");
+    std::fs::write(&plan, PLAN).unwrap();
+    let log = sub.join("session.mcap");
+    let o = rigtwin(&[
+        "run",
+        rig.to_str().unwrap(),
+        "--plan",
+        plan.to_str().unwrap(),
+        "--quiet",
+        "--out",
+        log.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let stripped = sub.join("stripped.mcap");
+    diagnose_support::strip_hidden_physics(&log, &stripped).unwrap();
+    (log, stripped)
+}
+
+/// Diagnoses `log` into `dir/<tag>`; returns the JSON.
+fn diagnose(log: &Path, dir: &Path, tag: &str, write_config: bool) -> Value {
+    let out = dir.join(tag);
+    let json = dir.join(format!("{tag}.json"));
+    let fixed = dir.join(format!("{tag}-fixed.toml"));
+    let mut args = vec![
+        "diagnose",
+        log.to_str().unwrap(),
+        "--json",
+        json.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--jobs",
+        "2",
+    ];
+    if write_config {
+        args.extend(["--write-config", fixed.to_str().unwrap()]);
+    }
+    let o = rigtwin(&args);
+    assert!(o.status.success(), "{}", text(&o));
+    let t = text(&o);
+    assert!(t.contains("== locate") && t.contains("verdict:"), "{t}");
+    serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap()
+}
+
+fn accepted<'a>(d: &'a Value, effect: &str) -> Vec<&'a Value> {
+    d["effects"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|e| e["effect"] == effect && e["accepted"] == true)
+        .collect()
+}
+
+/// The diagnosis without what differs from run to run (wall time, paths).
+fn comparable(mut d: Value) -> Value {
+    d["wall_seconds"] = Value::Null;
+    d["model"] = Value::Null;
+    d["cost"]["model_wall_seconds"] = Value::Null;
+    d
+}
+
+#[test]
+fn the_nominal_rig_is_no_mismatch_and_the_hidden_physics_is_never_read() {
+    let dir = tempfile::tempdir().unwrap();
+    let (log, stripped) = session(
+        dir.path(),
+        "nominal",
+        "[daq]\nnoise_seed = 2\n[truth.variants]\n",
+    );
+    let d = diagnose(&log, dir.path(), "as-logged", false);
+    assert_eq!(d["verdict"], "no_significant_mismatch", "{d:#}");
+    assert!(
+        d["effects"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .all(|e| e["accepted"] == false),
+        "{d:#}"
+    );
+    assert!(d["scores_before"].as_array().unwrap().len() == 21);
+    let figures: Vec<_> = std::fs::read_dir(dir.path().join("as-logged"))
+        .unwrap()
+        .collect();
+    assert!(!figures.is_empty());
+    // The same log without any trace of the hidden physics: the same diagnosis.
+    let s = diagnose(&stripped, dir.path(), "stripped", false);
+    assert_eq!(comparable(d), comparable(s));
+}
+
+#[test]
+fn a_wrong_linear_1fu_is_found_fitted_validated_and_written_out() {
+    let dir = tempfile::tempdir().unwrap();
+    let (f_true, z_true) = (51.8, 0.0027);
+    let truth = format!(
+        "[truth.variants]\nmodes = [{{ mode = \"1FU\", frequency_hz = {f_true}, damping_ratio = {z_true} }}]\n"
+    );
+    let (_, stripped) = session(dir.path(), "linear", &truth);
+    let d = diagnose(&stripped, dir.path(), "linear", true);
+    assert_eq!(d["verdict"], "mismatch");
+    let f = accepted(&d, "linear_frequency");
+    assert_eq!(f.len(), 1, "{d:#}");
+    assert_eq!(f[0]["rank"], 1);
+    assert_eq!(f[0]["parameters"]["mode"], "1FU");
+    let fit = f[0]["parameters"]["frequency_hz"].as_f64().unwrap();
+    assert!((fit / f_true - 1.0).abs() < 0.005, "{fit} for {f_true}");
+    let (b, a) = (
+        f[0]["error_before"]["validation"].as_f64().unwrap(),
+        f[0]["error_after"]["validation"].as_f64().unwrap(),
+    );
+    assert!(b >= 3.0 * a, "validation {b} -> {a}");
+    let z = accepted(&d, "linear_damping");
+    assert_eq!(z.len(), 1, "{d:#}");
+    let zeta = z[0]["parameters"]["damping_ratio"].as_f64().unwrap();
+    assert!((zeta / z_true - 1.0).abs() < 0.2, "{zeta} for {z_true}");
+    assert!(
+        z[0]["error_after"]["validation"].as_f64().unwrap()
+            < z[0]["error_before"]["validation"].as_f64().unwrap()
+    );
+
+    // The written description, replayed, gives the "after" comparison of every step.
+    let fixed = dir.path().join("linear-fixed.toml");
+    let replayed = dir.path().join("replayed.json");
+    let o = rigtwin(&[
+        "replay",
+        stripped.to_str().unwrap(),
+        "--twin",
+        "--config",
+        fixed.to_str().unwrap(),
+        "--ensemble",
+        "0",
+        "--json",
+        replayed.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let r: Value = serde_json::from_str(&std::fs::read_to_string(&replayed).unwrap()).unwrap();
+    let replayed_steps: Vec<&Value> = r["tests"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .flat_map(|t| t["steps"].as_array().unwrap())
+        .collect();
+    let after = d["scores_after"].as_array().unwrap();
+    assert_eq!(after.len(), replayed_steps.len());
+    for (a, s) in after.iter().zip(replayed_steps) {
+        assert_eq!(a["features"], s["twin"]["features"]);
+    }
+}
+
+#[test]
+fn a_mis_calibrated_lower_tip_accelerometer_is_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let gain = 0.95;
+    let truth = format!(
+        "[truth.variants]\nsensor_gains = [{{ channel = \"lower_tip\", gain = {gain} }}]\n"
+    );
+    let (_, stripped) = session(dir.path(), "gain", &truth);
+    let d = diagnose(&stripped, dir.path(), "gain", false);
+    assert_eq!(d["verdict"], "mismatch");
+    let g = accepted(&d, "sensor_gain");
+    assert_eq!(g.len(), 1, "{d:#}");
+    assert_eq!(g[0]["rank"], 1);
+    assert_eq!(g[0]["parameters"]["channel"], "lower_tip");
+    let fit = g[0]["parameters"]["gain"].as_f64().unwrap();
+    assert!((fit / gain - 1.0).abs() < 0.01, "{fit} for {gain}");
+}
+
+#[test]
+fn what_cannot_be_diagnosed_is_a_clear_message() {
+    let dir = tempfile::tempdir().unwrap();
+    let json = dir.path().join("d.json");
+    let out = dir.path().join("fig");
+    let run = |log: &Path| {
+        rigtwin(&[
+            "diagnose",
+            log.to_str().unwrap(),
+            "--json",
+            json.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ])
+    };
+    // Not a log.
+    let junk = dir.path().join("junk.mcap");
+    std::fs::write(&junk, b"not an mcap file").unwrap();
+    let o = run(&junk);
+    assert!(!o.status.success());
+    let t = text(&o);
+    assert!(t.contains("junk.mcap") && !t.contains("panicked"), "{t}");
+
+    // A log cut before its first record window: nothing to diagnose.
+    let sub = dir.path().join("cut");
+    std::fs::create_dir_all(&sub).unwrap();
+    let rig = default_rig_with(&sub, "");
+    let plan = sub.join("plan.toml");
+    std::fs::write(&plan, PLAN.replace("steps = 7", "steps = 2")).unwrap();
+    let log = sub.join("session.mcap");
+    let o = rigtwin(&[
+        "run",
+        rig.to_str().unwrap(),
+        "--plan",
+        plan.to_str().unwrap(),
+        "--quiet",
+        "--out",
+        log.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let bytes = std::fs::read(&log).unwrap();
+    let cut = sub.join("cut.mcap");
+    std::fs::write(&cut, &bytes[..bytes.len() / 20]).unwrap();
+    let o = run(&cut);
+    let t = text(&o);
+    assert!(!o.status.success(), "{t}");
+    assert!(!t.contains("panicked"), "{t}");
+    assert!(t.contains("record window") || t.contains("cut.mcap"), "{t}");
+}

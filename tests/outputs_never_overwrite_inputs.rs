@@ -122,6 +122,32 @@ fn an_output_on_an_input_is_refused_by_path_and_by_link() {
         &content,
     );
     refused(
+        &[
+            "diagnose",
+            &d("s.mcap"),
+            "--json",
+            &d("s.mcap"),
+            "--out",
+            &d("fig"),
+        ],
+        &log,
+        &content,
+    );
+    refused(
+        &[
+            "diagnose",
+            &d("s.mcap"),
+            "--json",
+            &d("d.json"),
+            "--out",
+            &d("fig"),
+            "--write-config",
+            &d("s.mcap"),
+        ],
+        &log,
+        &content,
+    );
+    refused(
         &["simulate", "--plan", &plan, "--json", &plan],
         Path::new(&plan),
         &plan_text,

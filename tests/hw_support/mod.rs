@@ -24,6 +24,12 @@ pub struct FirmwareSim {
 impl FirmwareSim {
     /// Starts it (virtual pacing, one session, the plan's clearance) with `extra` arguments.
     pub fn start(extra: &[&str]) -> FirmwareSim {
+        FirmwareSim::start_at("2.78e-3", extra)
+    }
+
+    /// Starts it (virtual pacing, one session) at `clearance` (per beam length, as a plan's)
+    /// with `extra` arguments.
+    pub fn start_at(clearance: &str, extra: &[&str]) -> FirmwareSim {
         let mut child = Command::new(env!("CARGO_BIN_EXE_rigtwin"))
             .env("RIGTWIN_CACHE", super::cli_support::cache())
             .args([
@@ -33,7 +39,7 @@ impl FirmwareSim {
                 "--once",
                 "--quiet",
                 "--clearance",
-                "2.78e-3",
+                clearance,
             ])
             .args(extra)
             .stdout(Stdio::piped())

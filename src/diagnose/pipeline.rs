@@ -107,8 +107,8 @@ pub enum DiagnoseProgress {
 enum Steps {
     /// Impact-free steps, motion channels.
     ImpactFree,
-    /// Steps with contact, every channel.
-    Impacts,
+    /// Every step, every channel (the model's contact where the measurement had none counts).
+    All,
 }
 
 /// RMS score of the features of the steps of `tests` in `which`; None without any.
@@ -117,7 +117,7 @@ fn set_error(scores: &[StepScores], tests: &[usize], which: Steps) -> Option<f64
     for s in scores.iter().filter(|s| tests.contains(&s.test_index)) {
         let keep = match which {
             Steps::ImpactFree => s.regime != Regime::Impacts,
-            Steps::Impacts => s.regime == Regime::Impacts,
+            Steps::All => true,
         };
         if !keep {
             continue;
@@ -1036,25 +1036,84 @@ fn clearance_stage(
     }
     let idx: Vec<usize> = bracketed.iter().map(|t| t.test_index).collect();
     let (train, validation) = alternate(&idx);
-    // Offset: the train tests' estimates minus the model's current clearance of each test.
+    // Per train test: the clearance within its bracket whose model run matches the test best
+    // (every step and channel: where the first contact falls, how much contact follows), on
+    // a grid refined once around the best point; the offset to the model's clearance is the
+    // mean over the train tests.
+    let mut fitted = Vec::new();
+    for t in bracketed.iter().filter(|t| train.contains(&t.test_index)) {
+        let (Some(lo), Some(hi)) = (t.lower_bound_m, t.upper_bound_m) else {
+            continue;
+        };
+        let (lo, hi) = (lo.min(hi), lo.max(hi));
+        let mut tried: Vec<(f64, f64)> = Vec::new();
+        let mut grid: Vec<f64> = (0..9).map(|k| lo + (hi - lo) * k as f64 / 8.0).collect();
+        for round in 0..2 {
+            for &c in &grid {
+                if tried.iter().any(|p| p.0 == c) {
+                    continue;
+                }
+                let mut ext = work.accepted.clone();
+                let mut spec = ext.clearance.clone().unwrap_or(ClearanceSpec {
+                    offset: 0.0,
+                    tests: Vec::new(),
+                });
+                spec.tests.retain(|x| x.test != t.test);
+                spec.tests.push(crate::config::TestClearanceSpec {
+                    test: t.test.clone(),
+                    clearance: c,
+                });
+                ext.clearance = Some(spec);
+                let s = work.scores(&ext, &[t.test_index])?;
+                if let Some(e) = set_error(&s, &[t.test_index], Steps::All) {
+                    tried.push((c, e));
+                }
+            }
+            let Some(&(best, _)) = tried.iter().min_by(|a, b| a.1.total_cmp(&b.1)) else {
+                break;
+            };
+            if round == 0 {
+                let h = (hi - lo) / 8.0;
+                grid = vec![
+                    best - 0.5 * h,
+                    best - 0.25 * h,
+                    best + 0.25 * h,
+                    best + 0.5 * h,
+                ];
+            }
+        }
+        if let Some(&(best, e)) = tried.iter().min_by(|a, b| a.1.total_cmp(&b.1)) {
+            (work.progress)(DiagnoseProgress::Note(format!(
+                "clearance of {}: {:.4e} m by model runs (bracket {:.4e}-{:.4e} m, error {e:.3}, {} runs)",
+                t.test,
+                best,
+                lo,
+                hi,
+                tried.len()
+            )));
+            fitted.push((t, best));
+        }
+    }
+    if fitted.is_empty() {
+        return Ok(Some(ce));
+    }
     let current = |t: &super::clearance::TestClearance| {
         work.accepted.test_clearance(&t.test, t.plan_clearance_m)
     };
-    let offs: Vec<(f64, f64)> = bracketed
-        .iter()
-        .filter(|t| train.contains(&t.test_index))
-        .map(|t| {
-            let u = t.uncertainty_m.unwrap_or(0.0).max(1e-9);
-            (t.clearance_m.unwrap_or(0.0) - current(t), 1.0 / (u * u))
-        })
-        .collect();
-    let w: f64 = offs.iter().map(|o| o.1).sum();
-    let offset = offs.iter().map(|o| o.0 * o.1).sum::<f64>() / w;
-    let spread = (1.0 / w).sqrt();
+    let offs: Vec<f64> = fitted.iter().map(|(t, c)| c - current(t)).collect();
+    let offset = offs.iter().sum::<f64>() / offs.len() as f64;
     let plan = bracketed[0].plan_clearance_m;
-    if offset.abs() <= 2.0 * spread || offset.abs() < 0.01 * plan {
+    if offset.abs() < 0.02 * plan {
+        (work.progress)(DiagnoseProgress::Note(format!(
+            "clearance: the fitted offset {offset:+.2e} m is within 2 % of the plan's {plan:.3e} m"
+        )));
         return Ok(Some(ce));
     }
+    let spread = if offs.len() > 1 {
+        (offs.iter().map(|o| (o - offset).powi(2)).sum::<f64>() / (offs.len() - 1) as f64).sqrt()
+    } else {
+        f64::NAN
+    };
     let mut ext = work.accepted.clone();
     let base_offset = ext.clearance.as_ref().map_or(0.0, |c| c.offset);
     ext.clearance = Some(ClearanceSpec {
@@ -1064,13 +1123,13 @@ fn clearance_stage(
     let cand = Candidate {
         effect: "clearance",
         ext,
-        parameters: json!({"offset": base_offset + offset, "tests": bracketed.iter().map(|t| json!({"test": t.test, "clearance": t.clearance_m})).collect::<Vec<_>>()}),
+        parameters: json!({"offset": base_offset + offset, "tests": fitted.iter().map(|(t, c)| json!({"test": t.test, "clearance": c})).collect::<Vec<_>>()}),
         n_params: 1,
-        evidence: json!({"offset_m": offset, "offset_standard_error_m": spread, "plan_clearance_m": plan}),
+        evidence: json!({"offset_m": offset, "offset_spread_m": spread.is_finite().then_some(spread), "plan_clearance_m": plan, "brackets_m": bracketed.iter().map(|t| json!({"test": t.test, "lower": t.lower_bound_m, "upper": t.upper_bound_m})).collect::<Vec<_>>()}),
         alternatives: vec!["tilt: a tilted face closes first at one edge, like a smaller clearance (not separated yet)".into()],
         train,
         validation,
-        steps: Steps::Impacts,
+        steps: Steps::All,
     };
     work.judge(cand)?;
     Ok(Some(ce))

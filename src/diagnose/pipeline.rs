@@ -111,8 +111,14 @@ enum Steps {
     All,
 }
 
-/// RMS score of the features of the steps of `tests` in `which`; None without any.
-fn set_error(scores: &[StepScores], tests: &[usize], which: Steps) -> Option<f64> {
+/// RMS score of the features of the steps of `tests` in `which` (of channel `channel` only,
+/// when given); None without any.
+fn set_error_of(
+    scores: &[StepScores],
+    tests: &[usize],
+    which: Steps,
+    channel: Option<&str>,
+) -> Option<f64> {
     let (mut sum, mut n) = (0.0, 0usize);
     for s in scores.iter().filter(|s| tests.contains(&s.test_index)) {
         let keep = match which {
@@ -126,11 +132,19 @@ fn set_error(scores: &[StepScores], tests: &[usize], which: Steps) -> Option<f64
             if which == Steps::ImpactFree && f.channel == "contact" {
                 continue;
             }
+            if channel.is_some_and(|c| c != f.channel) {
+                continue;
+            }
             sum += f.score * f.score;
             n += 1;
         }
     }
     (n > 0).then(|| (sum / n as f64).sqrt())
+}
+
+/// [`set_error_of`] over every channel.
+fn set_error(scores: &[StepScores], tests: &[usize], which: Steps) -> Option<f64> {
+    set_error_of(scores, tests, which, None)
 }
 
 /// A candidate effect.
@@ -145,6 +159,8 @@ struct Candidate {
     train: Vec<usize>,
     validation: Vec<usize>,
     steps: Steps,
+    /// The one channel the effect acts on (a sensor gain), whose features judge it.
+    channel: Option<String>,
 }
 
 /// The diagnosis state: the runner, the model so far, the results.
@@ -190,8 +206,8 @@ impl Work<'_> {
         let s = self.scores(ext, &all)?;
         Ok(
             match (
-                set_error(&s, &c.train, c.steps),
-                set_error(&s, &c.validation, c.steps),
+                set_error_of(&s, &c.train, c.steps, c.channel.as_deref()),
+                set_error_of(&s, &c.validation, c.steps, c.channel.as_deref()),
             ) {
                 (Some(train), Some(validation)) => Some(SetError { train, validation }),
                 _ => None,
@@ -463,6 +479,30 @@ pub fn diagnose(
         clamp_stage(&mut work, input.rom, lin)?;
     }
 
+    // The beam channels' gains once more, against the model with the linear and clamp
+    // effects: a gain hides behind a beam's wrong physics in the first pass.
+    let since = work
+        .effects
+        .iter()
+        .any(|e| e.accepted && e.effect != "sensor_gain");
+    let free = tests_with(&steps, true);
+    let all: Vec<usize> = (0..steps.tests.len()).collect();
+    let (train, validation) = alternate(&all);
+    let free_train: Vec<usize> = free.iter().copied().filter(|t| train.contains(t)).collect();
+    let free_validation: Vec<usize> = free
+        .iter()
+        .copied()
+        .filter(|t| validation.contains(t))
+        .collect();
+    if since && !free_train.is_empty() && !free_validation.is_empty() {
+        (work.progress)(DiagnoseProgress::Stage(
+            "identify: the beam channels' sensitivities against the corrected model".into(),
+        ));
+        let accepted = work.accepted.clone();
+        let scores = work.scores(&accepted, &free)?;
+        unpartnered_gains(&mut work, &scores, &free_train, &free_validation)?;
+    }
+
     // 4. Clearance per test.
     (work.progress)(DiagnoseProgress::Stage(
         "identify: clearance per test before the first impact".into(),
@@ -663,6 +703,8 @@ fn sensor_stage(
                 train: train.clone(),
                 validation: validation.clone(),
                 steps: Steps::ImpactFree,
+                // A platform accelerometer moves the base the model consumes: every channel.
+                channel: (!c.channel.starts_with("platform")).then(|| c.channel.clone()),
             };
             work.judge(cand)?;
         }
@@ -700,6 +742,7 @@ fn sensor_stage(
                 train: free_train.clone(),
                 validation: free_validation.clone(),
                 steps: Steps::ImpactFree,
+                channel: Some(channel.to_string()),
             };
             work.judge(cand)?;
         }
@@ -713,18 +756,41 @@ fn sensor_stage(
         );
         return Ok(Some(sens));
     }
+    unpartnered_gains(work, before, &free_train, &free_validation)?;
+    Ok(Some(sens))
+}
+
+/// The sensor gains of the beam channels without a redundant partner, against the model
+/// whose comparison is `scores`: a measured/model ratio off 1, flat in frequency, and unlike
+/// the beam's other channel (a beam's physics moves both). Channels with a gain accepted
+/// already are skipped. Returns how many were accepted.
+fn unpartnered_gains(
+    work: &mut Work<'_>,
+    scores: &[StepScores],
+    free_train: &[usize],
+    free_validation: &[usize],
+) -> Result<usize, DiagnoseError> {
     let partner = |c: &str| match c {
         "lower_tip" => Some("lower_mid"),
         "lower_mid" => Some("lower_tip"),
         "upper_mid" => Some("upper_tip"),
         _ => None,
     };
+    let mut n = 0;
     for channel in ["lower_tip", "lower_mid", "upper_mid"] {
-        let Some((ratio, se, sd)) = channel_ratio(before, channel, &free_train) else {
+        if work
+            .accepted
+            .sensor_gains
+            .iter()
+            .any(|g| g.channel == channel)
+        {
+            continue;
+        }
+        let Some((ratio, se, sd)) = channel_ratio(scores, channel, free_train) else {
             continue;
         };
         let Some(p) = partner(channel) else { continue };
-        let Some((pr, pse, _)) = channel_ratio(before, p, &free_train) else {
+        let Some((pr, pse, _)) = channel_ratio(scores, p, free_train) else {
             continue;
         };
         let off = (ratio - 1.0).abs() > 0.01 && (ratio - 1.0).abs() > 4.0 * se;
@@ -739,14 +805,17 @@ fn sensor_stage(
                 n_params: 1,
                 evidence: json!({"measured_over_model": ratio, "standard_error": se, "spread_over_steps": sd, "partner": p, "partner_measured_over_model": pr}),
                 alternatives: Vec::new(),
-                train: free_train.clone(),
-                validation: free_validation.clone(),
+                train: free_train.to_vec(),
+                validation: free_validation.to_vec(),
                 steps: Steps::ImpactFree,
+                channel: Some(channel.to_string()),
             };
-            work.judge(cand)?;
+            if work.judge(cand)? {
+                n += 1;
+            }
         }
     }
-    Ok(Some(sens))
+    Ok(n)
 }
 
 /// The model's natural frequency (Hz) and damping ratio of mode `label` under `ext`.
@@ -870,6 +939,7 @@ fn linear_stage(work: &mut Work<'_>, rom: &Rom, lin: &LinearEvidence) -> Result<
                 train: train.clone(),
                 validation: validation.clone(),
                 steps: Steps::ImpactFree,
+                channel: None,
             };
             work.judge(cand)?;
         }
@@ -884,6 +954,7 @@ fn linear_stage(work: &mut Work<'_>, rom: &Rom, lin: &LinearEvidence) -> Result<
                 train,
                 validation,
                 steps: Steps::ImpactFree,
+                channel: None,
             };
             work.judge(cand)?;
         }
@@ -962,10 +1033,17 @@ fn clamp_stage(work: &mut Work<'_>, rom: &Rom, lin: &LinearEvidence) -> Result<(
         work.undecided("clamp_friction", "the clamp's friction shows, but no test outside the fitted ones has impact-free steps to validate it on");
         return Ok(());
     }
-    // The stiffness share: the fully slipped joint's softening; slopes fix only sf / A_h.
-    let mut best: Option<(f64, f64)> = None;
-    for sf in [0.02, 0.05, 0.1, 0.2, 0.4] {
-        let a_h = sf / rho;
+    // Model runs on the fitted tests: the stiffness share per slip amplitude around the
+    // slopes' value, and the share itself (it shows only where the tips pass full slip,
+    // twice the half-slip amplitude; below, the joint's describing function depends on the
+    // ratio alone). A grid, then the ratio refined around the best point.
+    let mut tried: Vec<(f64, f64, f64)> = Vec::new();
+    let run = |work: &mut Work<'_>,
+               tried: &mut Vec<(f64, f64, f64)>,
+               sf: f64,
+               r: f64|
+     -> Result<(), DiagnoseError> {
+        let a_h = sf / r;
         let mut ext = work.accepted.clone();
         ext.clamp_friction = Some(ClampFrictionSpec {
             stiffness_fraction: sf,
@@ -973,16 +1051,34 @@ fn clamp_stage(work: &mut Work<'_>, rom: &Rom, lin: &LinearEvidence) -> Result<(
             sliders: 64,
             beams: beams.clone(),
         });
-        (work.progress)(DiagnoseProgress::Evaluation(format!("clamp_friction: stiffness_fraction {sf}, half_slip_tip_amplitude {a_h:.3e} m on the fitted tests")));
         let s = work.scores(&ext, &train)?;
         if let Some(e) = set_error(&s, &train, Steps::ImpactFree) {
-            if best.is_none_or(|b| e < b.1) {
-                best = Some((sf, e));
-            }
+            tried.push((sf, r, e));
+        }
+        Ok(())
+    };
+    (work.progress)(DiagnoseProgress::Evaluation(format!(
+        "clamp_friction: 15 model runs on the fitted tests (stiffness share 0.1-0.4, share per slip amplitude 0.7-1.3 x {rho:.0} /m)"
+    )));
+    for sf in [0.1, 0.2, 0.4] {
+        for m in [0.7, 0.85, 1.0, 1.15, 1.3] {
+            run(work, &mut tried, sf, rho * m)?;
         }
     }
-    let Some((sf, _)) = best else { return Ok(()) };
-    let a_h = sf / rho;
+    let Some(&(sf, r0, _)) = tried.iter().min_by(|a, b| a.2.total_cmp(&b.2)) else {
+        return Ok(());
+    };
+    for m in [0.95, 0.975, 1.025, 1.05] {
+        run(work, &mut tried, sf, r0 * m)?;
+    }
+    let Some(&(sf, r, e)) = tried.iter().min_by(|a, b| a.2.total_cmp(&b.2)) else {
+        return Ok(());
+    };
+    (work.progress)(DiagnoseProgress::Note(format!(
+        "clamp_friction: best of {} runs: stiffness share {sf}, {r:.0} /m (slopes: {rho:.0} /m), error {e:.3}",
+        tried.len()
+    )));
+    let a_h = sf / r;
     let mut ext = work.accepted.clone();
     let spec = ClampFrictionSpec {
         stiffness_fraction: sf,
@@ -996,11 +1092,12 @@ fn clamp_stage(work: &mut Work<'_>, rom: &Rom, lin: &LinearEvidence) -> Result<(
         ext,
         parameters: json!({"stiffness_fraction": sf, "half_slip_tip_amplitude": a_h, "beams": beams}),
         n_params: 2,
-        evidence: json!({"modes": with.iter().map(|d| &d.mode).collect::<Vec<_>>(), "stiffness_fraction_over_half_slip_amplitude_per_m": rho, "from_slopes": ratios}),
+        evidence: json!({"modes": with.iter().map(|d| &d.mode).collect::<Vec<_>>(), "stiffness_fraction_over_half_slip_amplitude_per_m": r, "from_slopes_per_m": rho, "slopes_damping_and_frequency_per_m": ratios, "runs": tried.len()}),
         alternatives: Vec::new(),
         train,
         validation,
         steps: Steps::ImpactFree,
+        channel: None,
     };
     work.judge(cand)?;
     Ok(())
@@ -1130,6 +1227,7 @@ fn clearance_stage(
         train,
         validation,
         steps: Steps::All,
+        channel: None,
     };
     work.judge(cand)?;
     Ok(Some(ce))

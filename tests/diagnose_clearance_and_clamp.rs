@@ -1,0 +1,176 @@
+//! `rigtwin diagnose` on effects that need the impact band and two levels, on stripped logs of
+//! the simulated rig (tests/diagnose_support). Plan: 1FU impact-free at 0.1e-5 l and
+//! 0.4e-5 l, then 2e-5 l down and up through the impact band. Guards:
+//! - a clearance larger than the plan's (hidden offset +1e-4 m, +14 %): `clearance` accepted,
+//!   the offset within 20 %, the validation error (the other impact test) at least 3x lower;
+//! - two effects at once, a lower-tip gain (0.96) and friction in the upper clamp (Iwan,
+//!   stiffness share 0.2, half-slip tip amplitude 3e-4 m): both named and accepted; the gain
+//!   within 1 %, the clamp's stiffness share per slip amplitude (what amplitudes below full
+//!   slip identify) within 20 %, each lowering the validation error at least 3x.
+
+mod cli_support;
+mod diagnose_support;
+
+use std::path::{Path, PathBuf};
+
+use cli_support::{default_rig_with, rigtwin, text};
+use serde_json::Value;
+
+/// About 90 s of rig time.
+const PLAN: &str = r#"
+name = "diagnose-contact"
+[defaults]
+clearance = 2.33e-3
+settle_periods = 60
+record_periods = 50
+steps_per_period = 1000
+steps = 7
+direction = "up"
+omega_start = 0.985
+omega_end = 1.015
+
+[[test]]
+name = "1fu-low"
+level = 0.1e-5
+
+[[test]]
+name = "1fu-high"
+level = 0.4e-5
+
+[[test]]
+name = "band-down"
+level = 2e-5
+direction = "down"
+omega_start = 1.02
+omega_end = 0.97
+steps = 6
+
+[[test]]
+name = "band-up"
+level = 2e-5
+omega_start = 0.97
+omega_end = 1.02
+steps = 6
+"#;
+
+/// Runs the plan on the default rig with hidden physics `truth`; returns the stripped log.
+fn session(dir: &Path, name: &str, truth: &str) -> PathBuf {
+    let sub = dir.join(name);
+    std::fs::create_dir_all(&sub).unwrap();
+    let rig = default_rig_with(&sub, truth);
+    let plan = sub.join("plan.toml");
+    std::fs::write(&plan, PLAN).unwrap();
+    let log = sub.join("session.mcap");
+    let o = rigtwin(&[
+        "run",
+        rig.to_str().unwrap(),
+        "--plan",
+        plan.to_str().unwrap(),
+        "--quiet",
+        "--out",
+        log.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let stripped = sub.join("stripped.mcap");
+    diagnose_support::strip_hidden_physics(&log, &stripped).unwrap();
+    stripped
+}
+
+fn diagnose(log: &Path, dir: &Path, tag: &str) -> Value {
+    let json = dir.join(format!("{tag}.json"));
+    let o = rigtwin(&[
+        "diagnose",
+        log.to_str().unwrap(),
+        "--json",
+        json.to_str().unwrap(),
+        "--out",
+        dir.join(tag).to_str().unwrap(),
+        "--jobs",
+        "2",
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap()
+}
+
+fn accepted<'a>(d: &'a Value, effect: &str) -> Vec<&'a Value> {
+    d["effects"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|e| e["effect"] == effect && e["accepted"] == true)
+        .collect()
+}
+
+fn clearance_is_found(offset: f64) {
+    let dir = tempfile::tempdir().unwrap();
+    let truth = format!("[truth.variants.clearance]\noffset = {offset}\n");
+    let log = session(dir.path(), "clearance", &truth);
+    let d = diagnose(&log, dir.path(), "clearance");
+    assert_eq!(d["verdict"], "mismatch", "{d:#}");
+    let c = accepted(&d, "clearance");
+    assert_eq!(c.len(), 1, "{d:#}");
+    assert_eq!(c[0]["rank"], 1, "{d:#}");
+    let fit = c[0]["parameters"]["offset"].as_f64().unwrap();
+    assert!(
+        (fit / offset - 1.0).abs() < 0.2,
+        "offset {fit} for {offset}"
+    );
+    let (b, a) = (
+        c[0]["error_before"]["validation"].as_f64().unwrap(),
+        c[0]["error_after"]["validation"].as_f64().unwrap(),
+    );
+    assert!(b >= 3.0 * a, "validation {b} -> {a}");
+    // Nothing else is taken for it.
+    assert_eq!(
+        d["effects"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|e| e["accepted"] == true)
+            .count(),
+        1,
+        "{d:#}"
+    );
+}
+
+#[test]
+fn a_larger_clearance_is_found_by_model_runs_and_validated() {
+    clearance_is_found(1.0e-4);
+}
+
+#[test]
+fn a_sensor_gain_and_clamp_friction_at_once_are_both_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let (gain, share, slip) = (0.96, 0.2, 3.0e-4);
+    let truth = format!(
+        "[truth.variants]\nsensor_gains = [{{ channel = \"lower_tip\", gain = {gain} }}]\n\
+         [truth.variants.clamp_friction]\nstiffness_fraction = {share}\n\
+         half_slip_tip_amplitude = {slip}\nbeams = [\"upper\"]\n"
+    );
+    let log = session(dir.path(), "both", &truth);
+    let d = diagnose(&log, dir.path(), "both");
+    assert_eq!(d["verdict"], "mismatch");
+    let g = accepted(&d, "sensor_gain");
+    assert_eq!(g.len(), 1, "{d:#}");
+    assert_eq!(g[0]["parameters"]["channel"], "lower_tip");
+    let fit = g[0]["parameters"]["gain"].as_f64().unwrap();
+    assert!((fit / gain - 1.0).abs() < 0.01, "gain {fit} for {gain}");
+    let c = accepted(&d, "clamp_friction");
+    assert_eq!(c.len(), 1, "{d:#}");
+    let p = &c[0]["parameters"];
+    assert_eq!(p["beams"], serde_json::json!(["upper"]));
+    let ratio =
+        p["stiffness_fraction"].as_f64().unwrap() / p["half_slip_tip_amplitude"].as_f64().unwrap();
+    let hidden = share / slip;
+    assert!(
+        (ratio / hidden - 1.0).abs() < 0.2,
+        "stiffness share per slip amplitude {ratio} /m for {hidden} /m"
+    );
+    for e in [g[0], c[0]] {
+        let (b, a) = (
+            e["error_before"]["validation"].as_f64().unwrap(),
+            e["error_after"]["validation"].as_f64().unwrap(),
+        );
+        assert!(b >= 3.0 * a, "{}: validation {b} -> {a}", e["effect"]);
+    }
+}

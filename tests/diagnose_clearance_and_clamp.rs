@@ -1,8 +1,12 @@
 //! `rigtwin diagnose` on effects that need the impact band and two levels, on stripped logs of
-//! the simulated rig (tests/diagnose_support). Plan: 1FU impact-free at 0.1e-5 l and
-//! 0.4e-5 l, then 2e-5 l down and up through the impact band. Guards:
-//! - a clearance larger than the plan's (hidden offset +1e-4 m, +14 %): `clearance` accepted,
-//!   the offset within 20 %, the validation error (the other impact test) at least 3x lower;
+//! the simulated rig (tests/diagnose_support). Guards:
+//! - a clearance larger than the plan's (hidden offset +1e-4 m, +14 %), on the plan of 1FU and
+//!   1FL at two levels, 1FU low again and 2e-5 l down and up through the band
+//!   ([`LONG_PLAN`]): `clearance` accepted, the offset within 20 %, the validation error (the
+//!   other impact test) at least 3x lower. On the shorter [`PLAN`] the offset is found as
+//!   well, but the up-sweep that validates it lands on another attractor at its last steps
+//!   in the model and the rig alike and does not improve beyond the null spread
+//!   (BENCHMARKS.md, "Diagnosis"): validation of a clearance on one impact test is fragile;
 //! - two effects at once, a lower-tip gain (0.96) and friction in the upper clamp (Iwan,
 //!   stiffness share 0.2, half-slip tip amplitude 3e-4 m): both named and accepted; the gain
 //!   within 1 %, the clamp's stiffness share per slip amplitude (what amplitudes below full
@@ -15,6 +19,64 @@ use std::path::{Path, PathBuf};
 
 use cli_support::{default_rig_with, rigtwin, text};
 use serde_json::Value;
+
+/// 1FU 0.98-1.02 and 1FL 0.90-0.94 omega_2 at 0.1e-5 l, then at 0.4e-5 / 0.3e-5 l, 1FU low
+/// again (9 steps), then 2e-5 l down 1.02 -> 0.97 and up (6 steps): about 210 s of rig time.
+const LONG_PLAN: &str = r#"
+name = "diagnose-long"
+[defaults]
+clearance = 2.33e-3
+settle_periods = 60
+record_periods = 50
+steps_per_period = 1000
+steps = 9
+direction = "up"
+
+[[test]]
+name = "1fu-low"
+level = 0.1e-5
+omega_start = 0.98
+omega_end = 1.02
+
+[[test]]
+name = "1fl-low"
+level = 0.1e-5
+omega_start = 0.90
+omega_end = 0.94
+
+[[test]]
+name = "1fu-high"
+level = 0.4e-5
+omega_start = 0.98
+omega_end = 1.02
+
+[[test]]
+name = "1fl-high"
+level = 0.3e-5
+omega_start = 0.90
+omega_end = 0.94
+
+[[test]]
+name = "1fu-low-again"
+level = 0.1e-5
+omega_start = 0.98
+omega_end = 1.02
+
+[[test]]
+name = "band-down"
+level = 2e-5
+direction = "down"
+omega_start = 1.02
+omega_end = 0.97
+steps = 6
+
+[[test]]
+name = "band-up"
+level = 2e-5
+omega_start = 0.97
+omega_end = 1.02
+steps = 6
+"#;
 
 /// About 90 s of rig time.
 const PLAN: &str = r#"
@@ -53,13 +115,13 @@ omega_end = 1.02
 steps = 6
 "#;
 
-/// Runs the plan on the default rig with hidden physics `truth`; returns the stripped log.
-fn session(dir: &Path, name: &str, truth: &str) -> PathBuf {
+/// Runs `plan` on the default rig with hidden physics `truth`; returns the stripped log.
+fn session(dir: &Path, name: &str, truth: &str, plan_text: &str) -> PathBuf {
     let sub = dir.join(name);
     std::fs::create_dir_all(&sub).unwrap();
     let rig = default_rig_with(&sub, truth);
     let plan = sub.join("plan.toml");
-    std::fs::write(&plan, PLAN).unwrap();
+    std::fs::write(&plan, plan_text).unwrap();
     let log = sub.join("session.mcap");
     let o = rigtwin(&[
         "run",
@@ -104,7 +166,7 @@ fn accepted<'a>(d: &'a Value, effect: &str) -> Vec<&'a Value> {
 fn clearance_is_found(offset: f64) {
     let dir = tempfile::tempdir().unwrap();
     let truth = format!("[truth.variants.clearance]\noffset = {offset}\n");
-    let log = session(dir.path(), "clearance", &truth);
+    let log = session(dir.path(), "clearance", &truth, LONG_PLAN);
     let d = diagnose(&log, dir.path(), "clearance");
     assert_eq!(d["verdict"], "mismatch", "{d:#}");
     let c = accepted(&d, "clearance");
@@ -147,7 +209,7 @@ fn a_sensor_gain_and_clamp_friction_at_once_are_both_named() {
          [truth.variants.clamp_friction]\nstiffness_fraction = {share}\n\
          half_slip_tip_amplitude = {slip}\nbeams = [\"upper\"]\n"
     );
-    let log = session(dir.path(), "both", &truth);
+    let log = session(dir.path(), "both", &truth, PLAN);
     let d = diagnose(&log, dir.path(), "both");
     assert_eq!(d["verdict"], "mismatch");
     let g = accepted(&d, "sensor_gain");

@@ -1232,3 +1232,93 @@ fn clearance_stage(
     work.judge(cand)?;
     Ok(Some(ce))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::physics::iwan::Iwan;
+    use crate::twin::FeatureComparison;
+
+    /// The slope relations the clamp stage inverts, checked against the Iwan element itself:
+    /// cycled at amplitude `a = x delta_max` (x <= 1), its lost in-phase stiffness is
+    /// `k_J x I` and its energy per cycle `(2/3) k_J a^3 / delta_max`.
+    #[test]
+    fn the_iwan_slopes_match_the_element() {
+        let (k_j, delta_max) = (3.0, 2.0e-3);
+        let i_soft = iwan_softening_integral();
+        for x in [0.2, 0.5, 0.9] {
+            let a = x * delta_max;
+            let mut iwan = Iwan::uniform(k_j, delta_max, 4000);
+            let n = 4000;
+            let (mut lost_in_phase, mut e0, mut e1) = (0.0, 0.0, 0.0);
+            for cycle in 0..3 {
+                if cycle == 2 {
+                    e0 = iwan.dissipated();
+                }
+                for k in 0..n {
+                    let th = 2.0 * PI * (k as f64 + 1.0) / n as f64;
+                    let lost = iwan.update(a * th.sin());
+                    if cycle == 2 {
+                        lost_in_phase += lost * th.sin();
+                    }
+                }
+                if cycle == 2 {
+                    e1 = iwan.dissipated();
+                }
+            }
+            // First-harmonic in-phase part of the lost force over a: the lost stiffness.
+            let lost_k = 2.0 * lost_in_phase / n as f64 / a;
+            assert!(
+                (lost_k / (k_j * x * i_soft) - 1.0).abs() < 0.01,
+                "x {x}: {lost_k}"
+            );
+            let e = e1 - e0;
+            let e_theory = 2.0 / 3.0 * k_j * a.powi(3) / delta_max;
+            assert!(
+                (e / e_theory - 1.0).abs() < 0.01,
+                "x {x}: {e} vs {e_theory}"
+            );
+        }
+    }
+
+    fn step(test_index: usize, ratio: f64, regime: Regime) -> StepScores {
+        StepScores {
+            test: format!("t{test_index}"),
+            test_index,
+            step: 0,
+            omega_ratio: 1.0,
+            regime,
+            level: 1e-6,
+            features: vec![FeatureComparison {
+                channel: "lower_tip".into(),
+                feature: "rms".into(),
+                measured: ratio,
+                measured_spread: None,
+                model: 1.0,
+                model_spread: None,
+                score: 0.0,
+            }],
+        }
+    }
+
+    #[test]
+    fn the_measured_over_model_ratio_is_robust_to_a_few_steps() {
+        let mut s: Vec<StepScores> = (0..9)
+            .map(|k| step(0, 0.95 + 0.001 * (k % 3) as f64, Regime::ImpactFreeLow))
+            .collect();
+        // Two steps near a resonance the model places off, and an impact step.
+        s.push(step(0, 0.7, Regime::ImpactFreeLow));
+        s.push(step(0, 1.3, Regime::ImpactFreeLow));
+        s.push(step(0, 3.0, Regime::Impacts));
+        let (m, se, sd) = channel_ratio(&s, "lower_tip", &[0]).unwrap();
+        assert!((m - 0.951).abs() < 1e-9, "{m}");
+        assert!(sd < 0.01 && se < sd, "{sd} {se}");
+        assert!(channel_ratio(&s, "lower_tip", &[1]).is_none());
+    }
+
+    #[test]
+    fn tests_split_alternately() {
+        assert_eq!(alternate(&[3, 5, 6, 9]), (vec![3, 6], vec![5, 9]));
+        assert_eq!(alternate(&[2]), (vec![2], vec![]));
+    }
+}

@@ -493,7 +493,7 @@ pub fn diagnose(
         (work.progress)(DiagnoseProgress::Stage(
             "identify: amplitude dependence without contact (the clamp's friction)".into(),
         ));
-        clamp_stage(&mut work, input.rom, lin)?;
+        clamp_stage(&mut work, lin)?;
     }
 
     // The beam channels' gains once more, against the model with the linear and clamp
@@ -996,8 +996,7 @@ fn iwan_softening_integral() -> f64 {
 }
 
 /// Stage 3: the clamp's friction.
-fn clamp_stage(work: &mut Work<'_>, rom: &Rom, lin: &LinearEvidence) -> Result<(), DiagnoseError> {
-    let _ = rom;
+fn clamp_stage(work: &mut Work<'_>, lin: &LinearEvidence) -> Result<(), DiagnoseError> {
     for u in &lin.amplitude_dependence_undecided {
         work.undecided("clamp_friction", format!("{}: {}", u.mode, u.reason));
     }

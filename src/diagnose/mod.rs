@@ -15,8 +15,8 @@
 //! Every estimator works on [`evidence::SessionEvidence`], the fundamental complex amplitudes
 //! and contact state of every record window, built once per recording (optionally with
 //! sensor-gain corrections applied). An estimator never reads the simulated rig's hidden
-//! physics (`[truth]`, `[truth.variants]`, the log's `truth_variants`): it sees the DAQ
-//! counts, the layout and the session's events only. What a session cannot tell is a typed
+//! physics (neither the rig description's tables of it nor the log's metadata of it): it
+//! sees the DAQ counts, the layout and the session's events only. What a session cannot tell is a typed
 //! error ([`EvidenceError`]) or an explicit "undecided" in the result, never a guess.
 
 pub mod clearance;

@@ -101,7 +101,7 @@ pub struct ChannelSensitivity {
     pub channel: String,
     /// Nominal, off or undecided.
     pub status: SensitivityStatus,
-    /// True over nominal sensitivity (the `[model]` / `[truth.variants]` `gain`), -, when the
+    /// True over nominal sensitivity (the `[model]` `sensor_gains` `gain`), -, when the
     /// channel is decided: its ratio to the channels it agrees with. None when undecided.
     pub gain: Option<f64>,
     /// Spread of the gain over the record windows, -.

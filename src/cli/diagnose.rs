@@ -44,15 +44,6 @@ pub struct DiagnoseArgs {
     pub quiet: bool,
 }
 
-/// The rig description `text` without its `[truth]` tables (the simulated rig's hidden
-/// physics), as TOML.
-pub(crate) fn without_truth(text: &str, source: &str) -> anyhow::Result<String> {
-    let mut table: toml::Table =
-        toml::from_str(text).with_context(|| format!("{source}: not a TOML rig description"))?;
-    table.remove("truth");
-    toml::to_string(&table).with_context(|| format!("{source}: cannot write it back as TOML"))
-}
-
 pub(crate) fn run(a: DiagnoseArgs) -> anyhow::Result<()> {
     Files::new()
         .input("FILE", &a.file, "the session log")
@@ -92,7 +83,7 @@ pub(crate) fn run(a: DiagnoseArgs) -> anyhow::Result<()> {
             "rig.toml (attached to the log)".to_string(),
         ),
     };
-    let text = without_truth(&text, &source)?;
+    let text = crate::config::without_truth(&text, &source)?;
     let cfg = RigConfig::from_str(&text, &source)?;
     let (rom, rom_path, _) = models::cached_rom(&cfg, a.rebuild, a.quiet)?;
     super::check_extensions(&rom, &cfg.model, &source)?;

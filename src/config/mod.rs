@@ -120,7 +120,30 @@ pub fn with_model(
     source_name: &str,
     model: &PhysicsSpec,
 ) -> Result<String, ConfigError> {
-    let mut table: toml::Table = toml::from_str(text).map_err(|e| {
+    let mut table = parse_table(text, source_name)?;
+    table.remove("model");
+    if model.any() {
+        let value = toml::Value::try_from(model).map_err(|e| ConfigError::Service {
+            file: source_name.to_string(),
+            message: format!("model: cannot write the extensions as TOML: {e}"),
+        })?;
+        table.insert("model".to_string(), value);
+    }
+    write_table(&table, source_name)
+}
+
+/// The rig description `text` without its `[truth]` tables (the simulated rig's truth model
+/// and hidden physics), for a program that must not see them (`diagnose`). The other tables
+/// are kept as parsed (comments and key order are not).
+pub fn without_truth(text: &str, source_name: &str) -> Result<String, ConfigError> {
+    let mut table = parse_table(text, source_name)?;
+    table.remove("truth");
+    write_table(&table, source_name)
+}
+
+/// `text` parsed as a TOML table; a syntax error names the file, line and column.
+fn parse_table(text: &str, source_name: &str) -> Result<toml::Table, ConfigError> {
+    toml::from_str(text).map_err(|e| {
         let (line, column) = e
             .span()
             .map_or((0, 0), |s| error::line_column(text, s.start));
@@ -130,16 +153,11 @@ pub fn with_model(
             column,
             message: e.message().trim().to_string(),
         }
-    })?;
-    table.remove("model");
-    if model.any() {
-        let value = toml::Value::try_from(model).map_err(|e| ConfigError::Service {
-            file: source_name.to_string(),
-            message: format!("model: cannot write the extensions as TOML: {e}"),
-        })?;
-        table.insert("model".to_string(), value);
-    }
-    toml::to_string(&table).map_err(|e| ConfigError::Service {
+    })
+}
+
+fn write_table(table: &toml::Table, source_name: &str) -> Result<String, ConfigError> {
+    toml::to_string(table).map_err(|e| ConfigError::Service {
         file: source_name.to_string(),
         message: format!("cannot write the rig description as TOML: {e}"),
     })

@@ -24,8 +24,8 @@
 //!    parameter; rejected candidates are reported with the reason.
 //!
 //! A diagnosis never reads the simulated rig's hidden physics: its inputs are the recording
-//! (DAQ counts, layout, events), its replayed summary and the model; the caller strips
-//! `[truth]` from the rig description.
+//! (DAQ counts, layout, events), its replayed summary and the model, from whose rig
+//! description the caller has removed the simulated rig's tables.
 
 use std::collections::HashMap;
 use std::f64::consts::PI;
@@ -96,7 +96,7 @@ pub struct DiagnoseInput<'a> {
     pub rec: &'a Recording,
     /// Its replayed summary (the measurement).
     pub summary: &'a SessionSummary,
-    /// The model's rig description (`[truth]` stripped by the caller).
+    /// The model's rig description, without the simulated rig's tables (the caller's work).
     pub cfg: &'a RigConfig,
     /// Its ROM.
     pub rom: &'a Rom,
@@ -313,6 +313,32 @@ fn alternate(tests: &[usize]) -> (Vec<usize>, Vec<usize>) {
     (train, validation)
 }
 
+/// The tests split for the sensor gains: all of them alternately, and the impact-free ones
+/// (with at least one impact-free step) as they fall in that split.
+struct GainSplit {
+    train: Vec<usize>,
+    validation: Vec<usize>,
+    free: Vec<usize>,
+    free_train: Vec<usize>,
+    free_validation: Vec<usize>,
+}
+
+impl GainSplit {
+    fn of(steps: &SessionSteps) -> GainSplit {
+        let all: Vec<usize> = (0..steps.tests.len()).collect();
+        let (train, validation) = alternate(&all);
+        let free = tests_with(steps, true);
+        let within = |set: &[usize]| free.iter().copied().filter(|t| set.contains(t)).collect();
+        GainSplit {
+            free_train: within(&train),
+            free_validation: within(&validation),
+            train,
+            validation,
+            free,
+        }
+    }
+}
+
 /// Tests (indices) with at least one step of regime other than `Impacts` (`impact_free`) or
 /// of `Impacts`.
 fn tests_with(steps: &SessionSteps, impact_free: bool) -> Vec<usize> {
@@ -378,18 +404,13 @@ fn whole_session(
         .steps
         .iter()
         .zip(summary.steps())
-        .map(|(s, r)| StepScores {
-            test: s.info.test.clone(),
-            test_index: s.test_index,
-            step: s.info.step,
-            omega_ratio: s.info.omega_ratio,
-            regime: s.regime,
-            level: s.level,
-            features: r
-                .twin
-                .as_ref()
-                .map(|t| t.features.clone())
-                .unwrap_or_default(),
+        .map(|(s, r)| {
+            s.scores(
+                r.twin
+                    .as_ref()
+                    .map(|t| t.features.clone())
+                    .unwrap_or_default(),
+            )
         })
         .collect())
 }
@@ -502,15 +523,12 @@ pub fn diagnose(
         .effects
         .iter()
         .any(|e| e.accepted && e.effect != "sensor_gain");
-    let free = tests_with(&steps, true);
-    let all: Vec<usize> = (0..steps.tests.len()).collect();
-    let (train, validation) = alternate(&all);
-    let free_train: Vec<usize> = free.iter().copied().filter(|t| train.contains(t)).collect();
-    let free_validation: Vec<usize> = free
-        .iter()
-        .copied()
-        .filter(|t| validation.contains(t))
-        .collect();
+    let GainSplit {
+        free,
+        free_train,
+        free_validation,
+        ..
+    } = GainSplit::of(&steps);
     if since && !free_train.is_empty() && !free_validation.is_empty() {
         (work.progress)(DiagnoseProgress::Stage(
             "identify: the beam channels' sensitivities against the corrected model".into(),
@@ -678,8 +696,13 @@ fn sensor_stage(
     ev: &SessionEvidence,
     before: &[StepScores],
 ) -> Result<Option<super::sensors::SensorEvidence>, DiagnoseError> {
-    let all: Vec<usize> = (0..work.steps.tests.len()).collect();
-    let (train, validation) = alternate(&all);
+    let GainSplit {
+        train,
+        validation,
+        free,
+        free_train,
+        free_validation,
+    } = GainSplit::of(work.steps);
     // The redundant channels' estimate on the train tests only.
     let train_names = work.names(&train);
     let mut ev_train = ev.clone();
@@ -690,13 +713,6 @@ fn sensor_stage(
     } else {
         Some(sensor_sensitivities_of(&ev_train, &opts))
     };
-    let free = tests_with(work.steps, true);
-    let free_train: Vec<usize> = free.iter().copied().filter(|t| train.contains(t)).collect();
-    let free_validation: Vec<usize> = free
-        .iter()
-        .copied()
-        .filter(|t| validation.contains(t))
-        .collect();
     if validation.is_empty() {
         work.undecided(
             "sensor_gain",

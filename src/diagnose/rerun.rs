@@ -18,7 +18,7 @@ use crate::control::{EventKind, StepInfo, StepSummary};
 use crate::rom::Rom;
 use crate::session::replay::Recording;
 use crate::session::summary::SessionSummary;
-use crate::twin::{ClearanceSchedule, TwinModel, TwinSpec, TwinWindows};
+use crate::twin::{ClearanceSchedule, FeatureComparison, TwinModel, TwinSpec, TwinWindows};
 
 use super::outcome::{Regime, StepScores};
 use super::DiagnoseError;
@@ -42,6 +42,19 @@ impl SessionStep {
     /// Whether the measured record window had no contact.
     pub fn impact_free(&self) -> bool {
         self.regime != Regime::Impacts
+    }
+
+    /// The step compared: its `features` (none when the model missed part of the window).
+    pub fn scores(&self, features: Vec<FeatureComparison>) -> StepScores {
+        StepScores {
+            test: self.info.test.clone(),
+            test_index: self.test_index,
+            step: self.info.step,
+            omega_ratio: self.info.omega_ratio,
+            regime: self.regime,
+            level: self.level,
+            features,
+        }
     }
 }
 
@@ -176,13 +189,12 @@ impl<'a> ModelRunner<'a> {
         let mut wanted: Vec<usize> = tests.to_vec();
         wanted.sort_unstable();
         wanted.dedup();
-        let tests = wanted.clone();
         // Stretches of consecutive tests; the whole session for wear.
         let mut groups: Vec<Vec<usize>> = Vec::new();
         if ext.wear.is_some() {
             groups.push((0..self.steps.tests.len()).collect());
         } else {
-            for t in tests {
+            for &t in &wanted {
                 match groups.last_mut() {
                     Some(g) if g.last() == Some(&(t.wrapping_sub(1))) => g.push(t),
                     _ => groups.push(vec![t]),
@@ -304,15 +316,7 @@ impl<'a> ModelRunner<'a> {
                 }
                 None => Vec::new(),
             };
-            scores.push(StepScores {
-                test: info.test.clone(),
-                test_index: step.test_index,
-                step: info.step,
-                omega_ratio: info.omega_ratio,
-                regime: step.regime,
-                level: step.level,
-                features,
-            });
+            scores.push(step.scores(features));
         }
         Ok((scores, rig_seconds))
     }

@@ -15,10 +15,7 @@
 mod cli_support;
 mod diagnose_support;
 
-use std::path::{Path, PathBuf};
-
-use cli_support::{default_rig_with, rigtwin, text};
-use serde_json::Value;
+use diagnose_support::{accepted, diagnose, sim_session};
 
 /// 1FU 0.98-1.02 and 1FL 0.90-0.94 omega_2 at 0.1e-5 l, then at 0.4e-5 / 0.3e-5 l, 1FU low
 /// again (9 steps), then 2e-5 l down 1.02 -> 0.97 and up (6 steps): about 210 s of rig time.
@@ -115,59 +112,11 @@ omega_end = 1.02
 steps = 6
 "#;
 
-/// Runs `plan` on the default rig with hidden physics `truth`; returns the stripped log.
-fn session(dir: &Path, name: &str, truth: &str, plan_text: &str) -> PathBuf {
-    let sub = dir.join(name);
-    std::fs::create_dir_all(&sub).unwrap();
-    let rig = default_rig_with(&sub, truth);
-    let plan = sub.join("plan.toml");
-    std::fs::write(&plan, plan_text).unwrap();
-    let log = sub.join("session.mcap");
-    let o = rigtwin(&[
-        "run",
-        rig.to_str().unwrap(),
-        "--plan",
-        plan.to_str().unwrap(),
-        "--quiet",
-        "--out",
-        log.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", text(&o));
-    let stripped = sub.join("stripped.mcap");
-    diagnose_support::strip_hidden_physics(&log, &stripped).unwrap();
-    stripped
-}
-
-fn diagnose(log: &Path, dir: &Path, tag: &str) -> Value {
-    let json = dir.join(format!("{tag}.json"));
-    let o = rigtwin(&[
-        "diagnose",
-        log.to_str().unwrap(),
-        "--json",
-        json.to_str().unwrap(),
-        "--out",
-        dir.join(tag).to_str().unwrap(),
-        "--jobs",
-        "2",
-    ]);
-    assert!(o.status.success(), "{}", text(&o));
-    serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap()
-}
-
-fn accepted<'a>(d: &'a Value, effect: &str) -> Vec<&'a Value> {
-    d["effects"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .filter(|e| e["effect"] == effect && e["accepted"] == true)
-        .collect()
-}
-
 fn clearance_is_found(offset: f64) {
     let dir = tempfile::tempdir().unwrap();
     let truth = format!("[truth.variants.clearance]\noffset = {offset}\n");
-    let log = session(dir.path(), "clearance", &truth, LONG_PLAN);
-    let d = diagnose(&log, dir.path(), "clearance");
+    let (_, log) = sim_session(dir.path(), "clearance", &truth, LONG_PLAN);
+    let d = diagnose(&log, dir.path(), "clearance", &[]);
     assert_eq!(d["verdict"], "mismatch", "{d:#}");
     let c = accepted(&d, "clearance");
     assert_eq!(c.len(), 1, "{d:#}");
@@ -209,8 +158,8 @@ fn a_sensor_gain_and_clamp_friction_at_once_are_both_named() {
          [truth.variants.clamp_friction]\nstiffness_fraction = {share}\n\
          half_slip_tip_amplitude = {slip}\nbeams = [\"upper\"]\n"
     );
-    let log = session(dir.path(), "both", &truth, PLAN);
-    let d = diagnose(&log, dir.path(), "both");
+    let (_, log) = sim_session(dir.path(), "both", &truth, PLAN);
+    let d = diagnose(&log, dir.path(), "both", &[]);
     assert_eq!(d["verdict"], "mismatch");
     let g = accepted(&d, "sensor_gain");
     assert_eq!(g.len(), 1, "{d:#}");

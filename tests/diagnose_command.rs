@@ -15,9 +15,10 @@
 mod cli_support;
 mod diagnose_support;
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-use cli_support::{default_rig_with, rigtwin, text};
+use cli_support::{rigtwin, text};
+use diagnose_support::{accepted, diagnose, sim_session};
 use serde_json::Value;
 
 /// 1FU impact-free at 0.1e-5 l and 0.4e-5 l, then 0.1e-5 l again: the linear fit, its
@@ -47,64 +48,6 @@ name = "1fu-low-again"
 level = 0.1e-5
 "#;
 
-/// Runs the plan on the default rig with hidden physics `truth`, strips the log; returns
-/// (log, stripped log).
-fn session(dir: &Path, name: &str, truth: &str) -> (PathBuf, PathBuf) {
-    let sub = dir.join(name);
-    std::fs::create_dir_all(&sub).unwrap();
-    let rig = default_rig_with(&sub, truth);
-    let plan = sub.join("plan.toml");
-    std::fs::write(&plan, PLAN).unwrap();
-    let log = sub.join("session.mcap");
-    let o = rigtwin(&[
-        "run",
-        rig.to_str().unwrap(),
-        "--plan",
-        plan.to_str().unwrap(),
-        "--quiet",
-        "--out",
-        log.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", text(&o));
-    let stripped = sub.join("stripped.mcap");
-    diagnose_support::strip_hidden_physics(&log, &stripped).unwrap();
-    (log, stripped)
-}
-
-/// Diagnoses `log` into `dir/<tag>`; returns the JSON.
-fn diagnose(log: &Path, dir: &Path, tag: &str, write_config: bool) -> Value {
-    let out = dir.join(tag);
-    let json = dir.join(format!("{tag}.json"));
-    let fixed = dir.join(format!("{tag}-fixed.toml"));
-    let mut args = vec![
-        "diagnose",
-        log.to_str().unwrap(),
-        "--json",
-        json.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-        "--jobs",
-        "2",
-    ];
-    if write_config {
-        args.extend(["--write-config", fixed.to_str().unwrap()]);
-    }
-    let o = rigtwin(&args);
-    assert!(o.status.success(), "{}", text(&o));
-    let t = text(&o);
-    assert!(t.contains("== locate") && t.contains("verdict:"), "{t}");
-    serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap()
-}
-
-fn accepted<'a>(d: &'a Value, effect: &str) -> Vec<&'a Value> {
-    d["effects"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .filter(|e| e["effect"] == effect && e["accepted"] == true)
-        .collect()
-}
-
 /// The diagnosis without what differs from run to run (wall time, paths).
 fn comparable(mut d: Value) -> Value {
     d["wall_seconds"] = Value::Null;
@@ -116,12 +59,13 @@ fn comparable(mut d: Value) -> Value {
 #[test]
 fn the_nominal_rig_is_no_mismatch_and_the_hidden_physics_is_never_read() {
     let dir = tempfile::tempdir().unwrap();
-    let (log, stripped) = session(
+    let (log, stripped) = sim_session(
         dir.path(),
         "nominal",
         "[daq]\nnoise_seed = 2\n[truth.variants]\n",
+        PLAN,
     );
-    let d = diagnose(&log, dir.path(), "as-logged", false);
+    let d = diagnose(&log, dir.path(), "as-logged", &[]);
     assert_eq!(d["verdict"], "no_significant_mismatch", "{d:#}");
     assert!(
         d["effects"]
@@ -137,7 +81,7 @@ fn the_nominal_rig_is_no_mismatch_and_the_hidden_physics_is_never_read() {
         .collect();
     assert!(!figures.is_empty());
     // The same log without any trace of the hidden physics: the same diagnosis.
-    let s = diagnose(&stripped, dir.path(), "stripped", false);
+    let s = diagnose(&stripped, dir.path(), "stripped", &[]);
     assert_eq!(comparable(d), comparable(s));
 }
 
@@ -148,8 +92,14 @@ fn a_wrong_linear_1fu_is_found_fitted_validated_and_written_out() {
     let truth = format!(
         "[truth.variants]\nmodes = [{{ mode = \"1FU\", frequency_hz = {f_true}, damping_ratio = {z_true} }}]\n"
     );
-    let (_, stripped) = session(dir.path(), "linear", &truth);
-    let d = diagnose(&stripped, dir.path(), "linear", true);
+    let (_, stripped) = sim_session(dir.path(), "linear", &truth, PLAN);
+    let fixed = dir.path().join("linear-fixed.toml");
+    let d = diagnose(
+        &stripped,
+        dir.path(),
+        "linear",
+        &["--write-config", fixed.to_str().unwrap()],
+    );
     assert_eq!(d["verdict"], "mismatch");
     let f = accepted(&d, "linear_frequency");
     assert_eq!(f.len(), 1, "{d:#}");
@@ -172,7 +122,6 @@ fn a_wrong_linear_1fu_is_found_fitted_validated_and_written_out() {
     );
 
     // The written description, replayed, gives the "after" comparison of every step.
-    let fixed = dir.path().join("linear-fixed.toml");
     let replayed = dir.path().join("replayed.json");
     let o = rigtwin(&[
         "replay",
@@ -207,8 +156,8 @@ fn a_mis_calibrated_lower_tip_accelerometer_is_named() {
     let truth = format!(
         "[truth.variants]\nsensor_gains = [{{ channel = \"lower_tip\", gain = {gain} }}]\n"
     );
-    let (_, stripped) = session(dir.path(), "gain", &truth);
-    let d = diagnose(&stripped, dir.path(), "gain", false);
+    let (_, stripped) = sim_session(dir.path(), "gain", &truth, PLAN);
+    let d = diagnose(&stripped, dir.path(), "gain", &[]);
     assert_eq!(d["verdict"], "mismatch");
     let g = accepted(&d, "sensor_gain");
     assert_eq!(g.len(), 1, "{d:#}");
@@ -242,24 +191,14 @@ fn what_cannot_be_diagnosed_is_a_clear_message() {
     assert!(t.contains("junk.mcap") && !t.contains("panicked"), "{t}");
 
     // A log cut before its first record window: nothing to diagnose.
-    let sub = dir.path().join("cut");
-    std::fs::create_dir_all(&sub).unwrap();
-    let rig = default_rig_with(&sub, "");
-    let plan = sub.join("plan.toml");
-    std::fs::write(&plan, PLAN.replace("steps = 7", "steps = 2")).unwrap();
-    let log = sub.join("session.mcap");
-    let o = rigtwin(&[
-        "run",
-        rig.to_str().unwrap(),
-        "--plan",
-        plan.to_str().unwrap(),
-        "--quiet",
-        "--out",
-        log.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", text(&o));
+    let (log, _) = sim_session(
+        dir.path(),
+        "cut",
+        "",
+        &PLAN.replace("steps = 7", "steps = 2"),
+    );
     let bytes = std::fs::read(&log).unwrap();
-    let cut = sub.join("cut.mcap");
+    let cut = dir.path().join("cut.mcap");
     std::fs::write(&cut, &bytes[..bytes.len() / 20]).unwrap();
     let o = run(&cut);
     let t = text(&o);

@@ -8,11 +8,12 @@
 //!   of 1FU accepted within 20 %.
 
 mod cli_support;
+mod diagnose_support;
 mod hw_support;
 
-use cli_support::{default_rig_with, json, rigtwin, text};
+use cli_support::{default_rig_with, json, text};
+use diagnose_support::{accepted, diagnose};
 use hw_support::{run_hw, FirmwareSim};
-use serde_json::Value;
 
 /// The plan of tests/diagnose_command.rs: 1FU impact-free at 0.1e-5 l and 0.4e-5 l, then
 /// 0.1e-5 l again, in about 60 s of rig time.
@@ -40,15 +41,6 @@ level = 0.4e-5
 name = "1fu-low-again"
 level = 0.1e-5
 "#;
-
-fn accepted<'a>(d: &'a Value, effect: &str) -> Vec<&'a Value> {
-    d["effects"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .filter(|e| e["effect"] == effect && e["accepted"] == true)
-        .collect()
-}
 
 #[test]
 fn a_wrong_1fu_behind_the_hardware_links_is_diagnosed_as_on_the_simulated_rig() {
@@ -83,21 +75,7 @@ fn a_wrong_1fu_behind_the_hardware_links_is_diagnosed_as_on_the_simulated_rig() 
         "{variants:?}"
     );
 
-    let json_out = dir.path().join("diagnosis.json");
-    let out = dir.path().join("diagnosis");
-    let o = rigtwin(&[
-        "diagnose",
-        log.to_str().unwrap(),
-        "--json",
-        json_out.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-        "--jobs",
-        "2",
-    ]);
-    assert!(o.status.success(), "{}", text(&o));
-    println!("{}", text(&o));
-    let d = json(&json_out);
+    let d = diagnose(&log, dir.path(), "diagnosis", &[]);
     assert_eq!(d["verdict"], "mismatch", "{d:#}");
     let f = accepted(&d, "linear_frequency");
     assert_eq!(f.len(), 1, "{d:#}");

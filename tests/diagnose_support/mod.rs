@@ -147,3 +147,66 @@ fn table_names(name: &str, value: &toml::Value, out: &mut Vec<String>) {
         }
     }
 }
+
+/// Runs `plan` (plan TOML) on the simulated rig described by the default rig plus `extra`
+/// (TOML appended: the hidden physics) in the folder `dir/name`; returns the session log and
+/// its copy without the hidden physics ([`strip_hidden_physics`]).
+pub fn sim_session(
+    dir: &Path,
+    name: &str,
+    extra: &str,
+    plan: &str,
+) -> (std::path::PathBuf, std::path::PathBuf) {
+    let sub = dir.join(name);
+    std::fs::create_dir_all(&sub).unwrap();
+    let rig = crate::cli_support::default_rig_with(&sub, extra);
+    let plan_path = sub.join("plan.toml");
+    std::fs::write(&plan_path, plan).unwrap();
+    let log = sub.join("session.mcap");
+    let o = crate::cli_support::rigtwin(&[
+        "run",
+        rig.to_str().unwrap(),
+        "--plan",
+        plan_path.to_str().unwrap(),
+        "--quiet",
+        "--out",
+        log.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", crate::cli_support::text(&o));
+    let stripped = sub.join("stripped.mcap");
+    strip_hidden_physics(&log, &stripped).unwrap();
+    (log, stripped)
+}
+
+/// `rigtwin diagnose LOG --json dir/TAG.json --out dir/TAG --jobs 2 ARGS...`: asserts it
+/// succeeds and shows its stages and verdict; returns the diagnosis.
+pub fn diagnose(log: &Path, dir: &Path, tag: &str, args: &[&str]) -> serde_json::Value {
+    let json = dir.join(format!("{tag}.json"));
+    let out = dir.join(tag);
+    let mut all = vec![
+        "diagnose",
+        log.to_str().unwrap(),
+        "--json",
+        json.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--jobs",
+        "2",
+    ];
+    all.extend(args);
+    let o = crate::cli_support::rigtwin(&all);
+    let t = crate::cli_support::text(&o);
+    assert!(o.status.success(), "{t}");
+    assert!(t.contains("== locate") && t.contains("verdict:"), "{t}");
+    serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap()
+}
+
+/// The accepted effects of kind `effect` in diagnosis `d`.
+pub fn accepted<'a>(d: &'a serde_json::Value, effect: &str) -> Vec<&'a serde_json::Value> {
+    d["effects"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|e| e["effect"] == effect && e["accepted"] == true)
+        .collect()
+}

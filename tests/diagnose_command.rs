@@ -9,15 +9,19 @@
 //!   written rig description replayed gives the "after" comparison;
 //! - a lower-tip accelerometer 5 % low (no redundant channel): `sensor_gain` of `lower_tip`
 //!   named first, within 20 % (here 1 %);
-//! - bad input: not a log, a log cut before its first record window: a clear message, no
-//!   panic.
+//! - the linear case the other way round: the rig nominal (noise seed 1, the second null
+//!   case), the model a wrong rig description given by `--config` (upper clamp layers 4x
+//!   softer, 1FU damping 1.6x): `linear_frequency` and `linear_damping` of 1FU found within
+//!   0.5 % and 20 % of the nominal rig's;
+//! - bad input: not a log, a log cut before its first record window, a plan with a single
+//!   level: a clear message of what cannot be diagnosed, no panic.
 
 mod cli_support;
 mod diagnose_support;
 
 use std::path::Path;
 
-use cli_support::{rigtwin, text};
+use cli_support::{json, rigtwin, text};
 use diagnose_support::{accepted, diagnose, sim_session};
 use serde_json::Value;
 
@@ -167,6 +171,103 @@ fn a_mis_calibrated_lower_tip_accelerometer_is_named() {
     assert!((fit / gain - 1.0).abs() < 0.01, "{fit} for {gain}");
 }
 
+/// The default rig description with the upper beam's clamp layers 4x softer and the 1FU
+/// damping ratio 0.0030 instead of 0.00183: a model whose 1FU sits 1.4 % low and is damped
+/// 1.6x too much, as an analyst's first FE model might be.
+fn wrong_rig_description(dir: &Path) -> std::path::PathBuf {
+    let mut t = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/rig-config/two-beam.toml"
+    ))
+    .unwrap();
+    for layer in ["upper_spacer", "upper_top"] {
+        let start = t.find(&format!("[layers.{layer}]")).unwrap();
+        let end = start + t[start..].find("\n\n").unwrap();
+        let block = t[start..end]
+            .replace("normal = 1.0e13", "normal = 2.5e12")
+            .replace("tangential = 3.0e12", "tangential = 7.5e11");
+        assert!(
+            block.contains("2.5e12") && block.contains("7.5e11"),
+            "{block}"
+        );
+        t.replace_range(start..end, &block);
+    }
+    let nominal = "{ label = \"1FU\", ratio = 0.00183 }";
+    assert!(t.contains(nominal));
+    t = t.replace(nominal, "{ label = \"1FU\", ratio = 0.00300 }");
+    let p = dir.join("wrong.toml");
+    std::fs::write(&p, t).unwrap();
+    p
+}
+
+#[test]
+fn a_nominal_session_against_a_wrong_rig_description_finds_its_1fu() {
+    let dir = tempfile::tempdir().unwrap();
+    // The nominal rig's 1FU and its damping ratio: the default rig's ROM.
+    let rom = dir.path().join("nominal.rom");
+    let info = dir.path().join("nominal-rom.json");
+    let o = rigtwin(&["rom", "build", "--out", rom.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", text(&o));
+    let o = rigtwin(&[
+        "rom",
+        "info",
+        rom.to_str().unwrap(),
+        "--json",
+        info.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let info = json(&info);
+    let f_true = info["f_1fu_hz"].as_f64().unwrap();
+    let i = info["labels"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .position(|l| l == "1FU")
+        .unwrap();
+    let z_true = info["damping_ratios"][i].as_f64().unwrap();
+
+    // Noise seed 1 (the default): with its own description, the second null case.
+    let (_, stripped) = sim_session(dir.path(), "nominal", "", PLAN);
+    let d = diagnose(&stripped, dir.path(), "own", &[]);
+    assert_eq!(d["verdict"], "no_significant_mismatch", "{d:#}");
+    assert!(
+        d["effects"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .all(|e| e["accepted"] == false),
+        "{d:#}"
+    );
+
+    // The same recording against the wrong description.
+    let wrong = wrong_rig_description(dir.path());
+    let d = diagnose(
+        &stripped,
+        dir.path(),
+        "wrong",
+        &["--config", wrong.to_str().unwrap()],
+    );
+    assert_eq!(d["verdict"], "mismatch");
+    let f = accepted(&d, "linear_frequency");
+    assert_eq!(f.len(), 1, "{d:#}");
+    assert_eq!(f[0]["rank"], 1);
+    assert_eq!(f[0]["parameters"]["mode"], "1FU");
+    let fit = f[0]["parameters"]["frequency_hz"].as_f64().unwrap();
+    assert!((fit / f_true - 1.0).abs() < 0.005, "{fit} for {f_true}");
+    let z = accepted(&d, "linear_damping");
+    assert_eq!(z.len(), 1, "{d:#}");
+    assert_eq!(z[0]["parameters"]["mode"], "1FU");
+    let zeta = z[0]["parameters"]["damping_ratio"].as_f64().unwrap();
+    assert!((zeta / z_true - 1.0).abs() < 0.2, "{zeta} for {z_true}");
+    for e in [f[0], z[0]] {
+        let (b, a) = (
+            e["error_before"]["validation"].as_f64().unwrap(),
+            e["error_after"]["validation"].as_f64().unwrap(),
+        );
+        assert!(b > a, "validation {b} -> {a}: {e:#}");
+    }
+}
+
 #[test]
 fn what_cannot_be_diagnosed_is_a_clear_message() {
     let dir = tempfile::tempdir().unwrap();
@@ -190,13 +291,37 @@ fn what_cannot_be_diagnosed_is_a_clear_message() {
     let t = text(&o);
     assert!(t.contains("junk.mcap") && !t.contains("panicked"), "{t}");
 
-    // A log cut before its first record window: nothing to diagnose.
-    let (log, _) = sim_session(
-        dir.path(),
-        "cut",
-        "",
-        &PLAN.replace("steps = 7", "steps = 2"),
+    // A plan with a single test at a single level: diagnosed, and says what it cannot decide
+    // (the amplitude dependence needs two levels; a fit needs another test to validate on).
+    let single = PLAN.split("[[test]]").next().unwrap().to_string()
+        + "[[test]]\nname = \"1fu-only\"\nlevel = 0.1e-5\n";
+    let (log, _) = sim_session(dir.path(), "single", "", &single);
+    let d = diagnose(&log, dir.path(), "single", &[]);
+    assert_eq!(d["verdict"], "no_significant_mismatch", "{d:#}");
+    let undecided = |effect: &str| -> Vec<String> {
+        d["undecided"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|u| u["effect"] == effect)
+            .map(|u| u["reason"].as_str().unwrap().to_string())
+            .collect()
+    };
+    let clamp = undecided("clamp_friction");
+    assert!(
+        clamp.iter().any(|r| r.contains("1 level(s) only")
+            && r.starts_with("mode 1FU:")
+            && !r.contains("1FU: mode")),
+        "{d:#}"
     );
+    assert!(
+        undecided("linear_frequency")
+            .iter()
+            .any(|r| r.contains("1FU") && r.contains("validate")),
+        "{d:#}"
+    );
+
+    // The same log cut before its first record window: nothing to diagnose.
     let bytes = std::fs::read(&log).unwrap();
     let cut = dir.path().join("cut.mcap");
     std::fs::write(&cut, &bytes[..bytes.len() / 20]).unwrap();

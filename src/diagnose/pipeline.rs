@@ -1013,8 +1013,9 @@ fn iwan_softening_integral() -> f64 {
 
 /// Stage 3: the clamp's friction.
 fn clamp_stage(work: &mut Work<'_>, lin: &LinearEvidence) -> Result<(), DiagnoseError> {
+    // The reasons name their mode (linear::amplitude_dependence's errors).
     for u in &lin.amplitude_dependence_undecided {
-        work.undecided("clamp_friction", format!("{}: {}", u.mode, u.reason));
+        work.undecided("clamp_friction", u.reason.clone());
     }
     let with: Vec<_> = lin
         .amplitude_dependence

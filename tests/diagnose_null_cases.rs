@@ -1,0 +1,83 @@
+//! `rigtwin diagnose` on sessions of the nominal simulated rig with the nominal model (issue
+//! 15, "Null"): nothing hidden, so nothing may be accepted and the verdict must be
+//! `no_significant_mismatch`, although the response in the impact band is non-periodic and
+//! the twin's own discretisation shows there. Guards the plans the issue names beside the
+//! short plans of `tests/diagnose_command.rs` (noise seeds 1 and 2):
+//! - the demo plan (the high level through the impact band, down and up; no impact-free
+//!   resonance): no mismatch, and it says that the linear and clamp effects cannot be decided;
+//! - `rig-config/plans/identify.toml` (every effect's evidence, 733 s of rig time; behind
+//!   `--ignored`: about 15 min on this machine, BENCHMARKS.md "Diagnosis").
+//!
+//! Each log is stripped of the simulated rig's hidden-physics tables before the diagnosis.
+
+mod cli_support;
+mod diagnose_support;
+
+use diagnose_support::{diagnose, sim_session};
+use serde_json::Value;
+
+/// A plan file of the repository.
+fn plan(name: &str) -> String {
+    std::fs::read_to_string(format!(
+        "{}/rig-config/plans/{name}",
+        env!("CARGO_MANIFEST_DIR")
+    ))
+    .unwrap()
+}
+
+/// Asserts the null verdict: nothing accepted, `no_significant_mismatch`.
+fn assert_null(d: &Value) {
+    assert_eq!(d["verdict"], "no_significant_mismatch", "{d:#}");
+    let accepted: Vec<&Value> = d["effects"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|e| e["accepted"] == true)
+        .collect();
+    assert!(
+        accepted.is_empty(),
+        "accepted on a nominal session: {accepted:#?}"
+    );
+}
+
+/// The effects a diagnosis says it cannot decide.
+fn undecided(d: &Value) -> Vec<String> {
+    d["undecided"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|u| u["effect"].as_str().unwrap().to_string())
+        .collect()
+}
+
+#[test]
+fn the_demo_plan_on_the_nominal_rig_is_no_mismatch_and_says_what_it_cannot_decide() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, stripped) = sim_session(dir.path(), "demo", "", &plan("demo.toml"));
+    let d = diagnose(&stripped, dir.path(), "demo", &[]);
+    assert_null(&d);
+    let u = undecided(&d);
+    for effect in ["linear_frequency", "clamp_friction"] {
+        assert!(
+            u.iter().any(|e| e == effect),
+            "{effect} not undecided: {u:?}"
+        );
+    }
+}
+
+#[test]
+#[ignore = "identify.toml: about 6 min to record and 7 min to diagnose on 2 cores"]
+fn identify_plan_on_the_nominal_rig_is_no_mismatch() {
+    let dir = tempfile::tempdir().unwrap();
+    let started = std::time::Instant::now();
+    let (_, stripped) = sim_session(dir.path(), "identify", "", &plan("identify.toml"));
+    let recorded = started.elapsed().as_secs_f64();
+    let d = diagnose(&stripped, dir.path(), "identify", &[]);
+    eprintln!(
+        "identify.toml: recorded in {recorded:.0} s, diagnosed in {:.0} s ({} model runs, {:.0} s of them)",
+        d["wall_seconds"].as_f64().unwrap(),
+        d["cost"]["model_runs"],
+        d["cost"]["model_wall_seconds"].as_f64().unwrap_or(f64::NAN),
+    );
+    assert_null(&d);
+}

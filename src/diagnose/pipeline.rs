@@ -42,7 +42,7 @@ use crate::twin::{TwinModel, TwinSpec};
 
 use super::clearance::{clearance_per_test_of, ClearanceOptions};
 use super::evidence::{session_evidence, SessionEvidence};
-use super::linear::{linear_modes_of, LinearEvidence, LinearOptions, ModeFit};
+use super::linear::{linear_modes_of, AmplitudeDependence, LinearEvidence, LinearOptions, ModeFit};
 use super::outcome::{
     Diagnosis, DiagnosisCost, EffectResult, Located, Regime, RegimeScores, SetError, StepScores,
     Undecided, Verdict,
@@ -240,6 +240,13 @@ impl Work<'_> {
         let accepted = self.accepted.clone();
         let before = self.errors(&accepted, &c)?;
         let after = self.errors(&c.ext, &c)?;
+        Ok(self.decide(c, before, after))
+    }
+
+    /// Accepts candidate `c` if its validation error falls from `before` to `after` by more
+    /// than the null spread plus the penalty for its parameters, and by the regime's share;
+    /// records the result. Returns whether accepted.
+    fn decide(&mut self, c: Candidate, before: Option<SetError>, after: Option<SetError>) -> bool {
         let (ok, reason) = match (before, after) {
             (Some(b), Some(a)) => {
                 let gain = b.validation - a.validation;
@@ -295,7 +302,7 @@ impl Work<'_> {
             error_before: before,
             error_after: after,
         });
-        Ok(ok)
+        ok
     }
 
     fn undecided(&mut self, effect: &str, reason: impl Into<String>) {
@@ -723,9 +730,20 @@ fn sensor_stage(
     let Some(sens) = sens else {
         return Ok(None);
     };
+    // The same estimate on the validation tests (the platform gains' judge).
+    let validation_names = work.names(&validation);
+    let mut ev_validation = ev.clone();
+    ev_validation
+        .windows
+        .retain(|w| validation_names.contains(&w.test));
+    let sens_validation = sensor_sensitivities_of(&ev_validation, &opts);
     for c in &sens.channels {
         if c.status == SensitivityStatus::Off {
             let gain = c.gain.unwrap_or(1.0);
+            let platform = sens
+                .platform_ratios
+                .iter()
+                .any(|r| r.numerator == c.channel);
             let cand = Candidate {
                 effect: "sensor_gain",
                 ext: with_gain(&work.accepted, &c.channel, gain),
@@ -736,10 +754,52 @@ fn sensor_stage(
                 train: train.clone(),
                 validation: validation.clone(),
                 steps: Steps::ImpactFree,
-                // A platform accelerometer moves the base the model consumes: every channel.
-                channel: (!c.channel.starts_with("platform")).then(|| c.channel.clone()),
+                channel: (!platform).then(|| c.channel.clone()),
             };
-            work.judge(cand)?;
+            if platform {
+                // NOTE: a platform accelerometer's gain moves the base the model consumes by
+                // a third of it (the mean of three), within the comparison's tolerance for a
+                // gain of a few percent: model runs cannot judge it. Its own observation model
+                // can — every platform accelerometer sees one base — so it is judged on its
+                // ratio to the others' mean over the validation tests' windows.
+                let of = |ev: &super::sensors::SensorEvidence| {
+                    ev.platform_ratios
+                        .iter()
+                        .find(|r| r.numerator == c.channel)
+                        .map(|r| (r.ratio, r.spread))
+                };
+                let (before, after) = match (of(&sens), of(&sens_validation)) {
+                    (Some(t), Some(v)) => {
+                        let err = |(r, spread): (f64, f64), g: f64| {
+                            redundancy_error(r, spread, g, opts.min_deviation)
+                        };
+                        (
+                            Some(SetError {
+                                train: err(t, 1.0),
+                                validation: err(v, 1.0),
+                            }),
+                            Some(SetError {
+                                train: err(t, gain),
+                                validation: err(v, gain),
+                            }),
+                        )
+                    }
+                    _ => (None, None),
+                };
+                let mut cand = cand;
+                cand.evidence["judged_on"] =
+                    json!("its ratio to the other platform accelerometers' mean");
+                let line = format!(
+                    "sensor_gain {} (fit on {}, validated on {}: the platform channels' ratios)",
+                    cand.parameters,
+                    work.names(&cand.train).join(", "),
+                    work.names(&cand.validation).join(", ")
+                );
+                (work.progress)(DiagnoseProgress::Evaluation(line));
+                work.decide(cand, before, after);
+            } else {
+                work.judge(cand)?;
+            }
         }
     }
     // The vibrometer and the upper-tip accelerometer disagree: the model tells which.
@@ -791,6 +851,24 @@ fn sensor_stage(
     }
     unpartnered_gains(work, before, &free_train, &free_validation)?;
     Ok(Some(sens))
+}
+
+/// The error of a redundant channel whose ratio to its partners is `ratio` (per-window spread
+/// `spread`) once divided by the gain `gain`: |ratio / gain - 1| in units of the relative
+/// spread, which is floored at `min_deviation` (the agreement two channels of one motion
+/// are allowed whatever their spread), like the comparison's scores.
+fn redundancy_error(ratio: f64, spread: f64, gain: f64, min_deviation: f64) -> f64 {
+    let relative = if ratio > 0.0 {
+        spread / ratio
+    } else {
+        f64::NAN
+    };
+    let tolerance = if relative.is_finite() {
+        relative.max(min_deviation)
+    } else {
+        min_deviation
+    };
+    (ratio / gain - 1.0).abs() / tolerance
 }
 
 /// The sensor gains of the beam channels without a redundant partner, against the model
@@ -1058,12 +1136,21 @@ fn clamp_stage(work: &mut Work<'_>, lin: &LinearEvidence) -> Result<(), Diagnose
         .collect();
     train.sort_unstable();
     train.dedup();
-    let validation: Vec<usize> = tests_with(work.steps, true)
+    let mut validation: Vec<usize> = tests_with(work.steps, true)
         .into_iter()
         .filter(|t| !train.contains(t))
         .collect();
     if validation.is_empty() {
-        work.undecided("clamp_friction", "the clamp's friction shows, but no test outside the fitted ones has impact-free steps to validate it on");
+        // Every impact-free test carries a fit (e.g. both beams' clamps slip): hold out a
+        // test whose mode and level another fitted test repeats, so that the fit still
+        // spans two levels of each mode.
+        if let Some(t) = repeated_level_test(&lin.fits, &with) {
+            train.retain(|&x| x != t);
+            validation.push(t);
+        }
+    }
+    if validation.is_empty() {
+        work.undecided("clamp_friction", "the clamp's friction shows, but no test outside the fitted ones has impact-free steps to validate it on, and no test repeats a fitted level to hold out");
         return Ok(());
     }
     // Model runs on the fitted tests: the stiffness share per slip amplitude around the
@@ -1134,6 +1221,31 @@ fn clamp_stage(work: &mut Work<'_>, lin: &LinearEvidence) -> Result<(), Diagnose
     };
     work.judge(cand)?;
     Ok(())
+}
+
+/// The last test (in session order) whose fit of one of the modes of `with` repeats the
+/// level of an earlier fitted test of that mode, and that carries no other mode's fit: a test
+/// the clamp's fit can do without and still span the same levels.
+fn repeated_level_test(fits: &[ModeFit], with: &[&AmplitudeDependence]) -> Option<usize> {
+    let of_modes: Vec<&ModeFit> = fits
+        .iter()
+        .filter(|f| with.iter().any(|d| d.mode == f.mode))
+        .collect();
+    of_modes
+        .iter()
+        .filter(|f| {
+            let same_level = |g: &&ModeFit| {
+                g.mode == f.mode
+                    && g.test_index < f.test_index
+                    && (g.base_amplitude_m / f.base_amplitude_m - 1.0).abs() < 0.05
+            };
+            let alone = of_modes
+                .iter()
+                .all(|g| g.test_index != f.test_index || g.mode == f.mode);
+            of_modes.iter().any(same_level) && alone
+        })
+        .map(|f| f.test_index)
+        .max()
 }
 
 /// Stage 4: the clearance per test, as an offset to the plan's.

@@ -13,10 +13,11 @@
 //! BENCHMARKS.md, "The comparison's spread").
 
 mod cli_support;
+mod twin_support;
 
 use std::path::Path;
 
-use cli_support::{default_rig_with, json, rigtwin, text};
+use twin_support::{hidden_and_declared, max_scores, Case};
 
 /// Three steps through 1FU at a level far from contact; 50 recorded periods give the
 /// measurement two sub-windows, hence a spread.
@@ -36,71 +37,14 @@ omega_start = 0.99
 omega_end = 1.01
 "#;
 
-/// Each step's largest score (`tests[0].steps[].twin.max_score`).
-fn max_scores(summary: &serde_json::Value) -> Vec<f64> {
-    summary["tests"][0]["steps"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|s| {
-            s["twin"]["max_score"]
-                .as_f64()
-                .unwrap_or_else(|| panic!("no score: {s}"))
-        })
-        .collect()
-}
-
 /// Runs the plan on the rig `extra` describes (appended to the default rig) with the live
 /// twin, then replays the twin of the default (nominal) rig on the same recording; returns
 /// the live twin's and the nominal twin's per-step largest scores.
 fn session(dir: &Path, name: &str, extra: &str) -> (Vec<f64>, Vec<f64>) {
-    let sub = dir.join(name);
-    std::fs::create_dir_all(&sub).unwrap();
-    let rig = default_rig_with(&sub, extra);
-    let nominal_dir = sub.join("nominal");
-    std::fs::create_dir_all(&nominal_dir).unwrap();
-    let nominal = default_rig_with(&nominal_dir, "");
-    let plan = sub.join("plan.toml");
-    std::fs::write(&plan, PLAN).unwrap();
-    let mcap = sub.join("session.mcap");
-    let live = sub.join("live.json");
-    let o = rigtwin(&[
-        "run",
-        rig.to_str().unwrap(),
-        "--plan",
-        plan.to_str().unwrap(),
-        "--quiet",
-        "--twin",
-        "--out",
-        mcap.to_str().unwrap(),
-        "--json",
-        live.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", text(&o));
-    let replayed = sub.join("nominal-twin.json");
-    let o = rigtwin(&[
-        "replay",
-        mcap.to_str().unwrap(),
-        "--twin",
-        "--config",
-        nominal.to_str().unwrap(),
-        "--ensemble",
-        "0",
-        "--json",
-        replayed.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", text(&o));
-    (max_scores(&json(&live)), max_scores(&json(&replayed)))
-}
-
-/// `physics` with `{t}` standing for the table prefix: once as `truth.variants` (hidden in
-/// the rig) and once as `model` (declared to the twin).
-fn hidden_and_declared(physics: &str) -> String {
-    format!(
-        "{}\n{}",
-        physics.replace("{t}", "truth.variants"),
-        physics.replace("{t}", "model")
-    )
+    let case = Case::new(dir, name, "", extra);
+    let live = case.record(PLAN, true).unwrap();
+    let nominal = case.replay(&case.nominal, "nominal-twin");
+    (max_scores(&live), max_scores(&nominal))
 }
 
 #[test]

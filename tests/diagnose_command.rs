@@ -9,6 +9,8 @@
 //!   written rig description replayed gives the "after" comparison;
 //! - a lower-tip accelerometer 5 % low (no redundant channel): `sensor_gain` of `lower_tip`
 //!   named first, within 20 % (here 1 %);
+//! - a platform accelerometer and the vibrometer off at once: both named, judged on their
+//!   redundant partners;
 //! - the linear case the other way round: the rig nominal (noise seed 1, the second null
 //!   case), the model a wrong rig description given by `--config` (upper clamp layers 4x
 //!   softer, 1FU damping 1.6x): `linear_frequency` and `linear_damping` of 1FU found within
@@ -266,6 +268,48 @@ fn a_nominal_session_against_a_wrong_rig_description_finds_its_1fu() {
         );
         assert!(b > a, "validation {b} -> {a}: {e:#}");
     }
+}
+
+#[test]
+fn mis_calibrated_redundant_channels_are_named_and_judged_on_their_partners() {
+    // Two redundant sensors off at once: a platform accelerometer (the base the model
+    // consumes moves by a third of it) and the vibrometer (the upper-tip accelerometer sees
+    // the same spot). Both are judged on their redundant partners over the validation tests.
+    let dir = tempfile::tempdir().unwrap();
+    let (platform, vibrometer) = (0.975, 1.035);
+    let truth = format!(
+        "[truth.variants]\nsensor_gains = [{{ channel = \"platform_3\", gain = {platform} }}, {{ channel = \"vibrometer\", gain = {vibrometer} }}]\n"
+    );
+    let (_, stripped) = sim_session(dir.path(), "redundant", &truth, PLAN);
+    let d = diagnose(&stripped, dir.path(), "redundant", &[]);
+    assert_eq!(d["verdict"], "mismatch");
+    let g = accepted(&d, "sensor_gain");
+    assert_eq!(g.len(), 2, "{d:#}");
+    for (channel, hidden) in [("platform_3", platform), ("vibrometer", vibrometer)] {
+        let e = g
+            .iter()
+            .find(|e| e["parameters"]["channel"] == channel)
+            .unwrap_or_else(|| panic!("{channel} not named: {d:#}"));
+        let fit = e["parameters"]["gain"].as_f64().unwrap();
+        assert!(
+            (fit / hidden - 1.0).abs() < 0.005,
+            "{channel}: {fit} for {hidden}"
+        );
+        let (b, a) = (
+            e["error_before"]["validation"].as_f64().unwrap(),
+            e["error_after"]["validation"].as_f64().unwrap(),
+        );
+        assert!(b >= 3.0 * a, "{channel}: validation {b} -> {a}");
+    }
+    // Nothing else is blamed for what the sensors did.
+    assert!(
+        d["effects"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .all(|e| e["accepted"] == false || e["effect"] == "sensor_gain"),
+        "{d:#}"
+    );
 }
 
 #[test]

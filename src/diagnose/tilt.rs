@@ -79,7 +79,7 @@ pub(super) fn tilt_stage(
         return Ok(());
     }
     let (tip_edge, clamp_edge) = edges(rom);
-    if !(tip_edge > 0.0 && clamp_edge > 0.0) {
+    if tip_edge <= 0.0 || clamp_edge <= 0.0 {
         work.undecided(
             "tilt",
             "the contact patch has no extent along the beams in the ROM",
@@ -103,7 +103,7 @@ pub(super) fn tilt_stage(
     } else {
         closes.iter().sum::<f64>() / closes.len() as f64
     };
-    if !(closing > 0.02 * plan) {
+    if closing.is_nan() || closing <= 0.02 * plan {
         work.accepted = after_clearance;
         (work.progress)(DiagnoseProgress::Note(format!(
             "tilt: the train tests' first contact comes {closing:+.2e} m from the model's clearance: no edge closes early, a tilt is not indicated"

@@ -112,7 +112,7 @@ fn line(points: &[(f64, f64)]) -> Option<(f64, f64, f64)> {
     let mx = points.iter().map(|p| p.0).sum::<f64>() / nf;
     let my = points.iter().map(|p| p.1).sum::<f64>() / nf;
     let sxx: f64 = points.iter().map(|p| (p.0 - mx).powi(2)).sum();
-    if !(sxx > 0.0) {
+    if sxx.is_nan() || sxx <= 0.0 {
         return None;
     }
     let sxy: f64 = points.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum();
@@ -173,7 +173,7 @@ pub(super) fn wear_stage(
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &w| {
             (a.min(w), b.max(w))
         });
-    if ws.len() < 3 || !(wmax - wmin > 1e-6) {
+    if ws.len() < 3 || (wmax - wmin).is_nan() || wmax - wmin <= 1e-6 {
         work.undecided(
             "wear",
             format!("the model's contact dissipates {:.2e} J between the first and last bracketed tests: nothing for wear to grow with", (wmax - wmin).max(0.0)),

@@ -101,8 +101,8 @@ pub(super) fn test_clearance_by_runs(
     }))
 }
 
-/// Least-squares line `y = a + k x`: (a, k, standard error of k); `None` with fewer than
-/// three points or no spread in `x`.
+/// Least-squares line `y = a + k x`: (a, k, standard error of k, NaN with two points); `None`
+/// with fewer than two points or no spread in `x`.
 fn line(points: &[(f64, f64)]) -> Option<(f64, f64, f64)> {
     let n = points.len();
     if n < 2 {
@@ -112,7 +112,9 @@ fn line(points: &[(f64, f64)]) -> Option<(f64, f64, f64)> {
     let mx = points.iter().map(|p| p.0).sum::<f64>() / nf;
     let my = points.iter().map(|p| p.1).sum::<f64>() / nf;
     let sxx: f64 = points.iter().map(|p| (p.0 - mx).powi(2)).sum();
-    if sxx.is_nan() || sxx <= 0.0 {
+    // NOTE: relative to the scale of x: equal x's leave a round-off spread, not zero.
+    let scale: f64 = points.iter().map(|p| p.0 * p.0).sum();
+    if sxx.is_nan() || sxx <= 1e-12 * scale {
         return None;
     }
     let sxy: f64 = points.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum();

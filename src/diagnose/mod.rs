@@ -10,7 +10,10 @@
 //!   steps of each test (reference section 3.2), and their dependence on the amplitude across
 //!   levels (the clamp's friction);
 //! - [`clearance`]: the clearance per test from the relative tip displacement before the
-//!   first impact (reference section 4, Table 2), and its trend over the session (wear).
+//!   first impact (reference section 4, Table 2);
+//! - [`wear`]: the clearance per test against the model's accumulated contact work, and
+//!   `[model.wear]` fitted by whole-session model runs; `tilt`: a tilted contact face
+//!   against a smaller clearance (both stages of [`pipeline`]).
 //!
 //! Every estimator works on [`evidence::SessionEvidence`], the fundamental complex amplitudes
 //! and contact state of every record window, built once per recording (optionally with
@@ -27,6 +30,8 @@ pub mod outcome;
 pub mod pipeline;
 pub mod rerun;
 pub mod sensors;
+mod tilt;
+pub mod wear;
 
 pub use clearance::{clearance_per_test, ClearanceEvidence, ClearanceOptions, TestClearance};
 pub use error::{DiagnoseError, EvidenceError};

@@ -115,7 +115,7 @@ pub enum DiagnoseProgress {
 
 /// Which steps an error covers.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Steps {
+pub(super) enum Steps {
     /// Impact-free steps, motion channels.
     ImpactFree,
     /// Every step, every channel (the model's contact where the measurement had none counts).
@@ -124,7 +124,7 @@ enum Steps {
 
 /// RMS score of the features of the steps of `tests` in `which` (of channel `channel` only,
 /// when given); None without any.
-fn set_error_of(
+pub(super) fn set_error_of(
     scores: &[StepScores],
     tests: &[usize],
     which: Steps,
@@ -154,40 +154,40 @@ fn set_error_of(
 }
 
 /// [`set_error_of`] over every channel.
-fn set_error(scores: &[StepScores], tests: &[usize], which: Steps) -> Option<f64> {
+pub(super) fn set_error(scores: &[StepScores], tests: &[usize], which: Steps) -> Option<f64> {
     set_error_of(scores, tests, which, None)
 }
 
 /// A candidate effect.
-struct Candidate {
-    effect: &'static str,
+pub(super) struct Candidate {
+    pub(super) effect: &'static str,
     /// The model with the candidate on top of the accepted effects.
-    ext: PhysicsSpec,
-    parameters: serde_json::Value,
-    n_params: usize,
-    evidence: serde_json::Value,
-    alternatives: Vec<String>,
-    train: Vec<usize>,
-    validation: Vec<usize>,
-    steps: Steps,
+    pub(super) ext: PhysicsSpec,
+    pub(super) parameters: serde_json::Value,
+    pub(super) n_params: usize,
+    pub(super) evidence: serde_json::Value,
+    pub(super) alternatives: Vec<String>,
+    pub(super) train: Vec<usize>,
+    pub(super) validation: Vec<usize>,
+    pub(super) steps: Steps,
     /// The one channel the effect acts on (a sensor gain), whose features judge it.
-    channel: Option<String>,
+    pub(super) channel: Option<String>,
 }
 
 /// The diagnosis state: the runner, the model so far, the results.
-struct Work<'a> {
-    runner: ModelRunner<'a>,
-    steps: &'a SessionSteps,
-    opts: DiagnoseOptions,
-    accepted: PhysicsSpec,
-    effects: Vec<EffectResult>,
-    undecided: Vec<Undecided>,
+pub(super) struct Work<'a> {
+    pub(super) runner: ModelRunner<'a>,
+    pub(super) steps: &'a SessionSteps,
+    pub(super) opts: DiagnoseOptions,
+    pub(super) accepted: PhysicsSpec,
+    pub(super) effects: Vec<EffectResult>,
+    pub(super) undecided: Vec<Undecided>,
     cache: HashMap<(String, Vec<usize>), Vec<StepScores>>,
-    progress: &'a mut dyn FnMut(DiagnoseProgress),
+    pub(super) progress: &'a mut dyn FnMut(DiagnoseProgress),
 }
 
 impl Work<'_> {
-    fn scores(
+    pub(super) fn scores(
         &mut self,
         ext: &PhysicsSpec,
         tests: &[usize],
@@ -201,12 +201,12 @@ impl Work<'_> {
         Ok(s)
     }
 
-    fn names(&self, tests: &[usize]) -> Vec<String> {
+    pub(super) fn names(&self, tests: &[usize]) -> Vec<String> {
         tests.iter().map(|&t| self.steps.tests[t].clone()).collect()
     }
 
     /// The errors of the model `ext` on the candidate's tests.
-    fn errors(
+    pub(super) fn errors(
         &mut self,
         ext: &PhysicsSpec,
         c: &Candidate,
@@ -228,7 +228,7 @@ impl Work<'_> {
 
     /// Judges candidate `c` against the accepted model; accepts it if it predicts its
     /// validation tests better beyond the null spread. Returns whether accepted.
-    fn judge(&mut self, c: Candidate) -> Result<bool, DiagnoseError> {
+    pub(super) fn judge(&mut self, c: Candidate) -> Result<bool, DiagnoseError> {
         let line = format!(
             "{} {} (fit on {}, validated on {})",
             c.effect,
@@ -305,7 +305,7 @@ impl Work<'_> {
         ok
     }
 
-    fn undecided(&mut self, effect: &str, reason: impl Into<String>) {
+    pub(super) fn undecided(&mut self, effect: &str, reason: impl Into<String>) {
         self.undecided.push(Undecided {
             effect: effect.to_string(),
             reason: reason.into(),
@@ -314,7 +314,7 @@ impl Work<'_> {
 }
 
 /// Tests split alternately: positions 0, 2, ... train, 1, 3, ... validation.
-fn alternate(tests: &[usize]) -> (Vec<usize>, Vec<usize>) {
+pub(super) fn alternate(tests: &[usize]) -> (Vec<usize>, Vec<usize>) {
     let train = tests.iter().step_by(2).copied().collect();
     let validation = tests.iter().skip(1).step_by(2).copied().collect();
     (train, validation)
@@ -549,11 +549,25 @@ pub fn diagnose(
     (work.progress)(DiagnoseProgress::Stage(
         "identify: clearance per test before the first impact".into(),
     ));
-    let clearance = clearance_stage(&mut work, input.cfg, &ev)?;
-    work.undecided(
-        "tilt",
-        "not identified: the contact-regime statistics that would separate a tilt from the clearance are not compared yet",
-    );
+    let mut ce = clearance_per_test_of(&ev, &ClearanceOptions::of_rig(input.cfg))?;
+    let before_contact = work.accepted.clone();
+    (work.progress)(DiagnoseProgress::Stage(
+        "identify: the clearance per test against the contact work before it (wear)".into(),
+    ));
+    let worn = super::wear::wear_stage(&mut work, &mut ce)?;
+    if worn {
+        work.undecided(
+            "tilt",
+            "not fitted on top of the wear: the clearance changes over the session, and a tilt's early edge contact would be fitted against a moving clearance",
+        );
+    } else {
+        clearance_stage(&mut work, &ce)?;
+        (work.progress)(DiagnoseProgress::Stage(
+            "identify: tilt against the clearance (contact-regime statistics)".into(),
+        ));
+        super::tilt::tilt_stage(&mut work, input.rom, &before_contact, &ce)?;
+    }
+    let clearance = Some(ce);
 
     // Show: the whole session with the accepted effects.
     let any = work.effects.iter().any(|e| e.accepted);
@@ -1305,10 +1319,8 @@ fn repeated_level_test(fits: &[ModeFit], with: &[&AmplitudeDependence]) -> Optio
 /// Stage 4: the clearance per test, as an offset to the plan's.
 fn clearance_stage(
     work: &mut Work<'_>,
-    cfg: &RigConfig,
-    ev: &SessionEvidence,
-) -> Result<Option<super::clearance::ClearanceEvidence>, DiagnoseError> {
-    let ce = clearance_per_test_of(ev, &ClearanceOptions::of_rig(cfg))?;
+    ce: &super::clearance::ClearanceEvidence,
+) -> Result<(), DiagnoseError> {
     let bracketed: Vec<&super::clearance::TestClearance> = ce
         .tests
         .iter()
@@ -1319,16 +1331,7 @@ fn clearance_stage(
             "clearance",
             format!("{} test(s) bracket the clearance (impact-free steps, then contact); two are needed, one to fit and one to validate", bracketed.len()),
         );
-        work.undecided(
-            "wear",
-            "the clearance's trend needs three or more bracketed tests",
-        );
-        return Ok(Some(ce));
-    }
-    if let Some(t) = &ce.trend {
-        if t.slope_m.abs() > 3.0 * t.slope_standard_error_m && bracketed.len() >= 3 {
-            work.undecided("wear", format!("the clearance changes over the session ({:+.3e} m per test, standard error {:.1e}): a trend is seen, but fitting the wear coefficient against the model's contact work is not built yet", t.slope_m, t.slope_standard_error_m));
-        }
+        return Ok(());
     }
     let idx: Vec<usize> = bracketed.iter().map(|t| t.test_index).collect();
     let (train, validation) = alternate(&idx);
@@ -1338,60 +1341,12 @@ fn clearance_stage(
     // mean over the train tests.
     let mut fitted = Vec::new();
     for t in bracketed.iter().filter(|t| train.contains(&t.test_index)) {
-        let (Some(lo), Some(hi)) = (t.lower_bound_m, t.upper_bound_m) else {
-            continue;
-        };
-        let (lo, hi) = (lo.min(hi), lo.max(hi));
-        let mut tried: Vec<(f64, f64)> = Vec::new();
-        let mut grid: Vec<f64> = (0..9).map(|k| lo + (hi - lo) * k as f64 / 8.0).collect();
-        for round in 0..2 {
-            for &c in &grid {
-                if tried.iter().any(|p| p.0 == c) {
-                    continue;
-                }
-                let mut ext = work.accepted.clone();
-                let mut spec = ext.clearance.clone().unwrap_or(ClearanceSpec {
-                    offset: 0.0,
-                    tests: Vec::new(),
-                });
-                spec.tests.retain(|x| x.test != t.test);
-                spec.tests.push(crate::config::TestClearanceSpec {
-                    test: t.test.clone(),
-                    clearance: c,
-                });
-                ext.clearance = Some(spec);
-                let s = work.scores(&ext, &[t.test_index])?;
-                if let Some(e) = set_error(&s, &[t.test_index], Steps::All) {
-                    tried.push((c, e));
-                }
-            }
-            let Some(&(best, _)) = tried.iter().min_by(|a, b| a.1.total_cmp(&b.1)) else {
-                break;
-            };
-            if round == 0 {
-                let h = (hi - lo) / 8.0;
-                grid = vec![
-                    best - 0.5 * h,
-                    best - 0.25 * h,
-                    best + 0.25 * h,
-                    best + 0.5 * h,
-                ];
-            }
-        }
-        if let Some(&(best, e)) = tried.iter().min_by(|a, b| a.1.total_cmp(&b.1)) {
-            (work.progress)(DiagnoseProgress::Note(format!(
-                "clearance of {}: {:.4e} m by model runs (bracket {:.4e}-{:.4e} m, error {e:.3}, {} runs)",
-                t.test,
-                best,
-                lo,
-                hi,
-                tried.len()
-            )));
-            fitted.push((t, best));
+        if let Some(best) = super::wear::test_clearance_by_runs(work, t)? {
+            fitted.push((*t, best.clearance_m));
         }
     }
     if fitted.is_empty() {
-        return Ok(Some(ce));
+        return Ok(());
     }
     let current = |t: &super::clearance::TestClearance| {
         work.accepted.test_clearance(&t.test, t.plan_clearance_m)
@@ -1403,7 +1358,7 @@ fn clearance_stage(
         (work.progress)(DiagnoseProgress::Note(format!(
             "clearance: the fitted offset {offset:+.2e} m is within 2 % of the plan's {plan:.3e} m"
         )));
-        return Ok(Some(ce));
+        return Ok(());
     }
     let spread = if offs.len() > 1 {
         (offs.iter().map(|o| (o - offset).powi(2)).sum::<f64>() / (offs.len() - 1) as f64).sqrt()
@@ -1422,14 +1377,14 @@ fn clearance_stage(
         parameters: json!({"offset": base_offset + offset, "tests": fitted.iter().map(|(t, c)| json!({"test": t.test, "clearance": c})).collect::<Vec<_>>()}),
         n_params: 1,
         evidence: json!({"offset_m": offset, "offset_spread_m": spread.is_finite().then_some(spread), "plan_clearance_m": plan, "brackets_m": bracketed.iter().map(|t| json!({"test": t.test, "lower": t.lower_bound_m, "upper": t.upper_bound_m})).collect::<Vec<_>>()}),
-        alternatives: vec!["tilt: a tilted face closes first at one edge, like a smaller clearance (not separated yet)".into()],
+        alternatives: Vec::new(),
         train,
         validation,
         steps: Steps::All,
         channel: None,
     };
     work.judge(cand)?;
-    Ok(Some(ce))
+    Ok(())
 }
 
 #[cfg(test)]

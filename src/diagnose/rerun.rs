@@ -151,6 +151,17 @@ pub struct ModelRunner<'a> {
     jobs: usize,
     /// What the runs cost so far.
     pub cost: RunCost,
+    /// Per test of the session: the dissipated contact work at its start in the last run, J
+    /// (`None`: not run, or no wear in the model).
+    last_contact_work: Vec<Option<f64>>,
+}
+
+/// What one stretch of tests gave.
+struct GroupRun {
+    scores: Vec<StepScores>,
+    rig_seconds: f64,
+    /// (test index, dissipated contact work at its start, J), with wear in the model.
+    work: Vec<(usize, f64)>,
 }
 
 impl<'a> ModelRunner<'a> {
@@ -176,6 +187,7 @@ impl<'a> ModelRunner<'a> {
             beam_length,
             jobs: jobs.max(1),
             cost: RunCost::default(),
+            last_contact_work: Vec::new(),
         }
     }
 
@@ -208,7 +220,7 @@ impl<'a> ModelRunner<'a> {
             circuit: self.base.circuit.clone(),
             contact_threshold_v: self.base.contact_threshold_v,
         };
-        let mut results: Vec<Result<(Vec<StepScores>, f64), DiagnoseError>> = Vec::new();
+        let mut results: Vec<Result<GroupRun, DiagnoseError>> = Vec::new();
         let this: &ModelRunner<'_> = self;
         for chunk in groups.chunks(this.jobs) {
             let done: Vec<_> = std::thread::scope(|s| {
@@ -227,27 +239,56 @@ impl<'a> ModelRunner<'a> {
             results.extend(done);
         }
         let mut out = Vec::new();
+        let mut work = vec![None; self.steps.tests.len()];
         for r in results {
-            let (steps, rig_seconds) = r?;
+            let g = r?;
             self.cost.runs += 1;
-            self.cost.rig_seconds += rig_seconds;
-            out.extend(steps);
+            self.cost.rig_seconds += g.rig_seconds;
+            out.extend(g.scores);
+            for (t, w) in g.work {
+                if let Some(slot) = work.get_mut(t) {
+                    *slot = Some(w);
+                }
+            }
         }
         out.sort_by_key(|s| (s.test_index, s.step));
         out.retain(|s| wanted.contains(&s.test_index));
         self.cost.wall_seconds += wall.elapsed().as_secs_f64();
+        self.last_contact_work = work;
         Ok(out)
     }
 
+    /// The model's dissipated contact work `W` (J, `physics::wear`) at the start of every
+    /// test, over the whole session run with extensions `ext` (wear on, with a zero coefficient
+    /// when `ext` has none: `W` is counted whatever the coefficient; the clearances stay
+    /// `ext`'s), with the compared steps of that run. The contact work of a test before its
+    /// first impact is its start's: the clearance measured there has seen exactly this `W`.
+    pub fn contact_work(
+        &mut self,
+        ext: &PhysicsSpec,
+    ) -> Result<(Vec<Option<f64>>, Vec<StepScores>), DiagnoseError> {
+        let mut ext = ext.clone();
+        if ext.wear.is_none() {
+            ext.wear = Some(crate::config::WearSpec {
+                coefficient: 0.0,
+                max_growth: None,
+            });
+        }
+        let all: Vec<usize> = (0..self.steps.tests.len()).collect();
+        let scores = self.run(&ext, &all)?;
+        Ok((self.last_contact_work.clone(), scores))
+    }
+
     /// One stretch of consecutive tests `group`, from rest at its lead-in.
-    fn run_group(
-        &self,
-        model: &TwinModel<'_>,
-        group: &[usize],
-    ) -> Result<(Vec<StepScores>, f64), DiagnoseError> {
+    fn run_group(&self, model: &TwinModel<'_>, group: &[usize]) -> Result<GroupRun, DiagnoseError> {
         let rec = self.rec;
+        let empty = GroupRun {
+            scores: Vec::new(),
+            rig_seconds: 0.0,
+            work: Vec::new(),
+        };
         let Some(&first) = group.first() else {
-            return Ok((Vec::new(), 0.0));
+            return Ok(empty);
         };
         let windows: Vec<&SessionStep> = self
             .steps
@@ -256,8 +297,16 @@ impl<'a> ModelRunner<'a> {
             .filter(|s| group.contains(&s.test_index))
             .collect();
         let Some(last) = windows.last() else {
-            return Ok((Vec::new(), 0.0));
+            return Ok(empty);
         };
+        // The first step start of each test of the group: where its contact work is read.
+        let mut test_starts: VecDeque<(usize, u64)> = VecDeque::new();
+        for &(t, _, sample) in &self.steps.starts {
+            if group.contains(&t) && test_starts.iter().all(|x| x.0 != t) {
+                test_starts.push_back((t, sample));
+            }
+        }
+        let mut work = Vec::new();
         let end = last.info.record_end_sample();
         let from = self.steps.lead_in(first).unwrap_or(0);
         let start = rec
@@ -291,6 +340,21 @@ impl<'a> ModelRunner<'a> {
             while let Some(c) = clearances.next_due(b.first_sample) {
                 twin.set_clearance(c)?;
             }
+            while test_starts
+                .front()
+                .is_some_and(|&(_, s)| s < b.first_sample + b.len as u64)
+            {
+                let Some((t, _)) = test_starts.pop_front() else {
+                    break;
+                };
+                // NOTE: read at the block holding the test's first sample (blocks are a few
+                // ms; no contact happens across a test's start, the sweep starts off the band).
+                if let Some(w) = twin.state().and_then(|s| s.effects.wear) {
+                    work.push((t, w.work));
+                } else if model.extensions.wear.is_some() {
+                    work.push((t, 0.0));
+                }
+            }
             let tb = twin.push_block(b)?;
             rig_seconds += b.len as f64 * dt;
             out.push(&tb);
@@ -318,6 +382,10 @@ impl<'a> ModelRunner<'a> {
             };
             scores.push(step.scores(features));
         }
-        Ok((scores, rig_seconds))
+        Ok(GroupRun {
+            scores,
+            rig_seconds,
+            work,
+        })
     }
 }

@@ -6,7 +6,8 @@
 //! - `evidence-linear`: natural frequency and damping ratio of 1FU and 1FL against the tip
 //!   amplitude at resonance, per test (the clamp friction's signature);
 //! - `evidence-clearance`: the clearance bracket per test against the session order or the
-//!   accumulated contact work (wear);
+//!   accumulated contact work (wear): with the wear stage's clearances refined by model runs
+//!   (measured) and the fitted wear's clearance (model);
 //! - `evidence-sensors`: measured over model RMS per motion channel on the impact-free steps
 //!   (a sensitivity error is flat in frequency);
 //! - `before-after`: the response of the validation tests, measured and the model before and
@@ -804,6 +805,7 @@ fn evidence_clearance(d: &Diagnosis) -> Option<Panels> {
         plan.insert(0, (x0, first));
         plan.push((x1, last));
     }
+    let plan_first = plan.first().map(|q| q.1);
     p.series.push(line(plan, GREY, LineKind::Solid, 1));
     let mut legend = Vec::new();
     for t in &est {
@@ -830,6 +832,47 @@ fn evidence_clearance(d: &Diagnosis) -> Option<Panels> {
         GREY,
         LineKind::Solid,
     ));
+    // The wear stage: each test's clearance refined by model runs within its bracket
+    // (measured) and the fitted model's clearance `plan + offset + k W` (model).
+    let wear = d.effects.iter().find(|e| e.effect == "wear");
+    if let (true, Some(w)) = (by_work, wear) {
+        let pts: Vec<(f64, f64)> = (w.evidence["points"].as_array().into_iter().flatten())
+            .filter_map(|q| {
+                Some((
+                    q["contact_work_j"].as_f64()?,
+                    1e3 * q["clearance_m"].as_f64()?,
+                ))
+            })
+            .collect();
+        if !pts.is_empty() {
+            p.series
+                .push(line(pts, BLACK, LineKind::Markers, width() + 2));
+            legend.push(entry(
+                "measured: refined by model runs within the bracket",
+                BLACK,
+                LineKind::Markers,
+            ));
+        }
+        let k = w.parameters["coefficient"].as_f64();
+        let off = w.parameters["clearance_offset"].as_f64().unwrap_or(0.0);
+        let cap = w.parameters["max_growth"].as_f64().unwrap_or(f64::INFINITY);
+        if let (Some(k), Some(c0)) = (k, plan_first) {
+            let model: Vec<(f64, f64)> = (0..=20)
+                .map(|i| x0.max(0.0) + (x1 - x0.max(0.0)) * f64::from(i) / 20.0)
+                .map(|x| (x, c0 + 1e3 * (off + (k * x).min(cap))))
+                .collect();
+            p.series.push(line(model, BLACK, LineKind::Dashed, width()));
+            legend.push(entry(
+                format!(
+                    "model: wear {} m/J ({})",
+                    sig(k),
+                    if w.accepted { "accepted" } else { "rejected" }
+                ),
+                BLACK,
+                LineKind::Dashed,
+            ));
+        }
+    }
     if let Some(t) = trend {
         p.series
             .push(line(trend_pts, GREY, LineKind::Dashed, width()));

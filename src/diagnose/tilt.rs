@@ -1,0 +1,249 @@
+//! The tilt stage of the diagnosis: a tilted contact face (`[model.tilt]`, `physics::tilt`)
+//! against a smaller clearance.
+//!
+//! A face tilted by `angle` about the axis `[0, 1]` (y: the gap varies along the beams) closes
+//! first at one edge of the patch, `sin(angle) x_edge` earlier than the mean gap (`x_edge` the
+//! edge's distance from the patch's centroid along x, from the ROM's pair positions): before
+//! the first impact it looks exactly like a clearance smaller by that much. What can separate
+//! them is what follows the first contact: the contact-regime statistics (contact fraction,
+//! impacts per period, the tip amplitudes in contact), as the pairs close progressively
+//! instead of all at once.
+//!
+//! Parameterisation: the angle about y, signed (positive: the tip-side edge, larger x, closes
+//! first), the axis fixed at `[0, 1]`. A slope across the beams (about x) is not fitted: the
+//! channels (bending along the beams, one contact voltage) carry no torsion, so it would be a
+//! smaller clearance to them. The angle starts from the clearance the train tests show before
+//! their first impact (the model-run clearance per test, [`super::wear::test_clearance_by_runs`]):
+//! `sin(angle) x_edge = c_model - c_measured`, for either edge; a grid of model runs of the
+//! train tests over both signs and 0.6-1.5 times that angle, refined once, fits it.
+//!
+//! Selection: the tilt is judged by the pipeline's rule against the model without the
+//! clearance offset (the two compete for the same evidence). Where the clearance offset was
+//! accepted too, the one with the lower validation error stays in the model if it is lower by
+//! more than the impact band's null spread; otherwise both are reported as equal alternatives
+//! of each other (the clearance, with one parameter and first identified, stays in the model):
+//! the session cannot tell them apart, and the diagnosis says so.
+
+use serde_json::json;
+
+use crate::config::{PhysicsSpec, TiltSpec};
+use crate::rom::Rom;
+
+use super::clearance::{ClearanceEvidence, TestClearance};
+use super::pipeline::{alternate, set_error, set_error_of, Candidate, Steps, Work};
+use super::wear::test_clearance_by_runs;
+use super::{DiagnoseError, DiagnoseProgress};
+
+/// The tilt axis fitted, `[x, y]`.
+const AXIS: [f64; 2] = [0.0, 1.0];
+
+/// The patch's edges along x from its area centroid, m: (tip side, larger x; clamp side),
+/// both >= 0.
+fn edges(rom: &Rom) -> (f64, f64) {
+    let total: f64 = rom.pair_area.iter().sum();
+    let cx = if total > 0.0 {
+        rom.pair_position
+            .iter()
+            .zip(&rom.pair_area)
+            .map(|(p, a)| a * p[0])
+            .sum::<f64>()
+            / total
+    } else {
+        0.0
+    };
+    rom.pair_position
+        .iter()
+        .fold((0.0f64, 0.0f64), |(t, c), p| {
+            (t.max(p[0] - cx), c.max(cx - p[0]))
+        })
+}
+
+/// Stage 5: tilt (module docs). `base` is the model before the clearance stage (without its
+/// offset); `ce` the clearance evidence.
+pub(super) fn tilt_stage(
+    work: &mut Work<'_>,
+    rom: &Rom,
+    base: &PhysicsSpec,
+    ce: &ClearanceEvidence,
+) -> Result<(), DiagnoseError> {
+    let bracketed: Vec<&TestClearance> = ce
+        .tests
+        .iter()
+        .filter(|t| t.clearance_m.is_some() && t.lower_bound_m.is_some())
+        .collect();
+    if bracketed.len() < 2 {
+        work.undecided(
+            "tilt",
+            format!("{} test(s) bracket the first contact; a tilt is fitted on one and validated on another", bracketed.len()),
+        );
+        return Ok(());
+    }
+    let (tip_edge, clamp_edge) = edges(rom);
+    if tip_edge <= 0.0 || clamp_edge <= 0.0 {
+        work.undecided(
+            "tilt",
+            "the contact patch has no extent along the beams in the ROM",
+        );
+        return Ok(());
+    }
+    let idx: Vec<usize> = bracketed.iter().map(|t| t.test_index).collect();
+    let (train, validation) = alternate(&idx);
+    // The train tests' clearance before the first impact against the base model's, by the
+    // same model runs as the clearance stage (shared through the cache).
+    let after_clearance = std::mem::replace(&mut work.accepted, base.clone());
+    let mut closes = Vec::new();
+    for t in bracketed.iter().filter(|t| train.contains(&t.test_index)) {
+        if let Some(r) = test_clearance_by_runs(work, t)? {
+            closes.push(base.test_clearance(&t.test, t.plan_clearance_m) - r.clearance_m);
+        }
+    }
+    let plan = bracketed[0].plan_clearance_m;
+    let closing = if closes.is_empty() {
+        0.0
+    } else {
+        closes.iter().sum::<f64>() / closes.len() as f64
+    };
+    if closing.is_nan() || closing <= 0.02 * plan {
+        work.accepted = after_clearance;
+        (work.progress)(DiagnoseProgress::Note(format!(
+            "tilt: the train tests' first contact comes {closing:+.2e} m from the model's clearance: no edge closes early, a tilt is not indicated"
+        )));
+        work.effects.push(super::outcome::EffectResult {
+            effect: "tilt".into(),
+            rank: 0,
+            accepted: false,
+            parameters: json!({}),
+            alternatives: Vec::new(),
+            evidence: json!({"edge_closing_m": closing, "plan_clearance_m": plan}),
+            reason: format!("not indicated: a tilted face closes one edge early, but the train tests' first contact is not earlier than the model's clearance by 2 % of it ({closing:+.2e} m)"),
+            train_tests: work.names(&train),
+            validation_tests: work.names(&validation),
+            error_before: None,
+            error_after: None,
+        });
+        return Ok(());
+    }
+    let with = |angle: f64| {
+        let mut ext = base.clone();
+        ext.tilt = Some(TiltSpec { angle, axis: AXIS });
+        ext
+    };
+    let start_tip = (closing / tip_edge).min(1.0).asin();
+    let start_clamp = -(closing / clamp_edge).min(1.0).asin();
+    let mut grid: Vec<f64> = [start_tip, start_clamp]
+        .iter()
+        .flat_map(|s| [0.6, 0.8, 1.0, 1.2, 1.5].map(|m| (m * s).clamp(-0.1, 0.1)))
+        .collect();
+    let mut tried: Vec<(f64, f64)> = Vec::new();
+    for round in 0..2 {
+        for &angle in &grid {
+            if tried.iter().any(|p| p.0 == angle) {
+                continue;
+            }
+            (work.progress)(DiagnoseProgress::Evaluation(format!(
+                "tilt {angle:.3e} rad about y on the train tests"
+            )));
+            let s = work.scores(&with(angle), &train)?;
+            if let Some(e) = set_error(&s, &train, Steps::All) {
+                tried.push((angle, e));
+            }
+        }
+        let Some(&(best, _)) = tried.iter().min_by(|a, b| a.1.total_cmp(&b.1)) else {
+            break;
+        };
+        if round == 0 {
+            grid = vec![0.9 * best, 1.1 * best];
+        }
+    }
+    let Some(&(angle, train_error)) = tried.iter().min_by(|a, b| a.1.total_cmp(&b.1)) else {
+        work.accepted = after_clearance;
+        return Ok(());
+    };
+    (work.progress)(DiagnoseProgress::Note(format!(
+        "tilt: {angle:.3e} rad about y by {} runs of the train tests (error {train_error:.3}; the edge closes {closing:.2e} m early)",
+        tried.len()
+    )));
+    // The contact channel's statistics on the validation tests, before and with the tilt and
+    // with the clearance offset: what separates the two.
+    let mut all: Vec<usize> = train.iter().chain(&validation).copied().collect();
+    all.sort_unstable();
+    let contact_rms = |s: &[super::outcome::StepScores]| {
+        set_error_of(s, &validation, Steps::All, Some("contact"))
+    };
+    let s_base = work.scores(base, &all)?;
+    let s_tilt = work.scores(&with(angle), &all)?;
+    let s_clear = work.scores(&after_clearance, &all)?;
+    let evidence = json!({
+        "edge_closing_m": closing,
+        "patch_edges_m": {"tip_side": tip_edge, "clamp_side": clamp_edge},
+        "axis": AXIS,
+        "validation_contact_score_rms": {
+            "model_before": contact_rms(&s_base),
+            "with_tilt": contact_rms(&s_tilt),
+            "with_clearance_stage": contact_rms(&s_clear),
+        },
+        "angles_tried": tried.iter().map(|(a, e)| json!({"angle": a, "train_error": e})).collect::<Vec<_>>(),
+    });
+    let cand = Candidate {
+        effect: "tilt",
+        ext: with(angle),
+        parameters: json!({"angle": angle, "axis": AXIS}),
+        n_params: 1,
+        evidence,
+        alternatives: Vec::new(),
+        train,
+        validation,
+        steps: Steps::All,
+        channel: None,
+    };
+    let tilt_ok = work.judge(cand)?;
+    // The clearance offset judged before, if it was accepted.
+    let Some(ci) = work
+        .effects
+        .iter()
+        .rposition(|e| e.effect == "clearance" && e.accepted)
+    else {
+        return Ok(());
+    };
+    let ti = work.effects.len() - 1;
+    let (Some(c_after), Some(t_after)) = (
+        work.effects[ci].error_after.map(|e| e.validation),
+        work.effects[ti].error_after.map(|e| e.validation),
+    ) else {
+        work.accepted = after_clearance;
+        return Ok(());
+    };
+    let null = work.opts.contact_null_spread;
+    if !tilt_ok {
+        work.accepted = after_clearance;
+        return Ok(());
+    }
+    let c_param = work.effects[ci].parameters.clone();
+    if t_after + null < c_after {
+        // The tilt predicts the validation tests better beyond the null spread: it replaces
+        // the offset (the model is `base` with the tilt, as judged).
+        let c = &mut work.effects[ci];
+        c.accepted = false;
+        c.reason = format!("replaced by the tilt, which predicts the validation tests better ({t_after:.3} against {c_after:.3}, beyond the null spread {null})");
+        c.alternatives.push(format!(
+            "tilt: {angle:.3e} rad about y (better on validation)"
+        ));
+        work.effects[ti].alternatives.push(format!(
+            "clearance {c_param}: the same first contact, worse on validation ({c_after:.3})"
+        ));
+    } else {
+        // Equal: the session cannot tell them apart. The clearance (one parameter, first
+        // identified) stays in the model; both name each other.
+        work.accepted = after_clearance;
+        let t = &mut work.effects[ti];
+        t.accepted = false;
+        t.reason = format!("an equal alternative of the clearance offset: both lower the validation error beyond the null spread, to {t_after:.3} (tilt) and {c_after:.3} (clearance), within the impact band's null spread {null} of each other; the channels cannot tell a tilted face from a smaller clearance here, the clearance stays in the model");
+        t.alternatives.push(format!(
+            "clearance {c_param} (equal: validation {c_after:.3})"
+        ));
+        work.effects[ci].alternatives.push(format!(
+            "tilt: {angle:.3e} rad about y (equal: validation {t_after:.3}; the channels cannot tell them apart)"
+        ));
+    }
+    Ok(())
+}

@@ -62,6 +62,25 @@ fn comparable(mut d: Value) -> Value {
     d
 }
 
+/// Asserts that diagnosis `d` is a mismatch whose first accepted effect is the 1FU frequency,
+/// within 0.5 % of `f_true`, with the 1FU damping within 20 % of `z_true` accepted too;
+/// returns the two effects.
+fn found_1fu(d: &Value, f_true: f64, z_true: f64) -> (&Value, &Value) {
+    assert_eq!(d["verdict"], "mismatch");
+    let f = accepted(d, "linear_frequency");
+    assert_eq!(f.len(), 1, "{d:#}");
+    assert_eq!(f[0]["rank"], 1);
+    assert_eq!(f[0]["parameters"]["mode"], "1FU");
+    let fit = f[0]["parameters"]["frequency_hz"].as_f64().unwrap();
+    assert!((fit / f_true - 1.0).abs() < 0.005, "{fit} for {f_true}");
+    let z = accepted(d, "linear_damping");
+    assert_eq!(z.len(), 1, "{d:#}");
+    assert_eq!(z[0]["parameters"]["mode"], "1FU");
+    let zeta = z[0]["parameters"]["damping_ratio"].as_f64().unwrap();
+    assert!((zeta / z_true - 1.0).abs() < 0.2, "{zeta} for {z_true}");
+    (f[0], z[0])
+}
+
 #[test]
 fn the_nominal_rig_is_no_mismatch_and_the_hidden_physics_is_never_read() {
     let dir = tempfile::tempdir().unwrap();
@@ -106,25 +125,15 @@ fn a_wrong_linear_1fu_is_found_fitted_validated_and_written_out() {
         "linear",
         &["--write-config", fixed.to_str().unwrap()],
     );
-    assert_eq!(d["verdict"], "mismatch");
-    let f = accepted(&d, "linear_frequency");
-    assert_eq!(f.len(), 1, "{d:#}");
-    assert_eq!(f[0]["rank"], 1);
-    assert_eq!(f[0]["parameters"]["mode"], "1FU");
-    let fit = f[0]["parameters"]["frequency_hz"].as_f64().unwrap();
-    assert!((fit / f_true - 1.0).abs() < 0.005, "{fit} for {f_true}");
+    let (f, z) = found_1fu(&d, f_true, z_true);
     let (b, a) = (
-        f[0]["error_before"]["validation"].as_f64().unwrap(),
-        f[0]["error_after"]["validation"].as_f64().unwrap(),
+        f["error_before"]["validation"].as_f64().unwrap(),
+        f["error_after"]["validation"].as_f64().unwrap(),
     );
     assert!(b >= 3.0 * a, "validation {b} -> {a}");
-    let z = accepted(&d, "linear_damping");
-    assert_eq!(z.len(), 1, "{d:#}");
-    let zeta = z[0]["parameters"]["damping_ratio"].as_f64().unwrap();
-    assert!((zeta / z_true - 1.0).abs() < 0.2, "{zeta} for {z_true}");
     assert!(
-        z[0]["error_after"]["validation"].as_f64().unwrap()
-            < z[0]["error_before"]["validation"].as_f64().unwrap()
+        z["error_after"]["validation"].as_f64().unwrap()
+            < z["error_before"]["validation"].as_f64().unwrap()
     );
 
     // The written description, replayed, gives the "after" comparison of every step.
@@ -249,19 +258,8 @@ fn a_nominal_session_against_a_wrong_rig_description_finds_its_1fu() {
         "wrong",
         &["--config", wrong.to_str().unwrap()],
     );
-    assert_eq!(d["verdict"], "mismatch");
-    let f = accepted(&d, "linear_frequency");
-    assert_eq!(f.len(), 1, "{d:#}");
-    assert_eq!(f[0]["rank"], 1);
-    assert_eq!(f[0]["parameters"]["mode"], "1FU");
-    let fit = f[0]["parameters"]["frequency_hz"].as_f64().unwrap();
-    assert!((fit / f_true - 1.0).abs() < 0.005, "{fit} for {f_true}");
-    let z = accepted(&d, "linear_damping");
-    assert_eq!(z.len(), 1, "{d:#}");
-    assert_eq!(z[0]["parameters"]["mode"], "1FU");
-    let zeta = z[0]["parameters"]["damping_ratio"].as_f64().unwrap();
-    assert!((zeta / z_true - 1.0).abs() < 0.2, "{zeta} for {z_true}");
-    for e in [f[0], z[0]] {
+    let (f, z) = found_1fu(&d, f_true, z_true);
+    for e in [f, z] {
         let (b, a) = (
             e["error_before"]["validation"].as_f64().unwrap(),
             e["error_after"]["validation"].as_f64().unwrap(),

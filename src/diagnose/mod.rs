@@ -25,6 +25,7 @@
 pub mod clearance;
 mod error;
 pub mod evidence;
+mod judge;
 pub mod linear;
 pub mod outcome;
 pub mod pipeline;
@@ -36,7 +37,8 @@ pub mod wear;
 pub use clearance::{clearance_per_test, ClearanceEvidence, ClearanceOptions, TestClearance};
 pub use error::{DiagnoseError, EvidenceError};
 pub use evidence::{session_evidence, SessionEvidence, WindowEvidence};
+pub use judge::{DiagnoseOptions, DiagnoseProgress};
 pub use linear::{linear_modes, LinearEvidence, LinearOptions, ModeFit};
 pub use outcome::{Diagnosis, Verdict};
-pub use pipeline::{diagnose, DiagnoseInput, DiagnoseOptions, DiagnoseProgress};
+pub use pipeline::{diagnose, DiagnoseInput};
 pub use sensors::{sensor_sensitivities, SensorEvidence, SensorOptions};

@@ -30,7 +30,7 @@ use crate::config::{PhysicsSpec, TiltSpec};
 use crate::rom::Rom;
 
 use super::clearance::{ClearanceEvidence, TestClearance};
-use super::pipeline::{alternate, set_error, set_error_of, Candidate, Steps, Work};
+use super::judge::{alternate, set_error, set_error_of, Candidate, Steps, Work};
 use super::wear::test_clearance_by_runs;
 use super::{DiagnoseError, DiagnoseProgress};
 

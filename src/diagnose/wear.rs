@@ -24,8 +24,8 @@ use serde_json::json;
 use crate::config::{ClearanceSpec, TestClearanceSpec, WearSpec};
 
 use super::clearance::{ClearanceEvidence, TestClearance};
+use super::judge::{alternate, set_error, Candidate, Steps, Work};
 use super::outcome::EffectResult;
-use super::pipeline::{alternate, set_error, Candidate, Steps, Work};
 use super::{DiagnoseError, DiagnoseProgress};
 
 /// A test's clearance refined by model runs.

@@ -13,7 +13,7 @@
 mod cli_support;
 mod diagnose_support;
 
-use diagnose_support::{diagnose, sim_session};
+use diagnose_support::{assert_null, diagnose, sim_session};
 use serde_json::Value;
 
 /// A plan file of the repository.
@@ -23,21 +23,6 @@ fn plan(name: &str) -> String {
         env!("CARGO_MANIFEST_DIR")
     ))
     .unwrap()
-}
-
-/// Asserts the null verdict: nothing accepted, `no_significant_mismatch`.
-fn assert_null(d: &Value) {
-    assert_eq!(d["verdict"], "no_significant_mismatch", "{d:#}");
-    let accepted: Vec<&Value> = d["effects"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .filter(|e| e["accepted"] == true)
-        .collect();
-    assert!(
-        accepted.is_empty(),
-        "accepted on a nominal session: {accepted:#?}"
-    );
 }
 
 /// The effects a diagnosis says it cannot decide.

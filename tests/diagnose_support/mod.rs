@@ -210,3 +210,18 @@ pub fn accepted<'a>(d: &'a serde_json::Value, effect: &str) -> Vec<&'a serde_jso
         .filter(|e| e["effect"] == effect && e["accepted"] == true)
         .collect()
 }
+
+/// Asserts the null verdict of diagnosis `d`: `no_significant_mismatch`, nothing accepted.
+pub fn assert_null(d: &serde_json::Value) {
+    assert_eq!(d["verdict"], "no_significant_mismatch", "{d:#}");
+    let accepted: Vec<&serde_json::Value> = d["effects"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|e| e["accepted"] == true)
+        .collect();
+    assert!(
+        accepted.is_empty(),
+        "accepted on a nominal session: {accepted:#?}"
+    );
+}

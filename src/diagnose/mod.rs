@@ -22,6 +22,7 @@
 //! sees the DAQ counts, the layout and the session's events only. What a session cannot tell is a typed
 //! error ([`EvidenceError`]) or an explicit "undecided" in the result, never a guess.
 
+mod clamp;
 pub mod clearance;
 mod error;
 pub mod evidence;

@@ -31,7 +31,6 @@ use std::f64::consts::PI;
 
 use serde_json::json;
 
-use crate::config::{Beam, ClampFrictionSpec};
 use crate::config::{ClearanceSpec, ModalCorrectionSpec, PhysicsSpec, RigConfig, SensorGainSpec};
 use crate::rom::Rom;
 use crate::session::replay::Recording;
@@ -44,7 +43,7 @@ use super::evidence::{session_evidence, SessionEvidence};
 use super::judge::{
     alternate, set_error, Candidate, DiagnoseOptions, DiagnoseProgress, Steps, Work,
 };
-use super::linear::{linear_modes_of, AmplitudeDependence, LinearEvidence, LinearOptions, ModeFit};
+use super::linear::{linear_modes_of, LinearEvidence, LinearOptions, ModeFit};
 use super::outcome::{
     Diagnosis, DiagnosisCost, EffectResult, Located, Regime, RegimeScores, SetError, StepScores,
     Verdict,
@@ -79,7 +78,7 @@ impl GainSplit {
     fn of(steps: &SessionSteps) -> GainSplit {
         let all: Vec<usize> = (0..steps.tests.len()).collect();
         let (train, validation) = alternate(&all);
-        let free = tests_with(steps, true);
+        let free = steps.tests_with(true);
         let within = |set: &[usize]| free.iter().copied().filter(|t| set.contains(t)).collect();
         GainSplit {
             free_train: within(&train),
@@ -89,19 +88,6 @@ impl GainSplit {
             free,
         }
     }
-}
-
-/// Tests (indices) with at least one step of regime other than `Impacts` (`impact_free`) or
-/// of `Impacts`.
-fn tests_with(steps: &SessionSteps, impact_free: bool) -> Vec<usize> {
-    let mut t: Vec<usize> = steps
-        .steps
-        .iter()
-        .filter(|s| s.impact_free() == impact_free)
-        .map(|s| s.test_index)
-        .collect();
-    t.dedup();
-    t
 }
 
 /// Per regime: steps, steps above the threshold, median largest score.
@@ -257,7 +243,7 @@ pub fn diagnose(
         (work.progress)(DiagnoseProgress::Stage(
             "identify: amplitude dependence without contact (the clamp's friction)".into(),
         ));
-        clamp_stage(&mut work, lin)?;
+        super::clamp::clamp_stage(&mut work, lin)?;
     }
 
     // The beam channels' gains once more, against the model with the linear and clamp
@@ -523,14 +509,7 @@ fn sensor_stage(
                 let mut cand = cand;
                 cand.evidence["judged_on"] =
                     json!("its ratio to the other platform accelerometers' mean");
-                let line = format!(
-                    "sensor_gain {} (fit on {}, validated on {}: the platform channels' ratios)",
-                    cand.parameters,
-                    work.names(&cand.train).join(", "),
-                    work.names(&cand.validation).join(", ")
-                );
-                (work.progress)(DiagnoseProgress::Evaluation(line));
-                work.decide(cand, before, after);
+                work.judge_on(cand, "the platform channels' ratios", before, after);
             } else {
                 work.judge(cand)?;
             }
@@ -601,14 +580,7 @@ fn sensor_stage(
             } else {
                 let (before, after) =
                     redundancy_errors(ratio_of(&sens), ratio_of(&sens_validation), gain, &opts);
-                let line = format!(
-                    "sensor_gain {} (fit on {}, validated on {}: the two channels' ratio)",
-                    cand.parameters,
-                    work.names(&cand.train).join(", "),
-                    work.names(&cand.validation).join(", ")
-                );
-                (work.progress)(DiagnoseProgress::Evaluation(line));
-                work.decide(cand, before, after);
+                work.judge_on(cand, "the two channels' ratio", before, after);
             }
         }
     }
@@ -872,181 +844,6 @@ fn linear_stage(work: &mut Work<'_>, rom: &Rom, lin: &LinearEvidence) -> Result<
     Ok(())
 }
 
-/// `integral_0^1 (1 - g(r)) dr`, `g` the in-phase describing function of a Jenkins element
-/// over its stiffness at slip ratio `r = delta / a`: the stiffness an Iwan element with
-/// uniform slip deflections loses per unit of `a / delta_max` (module docs of
-/// [`crate::physics::iwan`]).
-fn iwan_softening_integral() -> f64 {
-    let n = 2000;
-    (0..n)
-        .map(|k| {
-            let r = (k as f64 + 0.5) / n as f64;
-            let phi = (1.0 - 2.0 * r).acos();
-            1.0 - (phi - 0.5 * (2.0 * phi).sin()) / PI
-        })
-        .sum::<f64>()
-        / n as f64
-}
-
-/// Stage 3: the clamp's friction.
-fn clamp_stage(work: &mut Work<'_>, lin: &LinearEvidence) -> Result<(), DiagnoseError> {
-    // The reasons name their mode (linear::amplitude_dependence's errors).
-    for u in &lin.amplitude_dependence_undecided {
-        work.undecided("clamp_friction", u.reason.clone());
-    }
-    let with: Vec<_> = lin
-        .amplitude_dependence
-        .iter()
-        .filter(|d| d.clamp_friction_signature)
-        .collect();
-    if with.is_empty() {
-        return Ok(());
-    }
-    let beams: Vec<Beam> = with
-        .iter()
-        .filter_map(|d| match d.mode.as_str() {
-            "1FU" => Some(Beam::Upper),
-            "1FL" => Some(Beam::Lower),
-            _ => None,
-        })
-        .collect();
-    // Slopes: dzeta/dA = sf / (6 pi A_h), (df/dA) / f = -sf I / (4 A_h): ratio sf / A_h.
-    let i_soft = iwan_softening_integral();
-    let mut ratios = Vec::new();
-    for d in &with {
-        let z = d.damping_vs_amplitude.slope * 6.0 * PI;
-        let f = -d.frequency_vs_amplitude.slope / d.frequency_vs_amplitude.intercept * 4.0 / i_soft;
-        ratios.push((z, f));
-    }
-    let rho = ratios.iter().map(|(z, f)| 0.5 * (z + f)).sum::<f64>() / ratios.len() as f64;
-    if !(rho.is_finite() && rho > 0.0) {
-        work.undecided(
-            "clamp_friction",
-            "the slopes do not give a positive stiffness share per slip amplitude",
-        );
-        return Ok(());
-    }
-    // Train: the tests with fits of these modes; validation: the others with impact-free steps.
-    let mut train: Vec<usize> = lin
-        .fits
-        .iter()
-        .filter(|f| with.iter().any(|d| d.mode == f.mode))
-        .map(|f| f.test_index)
-        .collect();
-    train.sort_unstable();
-    train.dedup();
-    let mut validation: Vec<usize> = tests_with(work.steps, true)
-        .into_iter()
-        .filter(|t| !train.contains(t))
-        .collect();
-    if validation.is_empty() {
-        // Every impact-free test carries a fit (e.g. both beams' clamps slip): hold out a
-        // test whose mode and level another fitted test repeats, so that the fit still
-        // spans two levels of each mode.
-        if let Some(t) = repeated_level_test(&lin.fits, &with) {
-            train.retain(|&x| x != t);
-            validation.push(t);
-        }
-    }
-    if validation.is_empty() {
-        work.undecided("clamp_friction", "the clamp's friction shows, but no test outside the fitted ones has impact-free steps to validate it on, and no test repeats a fitted level to hold out");
-        return Ok(());
-    }
-    // Model runs on the fitted tests: the stiffness share per slip amplitude around the
-    // slopes' value, and the share itself (it shows only where the tips pass full slip,
-    // twice the half-slip amplitude; below, the joint's describing function depends on the
-    // ratio alone). A grid, then the ratio refined around the best point.
-    let mut tried: Vec<(f64, f64, f64)> = Vec::new();
-    let run = |work: &mut Work<'_>,
-               tried: &mut Vec<(f64, f64, f64)>,
-               sf: f64,
-               r: f64|
-     -> Result<(), DiagnoseError> {
-        let a_h = sf / r;
-        let mut ext = work.accepted.clone();
-        ext.clamp_friction = Some(ClampFrictionSpec {
-            stiffness_fraction: sf,
-            half_slip_tip_amplitude: a_h,
-            sliders: 64,
-            beams: beams.clone(),
-        });
-        let s = work.scores(&ext, &train)?;
-        if let Some(e) = set_error(&s, &train, Steps::ImpactFree) {
-            tried.push((sf, r, e));
-        }
-        Ok(())
-    };
-    (work.progress)(DiagnoseProgress::Evaluation(format!(
-        "clamp_friction: 15 model runs on the fitted tests (stiffness share 0.1-0.4, share per slip amplitude 0.7-1.3 x {rho:.0} /m)"
-    )));
-    for sf in [0.1, 0.2, 0.4] {
-        for m in [0.7, 0.85, 1.0, 1.15, 1.3] {
-            run(work, &mut tried, sf, rho * m)?;
-        }
-    }
-    let Some(&(sf, r0, _)) = tried.iter().min_by(|a, b| a.2.total_cmp(&b.2)) else {
-        return Ok(());
-    };
-    for m in [0.95, 0.975, 1.025, 1.05] {
-        run(work, &mut tried, sf, r0 * m)?;
-    }
-    let Some(&(sf, r, e)) = tried.iter().min_by(|a, b| a.2.total_cmp(&b.2)) else {
-        return Ok(());
-    };
-    (work.progress)(DiagnoseProgress::Note(format!(
-        "clamp_friction: best of {} runs: stiffness share {sf}, {r:.0} /m (slopes: {rho:.0} /m), error {e:.3}",
-        tried.len()
-    )));
-    let a_h = sf / r;
-    let mut ext = work.accepted.clone();
-    let spec = ClampFrictionSpec {
-        stiffness_fraction: sf,
-        half_slip_tip_amplitude: a_h,
-        sliders: 64,
-        beams: beams.clone(),
-    };
-    ext.clamp_friction = Some(spec);
-    let cand = Candidate {
-        effect: "clamp_friction",
-        ext,
-        parameters: json!({"stiffness_fraction": sf, "half_slip_tip_amplitude": a_h, "beams": beams}),
-        n_params: 2,
-        evidence: json!({"modes": with.iter().map(|d| &d.mode).collect::<Vec<_>>(), "stiffness_fraction_over_half_slip_amplitude_per_m": r, "from_slopes_per_m": rho, "slopes_damping_and_frequency_per_m": ratios, "runs": tried.len()}),
-        alternatives: Vec::new(),
-        train,
-        validation,
-        steps: Steps::ImpactFree,
-        channel: None,
-    };
-    work.judge(cand)?;
-    Ok(())
-}
-
-/// The last test (in session order) whose fit of one of the modes of `with` repeats the
-/// level of an earlier fitted test of that mode, and that carries no other mode's fit: a test
-/// the clamp's fit can do without and still span the same levels.
-fn repeated_level_test(fits: &[ModeFit], with: &[&AmplitudeDependence]) -> Option<usize> {
-    let of_modes: Vec<&ModeFit> = fits
-        .iter()
-        .filter(|f| with.iter().any(|d| d.mode == f.mode))
-        .collect();
-    of_modes
-        .iter()
-        .filter(|f| {
-            let same_level = |g: &&ModeFit| {
-                g.mode == f.mode
-                    && g.test_index < f.test_index
-                    && (g.base_amplitude_m / f.base_amplitude_m - 1.0).abs() < 0.05
-            };
-            let alone = of_modes
-                .iter()
-                .all(|g| g.test_index != f.test_index || g.mode == f.mode);
-            of_modes.iter().any(same_level) && alone
-        })
-        .map(|f| f.test_index)
-        .max()
-}
-
 /// Stage 4: the clearance per test, as an offset to the plan's.
 fn clearance_stage(
     work: &mut Work<'_>,
@@ -1121,50 +918,7 @@ fn clearance_stage(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::physics::iwan::Iwan;
     use crate::twin::FeatureComparison;
-
-    /// The slope relations the clamp stage inverts, checked against the Iwan element itself:
-    /// cycled at amplitude `a = x delta_max` (x <= 1), its lost in-phase stiffness is
-    /// `k_J x I` and its energy per cycle `(2/3) k_J a^3 / delta_max`.
-    #[test]
-    fn the_iwan_slopes_match_the_element() {
-        let (k_j, delta_max) = (3.0, 2.0e-3);
-        let i_soft = iwan_softening_integral();
-        for x in [0.2, 0.5, 0.9] {
-            let a = x * delta_max;
-            let mut iwan = Iwan::uniform(k_j, delta_max, 4000);
-            let n = 4000;
-            let (mut lost_in_phase, mut e0, mut e1) = (0.0, 0.0, 0.0);
-            for cycle in 0..3 {
-                if cycle == 2 {
-                    e0 = iwan.dissipated();
-                }
-                for k in 0..n {
-                    let th = 2.0 * PI * (k as f64 + 1.0) / n as f64;
-                    let lost = iwan.update(a * th.sin());
-                    if cycle == 2 {
-                        lost_in_phase += lost * th.sin();
-                    }
-                }
-                if cycle == 2 {
-                    e1 = iwan.dissipated();
-                }
-            }
-            // First-harmonic in-phase part of the lost force over a: the lost stiffness.
-            let lost_k = 2.0 * lost_in_phase / n as f64 / a;
-            assert!(
-                (lost_k / (k_j * x * i_soft) - 1.0).abs() < 0.01,
-                "x {x}: {lost_k}"
-            );
-            let e = e1 - e0;
-            let e_theory = 2.0 / 3.0 * k_j * a.powi(3) / delta_max;
-            assert!(
-                (e / e_theory - 1.0).abs() < 0.01,
-                "x {x}: {e} vs {e_theory}"
-            );
-        }
-    }
 
     fn step(test_index: usize, ratio: f64, regime: Regime) -> StepScores {
         StepScores {

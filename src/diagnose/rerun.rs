@@ -73,6 +73,19 @@ pub struct SessionSteps {
 
 impl SessionSteps {
     /// The steps of recording `rec` whose replayed summary is `summary`.
+    /// Tests (indices) with at least one step of regime other than `Impacts` (`impact_free`)
+    /// or of `Impacts`.
+    pub fn tests_with(&self, impact_free: bool) -> Vec<usize> {
+        let mut t: Vec<usize> = self
+            .steps
+            .iter()
+            .filter(|s| s.impact_free() == impact_free)
+            .map(|s| s.test_index)
+            .collect();
+        t.dedup();
+        t
+    }
+
     pub fn of(rec: &Recording, summary: &SessionSummary) -> SessionSteps {
         let mut tests: Vec<String> = Vec::new();
         let mut levels: Vec<f64> = Vec::new();
@@ -147,6 +160,10 @@ pub struct ModelRunner<'a> {
     rom: &'a Rom,
     base: TwinModel<'a>,
     spec: TwinSpec,
+    /// The twin settings as given (`spec` is them with the step refined).
+    own_spec: TwinSpec,
+    /// How many times finer than the given twin step the runs are (1: the given step).
+    refinement: u32,
     beam_length: f64,
     jobs: usize,
     /// What the runs cost so far.
@@ -183,12 +200,33 @@ impl<'a> ModelRunner<'a> {
             steps,
             rom: base.rom,
             base,
+            own_spec: spec.clone(),
             spec,
+            refinement: 1,
             beam_length,
             jobs: jobs.max(1),
             cost: RunCost::default(),
             last_contact_work: Vec::new(),
         }
+    }
+
+    /// Runs from now on at a twin step `refinement` (>= 1) times finer than the given one (1:
+    /// the given step): the twin's own discretisation error shrinks, at `refinement` times the
+    /// cost.
+    pub fn set_refinement(&mut self, refinement: u32) {
+        let r = refinement.max(1);
+        self.refinement = r;
+        self.spec = self.own_spec.clone();
+        if r > 1 {
+            self.spec.steps_per_sample = self.own_spec.steps_per_sample.map(|n| n * r);
+            self.spec.steps_per_reference_period =
+                self.own_spec.steps_per_reference_period * f64::from(r);
+        }
+    }
+
+    /// The refinement of the twin step in force ([`ModelRunner::set_refinement`]).
+    pub fn refinement(&self) -> u32 {
+        self.refinement
     }
 
     /// The compared steps of tests `tests` (indices, any order) with extensions `ext`, in

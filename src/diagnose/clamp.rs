@@ -1,0 +1,398 @@
+//! The clamp stage of the diagnosis: friction in the clamping joint (an Iwan element on a
+//! beam's first bending mode, `[model.clamp_friction]`) from the amplitude dependence of the
+//! impact-free resonances (frequency falls and damping rises with the tip amplitude, reversibly:
+//! [`super::linear::amplitude_dependence`]), its stiffness share per slip amplitude from the
+//! slopes, refined by model runs on the fitted tests and validated on the others.
+
+use std::f64::consts::PI;
+
+use serde_json::json;
+
+use crate::config::{Beam, ClampFrictionSpec};
+
+use super::judge::{set_error, Candidate, Steps, Work};
+use super::linear::{AmplitudeDependence, LinearEvidence, ModeFit};
+use super::{DiagnoseError, DiagnoseProgress};
+
+/// `integral_0^1 (1 - g(r)) dr`, `g` the in-phase describing function of a Jenkins element
+/// over its stiffness at slip ratio `r = delta / a`: the stiffness an Iwan element with
+/// uniform slip deflections loses per unit of `a / delta_max` (module docs of
+/// [`crate::physics::iwan`]).
+fn iwan_softening_integral() -> f64 {
+    let n = 2000;
+    (0..n)
+        .map(|k| {
+            let r = (k as f64 + 0.5) / n as f64;
+            let phi = (1.0 - 2.0 * r).acos();
+            1.0 - (phi - 0.5 * (2.0 * phi).sin()) / PI
+        })
+        .sum::<f64>()
+        / n as f64
+}
+
+/// Stage 3: the clamp's friction.
+pub(super) fn clamp_stage(work: &mut Work<'_>, lin: &LinearEvidence) -> Result<(), DiagnoseError> {
+    let with: Vec<_> = lin
+        .amplitude_dependence
+        .iter()
+        .filter(|d| d.clamp_friction_signature)
+        .collect();
+    // Modes whose resonance was fitted at one level: fitted by model runs where they can be.
+    let by_runs = if with.is_empty() {
+        clamp_by_runs(work, lin)?
+    } else {
+        Vec::new()
+    };
+    // The reasons name their mode (linear::amplitude_dependence's errors).
+    for u in &lin.amplitude_dependence_undecided {
+        if !by_runs.contains(&u.mode) {
+            work.undecided("clamp_friction", u.reason.clone());
+        }
+    }
+    if with.is_empty() {
+        return Ok(());
+    }
+    let beams: Vec<Beam> = with
+        .iter()
+        .filter_map(|d| match d.mode.as_str() {
+            "1FU" => Some(Beam::Upper),
+            "1FL" => Some(Beam::Lower),
+            _ => None,
+        })
+        .collect();
+    // Slopes: dzeta/dA = sf / (6 pi A_h), (df/dA) / f = -sf I / (4 A_h): ratio sf / A_h.
+    let i_soft = iwan_softening_integral();
+    let mut ratios = Vec::new();
+    for d in &with {
+        let z = d.damping_vs_amplitude.slope * 6.0 * PI;
+        let f = -d.frequency_vs_amplitude.slope / d.frequency_vs_amplitude.intercept * 4.0 / i_soft;
+        ratios.push((z, f));
+    }
+    let rho = ratios.iter().map(|(z, f)| 0.5 * (z + f)).sum::<f64>() / ratios.len() as f64;
+    if !(rho.is_finite() && rho > 0.0) {
+        work.undecided(
+            "clamp_friction",
+            "the slopes do not give a positive stiffness share per slip amplitude",
+        );
+        return Ok(());
+    }
+    // Train: the tests with fits of these modes; validation: the others with impact-free steps.
+    let mut train: Vec<usize> = lin
+        .fits
+        .iter()
+        .filter(|f| with.iter().any(|d| d.mode == f.mode))
+        .map(|f| f.test_index)
+        .collect();
+    train.sort_unstable();
+    train.dedup();
+    let mut validation: Vec<usize> = work
+        .steps
+        .tests_with(true)
+        .into_iter()
+        .filter(|t| !train.contains(t))
+        .collect();
+    if validation.is_empty() {
+        // Every impact-free test carries a fit (e.g. both beams' clamps slip): hold out a
+        // test whose mode and level another fitted test repeats, so that the fit still
+        // spans two levels of each mode.
+        if let Some(t) = repeated_level_test(&lin.fits, &with) {
+            train.retain(|&x| x != t);
+            validation.push(t);
+        }
+    }
+    if validation.is_empty() {
+        work.undecided("clamp_friction", "the clamp's friction shows, but no test outside the fitted ones has impact-free steps to validate it on, and no test repeats a fitted level to hold out");
+        return Ok(());
+    }
+    // Model runs on the fitted tests: the stiffness share per slip amplitude around the
+    // slopes' value, and the share itself (it shows only where the tips pass full slip,
+    // twice the half-slip amplitude; below, the joint's describing function depends on the
+    // ratio alone). A grid, then the ratio refined around the best point.
+    let mut tried: Vec<(f64, f64, f64)> = Vec::new();
+    let run = |work: &mut Work<'_>,
+               tried: &mut Vec<(f64, f64, f64)>,
+               sf: f64,
+               r: f64|
+     -> Result<(), DiagnoseError> {
+        let a_h = sf / r;
+        let mut ext = work.accepted.clone();
+        ext.clamp_friction = Some(ClampFrictionSpec {
+            stiffness_fraction: sf,
+            half_slip_tip_amplitude: a_h,
+            sliders: 64,
+            beams: beams.clone(),
+        });
+        let s = work.scores(&ext, &train)?;
+        if let Some(e) = set_error(&s, &train, Steps::ImpactFree) {
+            tried.push((sf, r, e));
+        }
+        Ok(())
+    };
+    (work.progress)(DiagnoseProgress::Evaluation(format!(
+        "clamp_friction: 15 model runs on the fitted tests (stiffness share 0.1-0.4, share per slip amplitude 0.7-1.3 x {rho:.0} /m)"
+    )));
+    for sf in [0.1, 0.2, 0.4] {
+        for m in [0.7, 0.85, 1.0, 1.15, 1.3] {
+            run(work, &mut tried, sf, rho * m)?;
+        }
+    }
+    let Some(&(sf, r0, _)) = tried.iter().min_by(|a, b| a.2.total_cmp(&b.2)) else {
+        return Ok(());
+    };
+    for m in [0.95, 0.975, 1.025, 1.05] {
+        run(work, &mut tried, sf, r0 * m)?;
+    }
+    let Some(&(sf, r, e)) = tried.iter().min_by(|a, b| a.2.total_cmp(&b.2)) else {
+        return Ok(());
+    };
+    (work.progress)(DiagnoseProgress::Note(format!(
+        "clamp_friction: best of {} runs: stiffness share {sf}, {r:.0} /m (slopes: {rho:.0} /m), error {e:.3}",
+        tried.len()
+    )));
+    let a_h = sf / r;
+    let mut ext = work.accepted.clone();
+    let spec = ClampFrictionSpec {
+        stiffness_fraction: sf,
+        half_slip_tip_amplitude: a_h,
+        sliders: 64,
+        beams: beams.clone(),
+    };
+    ext.clamp_friction = Some(spec);
+    let cand = Candidate {
+        effect: "clamp_friction",
+        ext,
+        parameters: json!({"stiffness_fraction": sf, "half_slip_tip_amplitude": a_h, "beams": beams}),
+        n_params: 2,
+        evidence: json!({"modes": with.iter().map(|d| &d.mode).collect::<Vec<_>>(), "stiffness_fraction_over_half_slip_amplitude_per_m": r, "from_slopes_per_m": rho, "slopes_damping_and_frequency_per_m": ratios, "runs": tried.len()}),
+        alternatives: Vec::new(),
+        train,
+        validation,
+        steps: Steps::ImpactFree,
+        channel: None,
+    };
+    work.judge(cand)?;
+    Ok(())
+}
+
+/// The clamp fitted by model runs where the resonance estimator saw one level only: a mode
+/// fitted in impact-free tests at one level whose band (the fitted test's frequency range)
+/// another impact-free test covers at a higher level, where the accepted model misses the
+/// response (RMS score above the threshold; e.g. the resonance left the band: a fully slipped
+/// joint softens the mode by up to `sqrt(1 - stiffness_fraction)` and damps it). Fitted on the
+/// highest level's tests, where the joint slips most, by a grid over the stiffness share and
+/// the half-slip amplitude (around the linear tip amplitude the lower level's fit predicts
+/// there), refined twice around the best point; validated on the other impact-free tests,
+/// the lower level's first: the parameters found where the joint slips must predict where it
+/// hardly does. Returns the modes it judged (accepted or not).
+fn clamp_by_runs(work: &mut Work<'_>, lin: &LinearEvidence) -> Result<Vec<String>, DiagnoseError> {
+    let mut judged = Vec::new();
+    if work.accepted.clamp_friction.is_some() {
+        return Ok(judged);
+    }
+    for (mode, beam) in [("1FU", Beam::Upper), ("1FL", Beam::Lower)] {
+        let fits: Vec<&ModeFit> = lin.fits_of(mode).collect();
+        let Some(low) = fits.iter().min_by(|a, b| a.level.total_cmp(&b.level)) else {
+            continue;
+        };
+        if fits.iter().any(|f| f.level > 1.05 * low.level) {
+            continue;
+        }
+        let (lo, hi) = (low.omega_ratio_range[0], low.omega_ratio_range[1]);
+        let (lo, hi) = (lo.min(hi) - 1e-9, lo.max(hi) + 1e-9);
+        let steps = work.steps;
+        let free = steps.tests_with(true);
+        let in_band = |t: usize| {
+            steps
+                .steps
+                .iter()
+                .filter(|s| s.test_index == t && s.impact_free())
+                .any(|s| (lo..=hi).contains(&s.info.omega_ratio))
+        };
+        let higher: Vec<usize> = free
+            .iter()
+            .copied()
+            .filter(|&t| in_band(t) && steps.levels[t] > 1.05 * low.level)
+            .collect();
+        let top = higher.iter().map(|&t| steps.levels[t]).fold(0.0, f64::max);
+        let train: Vec<usize> = higher
+            .iter()
+            .copied()
+            .filter(|&t| steps.levels[t] >= 0.95 * top)
+            .collect();
+        if train.is_empty() {
+            continue;
+        }
+        let accepted = work.accepted.clone();
+        let s = work.scores(&accepted, &train)?;
+        let Some(e0) = set_error(&s, &train, Steps::ImpactFree) else {
+            continue;
+        };
+        if e0 <= work.opts.threshold {
+            continue;
+        }
+        let validation: Vec<usize> = free
+            .iter()
+            .copied()
+            .filter(|t| !train.contains(t))
+            .collect();
+        judged.push(mode.to_string());
+        if validation.is_empty() {
+            work.undecided(
+                "clamp_friction",
+                format!("mode {mode}: the model misses {} (error {e0:.2}) at a higher level than its one fit, but no other test has impact-free steps to validate a clamp fitted there", work.names(&train).join(", ")),
+            );
+            continue;
+        }
+        // The linear tip amplitude at the top level, from the low level's resonance.
+        let a_ref = low.peak_tip_amplitude_m * top / low.level;
+        let with_joint = |sf: f64, a_h: f64| {
+            let mut ext = accepted.clone();
+            ext.clamp_friction = Some(ClampFrictionSpec {
+                stiffness_fraction: sf,
+                half_slip_tip_amplitude: a_h,
+                sliders: 64,
+                beams: vec![beam],
+            });
+            ext
+        };
+        let line = format!(
+            "clamp_friction of {mode} by model runs on {} (error {e0:.2}; its one fit at {:.2e} l predicts a tip amplitude of {a_ref:.2e} m there): 20 runs, stiffness share 0.05-0.4, half-slip amplitude 0.25-4 x that",
+            work.names(&train).join(", "),
+            low.level
+        );
+        (work.progress)(DiagnoseProgress::Evaluation(line));
+        let mut tried: Vec<(f64, f64, f64)> = Vec::new();
+        let mut grid: Vec<(f64, f64)> = [0.05, 0.1, 0.2, 0.4]
+            .iter()
+            .flat_map(|&sf| [0.25, 0.5, 1.0, 2.0, 4.0].map(|m| (sf, m * a_ref)))
+            .collect();
+        for round in 0..3 {
+            for &(sf, a_h) in &grid {
+                if tried.iter().any(|p| p.0 == sf && p.1 == a_h) || !(sf > 0.0 && sf < 1.0) {
+                    continue;
+                }
+                let s = work.scores(&with_joint(sf, a_h), &train)?;
+                if let Some(e) = set_error(&s, &train, Steps::ImpactFree) {
+                    tried.push((sf, a_h, e));
+                }
+            }
+            let Some(&(sf, a_h, _)) = tried.iter().min_by(|a, b| a.2.total_cmp(&b.2)) else {
+                break;
+            };
+            // Around the best point: a factor 1.4, then 1.15, in each parameter.
+            let f = if round == 0 { 1.4 } else { 1.15 };
+            grid = vec![(sf / f, a_h), (sf * f, a_h), (sf, a_h / f), (sf, a_h * f)];
+        }
+        let Some(&(sf, a_h, e)) = tried.iter().min_by(|a, b| a.2.total_cmp(&b.2)) else {
+            continue;
+        };
+        (work.progress)(DiagnoseProgress::Note(format!(
+            "clamp_friction of {mode}: best of {} runs: stiffness share {sf:.3}, half-slip amplitude {a_h:.3e} m, error {e0:.3} -> {e:.3}",
+            tried.len()
+        )));
+        // Slipped through at the low level too (twice the half-slip amplitude): the joint
+        // acts as a constant softening there, which a linear correction mimics.
+        let alternatives = if 2.0 * a_h < low.peak_tip_amplitude_m {
+            vec![format!("linear_frequency and linear_damping of {mode}: the joint is fully slipped at both levels")]
+        } else {
+            Vec::new()
+        };
+        let cand = Candidate {
+            effect: "clamp_friction",
+            ext: with_joint(sf, a_h),
+            parameters: json!({"stiffness_fraction": sf, "half_slip_tip_amplitude": a_h, "beams": [beam]}),
+            n_params: 2,
+            evidence: json!({
+                "mode": mode,
+                "fitted_by": "model runs on the higher level's tests (the resonance estimator has one level)",
+                "low_level_fit": {"test": low.test, "frequency_hz": low.frequency_hz, "damping_ratio": low.damping_ratio, "peak_tip_amplitude_m": low.peak_tip_amplitude_m},
+                "predicted_tip_amplitude_m": a_ref,
+                "stiffness_share_per_slip_amplitude_per_m": sf / a_h,
+                "runs": tried.iter().map(|t| json!({"stiffness_fraction": t.0, "half_slip_tip_amplitude": t.1, "train_error": t.2})).collect::<Vec<_>>(),
+            }),
+            alternatives,
+            train,
+            validation,
+            steps: Steps::ImpactFree,
+            channel: None,
+        };
+        work.judge(cand)?;
+        if work.accepted.clamp_friction.is_some() {
+            break;
+        }
+    }
+    Ok(judged)
+}
+
+/// The last test (in session order) whose fit of one of the modes of `with` repeats the
+/// level of an earlier fitted test of that mode, and that carries no other mode's fit: a test
+/// the clamp's fit can do without and still span the same levels.
+fn repeated_level_test(fits: &[ModeFit], with: &[&AmplitudeDependence]) -> Option<usize> {
+    let of_modes: Vec<&ModeFit> = fits
+        .iter()
+        .filter(|f| with.iter().any(|d| d.mode == f.mode))
+        .collect();
+    of_modes
+        .iter()
+        .filter(|f| {
+            let same_level = |g: &&ModeFit| {
+                g.mode == f.mode
+                    && g.test_index < f.test_index
+                    && (g.base_amplitude_m / f.base_amplitude_m - 1.0).abs() < 0.05
+            };
+            let alone = of_modes
+                .iter()
+                .all(|g| g.test_index != f.test_index || g.mode == f.mode);
+            of_modes.iter().any(same_level) && alone
+        })
+        .map(|f| f.test_index)
+        .max()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::physics::iwan::Iwan;
+
+    /// The slope relations the clamp stage inverts, checked against the Iwan element itself:
+    /// cycled at amplitude `a = x delta_max` (x <= 1), its lost in-phase stiffness is
+    /// `k_J x I` and its energy per cycle `(2/3) k_J a^3 / delta_max`.
+    #[test]
+    fn the_iwan_slopes_match_the_element() {
+        let (k_j, delta_max) = (3.0, 2.0e-3);
+        let i_soft = iwan_softening_integral();
+        for x in [0.2, 0.5, 0.9] {
+            let a = x * delta_max;
+            let mut iwan = Iwan::uniform(k_j, delta_max, 4000);
+            let n = 4000;
+            let (mut lost_in_phase, mut e0, mut e1) = (0.0, 0.0, 0.0);
+            for cycle in 0..3 {
+                if cycle == 2 {
+                    e0 = iwan.dissipated();
+                }
+                for k in 0..n {
+                    let th = 2.0 * PI * (k as f64 + 1.0) / n as f64;
+                    let lost = iwan.update(a * th.sin());
+                    if cycle == 2 {
+                        lost_in_phase += lost * th.sin();
+                    }
+                }
+                if cycle == 2 {
+                    e1 = iwan.dissipated();
+                }
+            }
+            // First-harmonic in-phase part of the lost force over a: the lost stiffness.
+            let lost_k = 2.0 * lost_in_phase / n as f64 / a;
+            assert!(
+                (lost_k / (k_j * x * i_soft) - 1.0).abs() < 0.01,
+                "x {x}: {lost_k}"
+            );
+            let e = e1 - e0;
+            let e_theory = 2.0 / 3.0 * k_j * a.powi(3) / delta_max;
+            assert!(
+                (e / e_theory - 1.0).abs() < 0.01,
+                "x {x}: {e} vs {e_theory}"
+            );
+        }
+    }
+}

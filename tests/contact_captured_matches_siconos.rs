@@ -228,12 +228,9 @@ fn captured_held_contact_problems_match_siconos() {
         };
         let (t_auto, s_auto, l_auto) = time(NewtonUse::Auto);
         let (t_gs, _, l_gs) = time(NewtonUse::Never);
-        assert!(
-            matches!(s_auto.path, SolvePath::Newton | SolvePath::SweepsThenNewton),
-            "{}: {:?}",
-            problem.label,
-            s_auto.path
-        );
+        // A few sweeps first, then Newton; a small held problem may already converge in the
+        // sweeps. A Newton attempt never fails here.
+        assert_ne!(s_auto.path, SolvePath::NewtonFallback, "{}", problem.label);
         // Newton against the stored (captured, default-solve) answer and against sweeps.
         let diff = |a: &[f64], b: &[f64]| {
             let n: f64 = a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum();

@@ -366,6 +366,17 @@ impl ContactSolver {
         Ok(())
     }
 
+    /// Forgets what the last solves leave to the next: the active set with its block and step
+    /// sizes, and the kept Newton factorisation. The next solve then gives the same bits as a
+    /// new solver's (a chord step on kept factors agrees with a fresh factorisation only
+    /// within the tolerance), so a run restarted from a saved state does not depend on what
+    /// the solver solved before (e.g. the ensemble members a replay thread ran earlier).
+    pub fn forget_history(&mut self) {
+        self.block_valid = false;
+        self.block_gathered = false;
+        self.newton.invalidate();
+    }
+
     /// State of every pair after the last solve (all open before the first).
     pub fn pair_states(&self) -> &[PairState] {
         &self.states

@@ -95,8 +95,9 @@ fn demo_reports_the_rom_and_runs_the_demo_plan() {
 
 /// The twin against the simulated rig over one test: the impact band's edges (first and last
 /// step with contact) within 2 steps; the upper tip's RMS within 10 % outside the band (no
-/// contact in either) and within 20 % inside it (the edge steps excepted, where the two may
-/// sit on different sides of the jump); contact fraction within 0.1.
+/// contact in either) and within 20 % inside it and in the first step past it (the edge steps
+/// excepted, where the two may sit on different sides of the jump); contact fraction within
+/// 0.1.
 fn twin_follows_the_rig(test: &str, steps: &[serde_json::Value]) {
     let f = |st: &serde_json::Value, key: &str| st[key].as_f64().unwrap();
     let band = |contact: &dyn Fn(&serde_json::Value) -> f64| -> (usize, usize) {
@@ -112,6 +113,11 @@ fn twin_follows_the_rig(test: &str, steps: &[serde_json::Value]) {
         "{test}: impact band steps {measured:?} measured, {twin:?} twin"
     );
     let edges = [measured.0, measured.1, twin.0, twin.1];
+    // The first step past the band (in sweep order) starts from the band's vibro-impact state
+    // and still carries its transient, whose size depends on when the last impact fell
+    // (chaotic: a change of the contact solve's last bits moved it from 1 % to 12 % in the
+    // high-down test at 0.96); it gets the band's tolerance.
+    let after = [measured.1 + 1, twin.1 + 1];
     for (i, st) in steps.iter().enumerate() {
         let w = &st["twin"];
         let (e, cm, ct) = (
@@ -121,7 +127,7 @@ fn twin_follows_the_rig(test: &str, steps: &[serde_json::Value]) {
         );
         let at = st["omega_ratio"].as_f64().unwrap();
         assert!((ct - cm).abs() <= 0.1, "{test} {at}: contact {ct} vs {cm}");
-        if cm == 0.0 && ct == 0.0 {
+        if cm == 0.0 && ct == 0.0 && !after.contains(&i) {
             assert!(
                 e.abs() <= 0.10,
                 "{test} {at}: outside the band, rms upper {e:+.3}"

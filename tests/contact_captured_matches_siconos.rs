@@ -151,9 +151,9 @@ fn captured_impact_problems_match_siconos() {
 
 /// Held contact (issue 16): problems captured from the default ROM with the probes touching
 /// (clearance 0, Omega = omega_2, 0.5e-5 l), at least 96 pairs in the solve, as solved by the
-/// default solve (Newton for these sizes). Siconos NSGS must agree to 1e-6; Siconos'
+/// default solve (a few sweeps, then Newton, for these sizes). Siconos NSGS must agree to 1e-6; Siconos'
 /// nonsmooth Newton (`FC3D_NSN_AC`) is timed beside it at the same tolerance, as are ours
-/// (default: Newton; Gauss-Seidel only). Times: cold solves, fresh solver each (ours include
+/// (default: sweeps then Newton; Gauss-Seidel only). Times: cold solves, fresh solver each (ours include
 /// the one-time `W^-1` where the complement form is used), best of 3.
 #[test]
 fn captured_held_contact_problems_match_siconos() {
@@ -228,7 +228,9 @@ fn captured_held_contact_problems_match_siconos() {
         };
         let (t_auto, s_auto, l_auto) = time(NewtonUse::Auto);
         let (t_gs, _, l_gs) = time(NewtonUse::Never);
-        assert_eq!(s_auto.path, SolvePath::Newton, "{}", problem.label);
+        // A few sweeps first, then Newton; a small held problem may already converge in the
+        // sweeps. A Newton attempt never fails here.
+        assert_ne!(s_auto.path, SolvePath::NewtonFallback, "{}", problem.label);
         // Newton against the stored (captured, default-solve) answer and against sweeps.
         let diff = |a: &[f64], b: &[f64]| {
             let n: f64 = a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum();

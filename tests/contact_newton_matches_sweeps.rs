@@ -131,8 +131,19 @@ fn auto_uses_sweeps_for_small_impacts_and_newton_for_large_held_contact() {
     let (_, s) = solve_problem(&small, &params(NewtonUse::Auto), None).unwrap();
     assert_eq!(s.path, SolvePath::Sweeps, "{s:?}");
     assert_eq!(s.newton_iterations, 0);
+    // Large: a few sweeps first (`newton_after_sweeps_large`), then Newton; or Newton from
+    // the warm start when that is set to 0.
     let large = held(physical_problem(7, 192), 1.0);
     let (_, s) = solve_problem(&large, &params(NewtonUse::Auto), None).unwrap();
+    let first = ContactParameters::default().newton_after_sweeps_large;
+    assert!(first > 0);
+    assert_eq!(s.path, SolvePath::SweepsThenNewton, "{s:?}");
+    assert_eq!(s.iterations, first, "{s:?}");
+    let p = ContactParameters {
+        newton_after_sweeps_large: 0,
+        ..params(NewtonUse::Auto)
+    };
+    let (_, s) = solve_problem(&large, &p, None).unwrap();
     assert_eq!(s.path, SolvePath::Newton, "{s:?}");
     assert_eq!(s.iterations, 0, "no sweep needed: {s:?}");
     // Below the pair threshold but slow to sweep: sweeps first, then Newton.

@@ -157,6 +157,8 @@ pub(crate) struct Newton {
     stack: Vec<MaybeUninit<u8>>,
     /// `W lambda` over all components (scratch of the gap-velocity update).
     w_lambda: Vec<f64>,
+    /// A combination of a pair's rows of W over all components (scratch of the assembly).
+    row_comb: Vec<f64>,
     /// Complement: `-K c` over all components.
     lam0: Vec<f64>,
     lam_new: Vec<f64>,
@@ -200,6 +202,7 @@ impl Newton {
             perm_inv: vec![0; d],
             stack: vec![MaybeUninit::uninit(); req.unaligned_bytes_required()],
             w_lambda: vec![0.0; d],
+            row_comb: vec![0.0; d],
             lam0: vec![0.0; d],
             lam_new: vec![0.0; d],
             y_new: vec![0.0; d],
@@ -526,26 +529,37 @@ impl Newton {
                     }
                 };
                 self.rhs[row] = rhs;
-                let rows: [&[f64]; 3] = [
-                    &w[3 * p * d..(3 * p + 1) * d],
-                    &w[(3 * p + 1) * d..(3 * p + 2) * d],
-                    &w[(3 * p + 2) * d..(3 * p + 3) * d],
-                ];
+                // The row of W combined once over all components (a plain row of W unless
+                // this is a slipping pair's `s` row), then read at the unknowns' pairs.
+                let src: &[f64] = if own.is_some() {
+                    self.row_comb.fill(0.0);
+                    for (al, r) in alpha.iter().zip(0..3) {
+                        if *al != 0.0 {
+                            axpy(
+                                *al,
+                                &w[(3 * p + r) * d..(3 * p + r + 1) * d],
+                                &mut self.row_comb,
+                            );
+                        }
+                    }
+                    &self.row_comb
+                } else {
+                    &w[(3 * p + a) * d..(3 * p + a + 1) * d]
+                };
                 let out = &mut self.a_cur[row * q..(row + 1) * q];
                 for (j, &sj) in self.unknowns.iter().enumerate() {
                     let pj = 3 * inp.active[sj];
-                    let mut v = [0.0; 3];
-                    for (al, r) in alpha.iter().zip(&rows) {
-                        if *al != 0.0 {
-                            v[0] += al * r[pj];
-                            v[1] += al * r[pj + 1];
-                            v[2] += al * r[pj + 2];
-                        }
-                    }
+                    let v = [src[pj], src[pj + 1], src[pj + 2]];
                     let oj = self.offset[j];
-                    let wj = unknown_width(&self.offset, j, q);
-                    for (col, bas) in out[oj..oj + wj].iter_mut().zip(&self.basis[j]) {
-                        *col = bas[0] * v[0] + bas[1] * v[1] + bas[2] * v[2];
+                    // Width 3: a sticking pair (identity basis); 1: frictionless ([1, 0, 0]).
+                    match unknown_width(&self.offset, j, q) {
+                        3 => out[oj..oj + 3].copy_from_slice(&v),
+                        1 => out[oj] = v[0],
+                        wj => {
+                            for (col, bas) in out[oj..oj + wj].iter_mut().zip(&self.basis[j]) {
+                                *col = bas[0] * v[0] + bas[1] * v[1] + bas[2] * v[2];
+                            }
+                        }
                     }
                 }
                 if let Some(own) = own {

@@ -92,20 +92,28 @@ pub struct ContactParameters {
     pub newton: NewtonUse,
     /// [`NewtonUse::Auto`]: a solve with at least this many active pairs is *large* and
     /// switches to Newton after [`ContactParameters::newton_after_sweeps_large`] sweeps, -.
-    /// Default 96 (half the default rig's patch).
+    /// Default 48 (a quarter of the default rig's patch).
+    // NOTE: 96 before the third pass of issue 16; with the few sweeps first (below) Newton is
+    // cheaper than the sweeps from about 48 pairs on the touching probes' solves (captured
+    // replay, `tests/contact_held_replay.rs`; BENCHMARKS.md "Held contact, third pass").
     pub newton_min_pairs: usize,
     /// [`NewtonUse::Auto`]: a solve below `newton_min_pairs` still sweeping after this many
     /// sweeps switches to Newton from the last sweep's iterate, -. Default 100 (impacts
     /// converge in about 30).
     pub newton_after_sweeps: usize,
-    /// [`NewtonUse::Auto`]: the same for large solves, -; 0 (the default): Newton from the
-    /// warm start.
-    // NOTE: the touching probes' large solves need hundreds to thousands of sweeps, and even
-    // 40 sweeps first (about 1 ms on 192 pairs) would cost a third of the Newton solve. The
-    // price of Newton first: a large impact (100+ pairs at the high level, stepping up past
-    // the band) is now solved by Newton, equal to the sweeps' answer within the tolerance but
-    // not bit for bit, so such vibro-impact trajectories differ from the sweeps-only ones
-    // after it (chaotic sensitivity; the pinned demo outputs were rewritten for issue 16).
+    /// [`NewtonUse::Auto`]: the same for large solves, -; 0: Newton from the warm start.
+    /// Default 3.
+    // NOTE: the touching probes' large solves need hundreds to thousands of sweeps to
+    // converge, but a handful of Gauss-Seidel sweeps (each O(m^2), a small fraction of one
+    // LU) already finds most of the closed set. Newton from the warm start instead starts
+    // from the previous step's forces, which after a bounce close far too many pairs (up to
+    // all 192, a system of 557 unknowns, where the solution closes 20-60) or none, and then
+    // shrinks the pattern by one LU per iteration. 3 sweeps first: 436 -> 273 LUs and 0.77 x
+    // the time on the captured touching solves (BENCHMARKS.md "Held contact, third pass");
+    // 2-8 do about the same, 40 is slower than none. The price of Newton in large solves: an impact with many
+    // pairs is solved by Newton, equal to the sweeps' answer within the tolerance but not
+    // bit for bit, so such vibro-impact trajectories differ from the sweeps-only ones after
+    // it (chaotic sensitivity; the pinned demo outputs were rewritten for issue 16).
     pub newton_after_sweeps_large: usize,
     /// Iteration limit of one Newton attempt; an attempt that does not converge hands its
     /// best iterate back to the sweeps, which continue up to `max_iterations`. Default 30.
@@ -160,9 +168,9 @@ impl Default for ContactParameters {
             max_iterations: 2000,
             open_gap_margin: 0.0,
             newton: NewtonUse::Auto,
-            newton_min_pairs: 96,
+            newton_min_pairs: 48,
             newton_after_sweeps: 100,
-            newton_after_sweeps_large: 0,
+            newton_after_sweeps_large: 3,
             newton_max_iterations: 30,
         }
     }
@@ -356,6 +364,17 @@ impl ContactSolver {
         self.block_valid = false;
         self.newton.invalidate();
         Ok(())
+    }
+
+    /// Forgets what the last solves leave to the next: the active set with its block and step
+    /// sizes, and the kept Newton factorisation. The next solve then gives the same bits as a
+    /// new solver's (a chord step on kept factors agrees with a fresh factorisation only
+    /// within the tolerance), so a run restarted from a saved state does not depend on what
+    /// the solver solved before (e.g. the ensemble members a replay thread ran earlier).
+    pub fn forget_history(&mut self) {
+        self.block_valid = false;
+        self.block_gathered = false;
+        self.newton.invalidate();
     }
 
     /// State of every pair after the last solve (all open before the first).
@@ -640,7 +659,12 @@ impl ContactSolver {
 
     /// Sweeps from the current iterate until converged or `*iterations` reaches `until`.
     fn run_sweeps(&mut self, m: usize, until: usize, iterations: &mut usize) -> SweepRun {
-        if !self.block_gathered {
+        // NOTE: with every pair active the block is W itself (the active pairs ascend), so the
+        // Gauss-Seidel sweep reads W in place instead of copying it (held contact hands all
+        // pairs to most large solves, which start with a few sweeps).
+        let whole =
+            self.active.len() == self.n_pairs && self.params.method == SweepMethod::GaussSeidel;
+        if !self.block_gathered && !whole {
             self.gather_block();
         }
         let tol2 = self.params.tolerance * self.params.tolerance;
@@ -656,7 +680,11 @@ impl ContactSolver {
                 SweepMethod::Jacobi => self.jacobi_sweep(m),
                 SweepMethod::AcceleratedJacobi => self.accelerated_sweep(m, &mut momentum),
                 SweepMethod::GaussSeidel => gauss_seidel_sweep(
-                    &self.w_act[..m * m],
+                    if self.block_gathered {
+                        &self.w_act[..m * m]
+                    } else {
+                        &self.w[..m * m]
+                    },
                     &self.c_act[..m],
                     &self.eps[..m],
                     &self.mu_act[..m / 3],

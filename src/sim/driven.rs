@@ -299,9 +299,11 @@ impl<const N: usize> DrivenRom<N> {
         }
     }
 
-    /// Back to rest at time 0, the last sensor values zero.
+    /// Back to rest at time 0, the last sensor values zero, the contact solver's history
+    /// forgotten (the ROM then runs as a new one would, bit for bit).
     pub fn reset(&mut self) {
         self.state = self.integrator.state_at_rest();
+        self.integrator.forget_contact_history();
         self.last = SensorStep::default();
     }
 

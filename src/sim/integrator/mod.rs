@@ -166,6 +166,12 @@ impl Integrator {
         &self.solver
     }
 
+    /// Forgets the contact solver's history ([`ContactSolver::forget_history`]): the next
+    /// steps give the same bits as a new integrator's from the same state.
+    pub fn forget_contact_history(&mut self) {
+        self.solver.forget_history();
+    }
+
     /// The time step, s.
     pub fn dt(&self) -> f64 {
         self.model.dt

@@ -6,7 +6,8 @@
 //! - the demo plan (the high level through the impact band, down and up; no impact-free
 //!   resonance): no mismatch, and it says that the linear and clamp effects cannot be decided;
 //! - `rig-config/plans/identify.toml` (every effect's evidence, 733 s of rig time; behind
-//!   `--ignored`: about 15 min on this machine, BENCHMARKS.md "Diagnosis").
+//!   `--ignored`: about 35 min on this shared machine, BENCHMARKS.md "identify.toml after the
+//!   wear and tilt stages").
 //!
 //! Each log is stripped of the simulated rig's hidden-physics tables before the diagnosis.
 
@@ -51,7 +52,7 @@ fn the_demo_plan_on_the_nominal_rig_is_no_mismatch_and_says_what_it_cannot_decid
 }
 
 #[test]
-#[ignore = "identify.toml: about 6 min to record and 7 min to diagnose on 2 cores"]
+#[ignore = "identify.toml: about 10 min to record and 25 min to diagnose on the shared 2 cores"]
 fn identify_plan_on_the_nominal_rig_is_no_mismatch() {
     let dir = tempfile::tempdir().unwrap();
     let started = std::time::Instant::now();

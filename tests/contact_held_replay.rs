@@ -9,38 +9,23 @@
 //! sweeps alone may run out of sweeps on held contact).
 //!
 //! ```text
-//! RIGTWIN_CACHE=~/.cache/rigtwin cargo test --release --test contact_held_replay -- --ignored --nocapture
+//! cargo test --release --test contact_held_replay -- --ignored --nocapture
 //! HELD_LEVEL=6e-5 HELD_CLEARANCE=1e-5 HELD_PERIODS=10 ...   # other cases
 //! HELD_VARIANTS="newton_min_pairs=96,newton_after_sweeps_large=0;newton_after_sweeps_large=8" ...
 //! ```
 //! `HELD_VARIANTS`: `;`-separated variants, each `,`-separated `key=value` TOML fields of
 //! `ContactParameters` over the integrator's defaults (replacing the built-in variants).
 
-use std::path::PathBuf;
+mod contact_support;
+mod default_rom;
 
-use rigtwin::config::RigConfig;
+use contact_support::thread_cpu_seconds;
 use rigtwin::contact::{ContactParameters, ContactSolver, NewtonUse, SolveStatus};
-use rigtwin::rom::build::BuildOptions;
 use rigtwin::sim::{Excitation, Integrator, IntegratorParameters, NullSink, TimeStep};
 
-/// CPU time of the calling thread (Linux), wall time elsewhere.
+/// CPU time of the calling thread, s (Linux; this measurement runs there).
 fn cpu_seconds() -> f64 {
-    #[repr(C)]
-    struct Timespec {
-        tv_sec: i64,
-        tv_nsec: i64,
-    }
-    extern "C" {
-        fn clock_gettime(clock: i32, tp: *mut Timespec) -> i32;
-    }
-    let mut t = Timespec {
-        tv_sec: 0,
-        tv_nsec: 0,
-    };
-    // SAFETY: clock_gettime writes one timespec into `t`.
-    let rc = unsafe { clock_gettime(3, &mut t) };
-    assert_eq!(rc, 0);
-    t.tv_sec as f64 + 1e-9 * t.tv_nsec as f64
+    thread_cpu_seconds().expect("thread CPU time (Linux)")
 }
 
 fn env_f64(name: &str, default: f64) -> f64 {
@@ -68,18 +53,7 @@ fn rel_diff(a: &[f64], b: &[f64]) -> f64 {
 #[test]
 #[ignore = "measurement: run with --ignored --nocapture"]
 fn contact_held_replay() {
-    let cfg = RigConfig::default_rig();
-    let dir = std::env::var_os("RIGTWIN_CACHE")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/rom-cache"));
-    let (rom, _, _) = rigtwin::rom::cache::load_or_build(
-        cfg.model(),
-        &BuildOptions::default(),
-        &dir,
-        false,
-        &mut |_| {},
-    )
-    .expect("default ROM");
+    let rom = default_rom::default_rom();
     let l = rom.meta.beam_length;
     let omega = rom.omega_ref() * env_f64("HELD_OMEGA", 1.0);
     let level = env_f64("HELD_LEVEL", 0.5e-5);
@@ -99,7 +73,7 @@ fn contact_held_replay() {
         },
         ..Default::default()
     };
-    let mut integ = Integrator::new(&rom, params).expect("integrator");
+    let mut integ = Integrator::new(rom, params).expect("integrator");
     integ.set_clearance(clearance * l).expect("clearance");
     let mut st = integ.state_at_rest();
     integ

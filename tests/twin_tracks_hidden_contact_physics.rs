@@ -2,7 +2,8 @@
 //! rig with a clearance offset, wear or a tilted protrusion hidden in `[truth.variants]`, and a
 //! twin that declares the same physics with the same parameters in `[model]`, tracks the rig as
 //! closely as the nominal twin tracks the nominal rig on the same plan and noise seed (the
-//! null case), while the nominal twin on the same recording does not. Two parameter values per
+//! null case), while the nominal twin on the same recording does not (it scores above the twin
+//! with the physics by more than one over the plan). Two parameter values per
 //! effect. The test fails if the twin ignores the declared physics (tried: then the "twin with
 //! the physics" is the nominal twin, whose scores fail the null comparison).
 //!
@@ -122,11 +123,15 @@ fn a_twin_with_the_hidden_contact_physics_tracks_the_rig_and_the_nominal_twin_do
                  {null_median:.2}"
             ));
         }
-        // The nominal twin does not: over the plan it is further from the rig than the null
-        // case and than the twin with the physics by more than one, and some step misses by more
+        // The nominal twin does not: on the same recording it is further from the rig than the
+        // twin with the physics by more than one over the plan, and some step misses by more
         // than the threshold of a mismatch (3).
+        // NOTE: a paired comparison (one recording, two twins). The null case is another
+        // recording, and its median is one draw of a chaotic band: it moved from 5.49 to 8.10
+        // when the contact solve's path changed (Newton from 48 pairs, issue 16), while every
+        // nominal twin stayed 2.8-8.7 above its twin with the physics.
         let worst = nominal.iter().copied().fold(0.0, f64::max);
-        if n <= null_median + 1.0 || n <= m + 1.0 || worst <= 3.0 {
+        if n <= m + 1.0 || worst <= 3.0 {
             failures.push(format!(
                 "{name}: the nominal twin should not track the rig: {n:.2} over the plan (null \
                  case {null_median:.2}, twin with the physics {m:.2}), worst step {worst:.2}"

@@ -329,3 +329,30 @@ pub fn siconos_or_skip(name: &str) -> Option<String> {
         }
     }
 }
+
+/// CPU time of the calling thread, s (Linux; `None` elsewhere): timings that the load of a
+/// shared machine does not enter.
+#[cfg(target_os = "linux")]
+pub fn thread_cpu_seconds() -> Option<f64> {
+    #[repr(C)]
+    struct Timespec {
+        tv_sec: i64,
+        tv_nsec: i64,
+    }
+    extern "C" {
+        fn clock_gettime(clock: i32, tp: *mut Timespec) -> i32;
+    }
+    const CLOCK_THREAD_CPUTIME_ID: i32 = 3;
+    let mut t = Timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
+    // SAFETY: clock_gettime writes one timespec (two 64-bit fields on 64-bit Linux) into `t`.
+    let rc = unsafe { clock_gettime(CLOCK_THREAD_CPUTIME_ID, &mut t) };
+    (rc == 0).then_some(t.tv_sec as f64 + 1e-9 * t.tv_nsec as f64)
+}
+
+#[cfg(not(target_os = "linux"))]
+pub fn thread_cpu_seconds() -> Option<f64> {
+    None
+}

@@ -406,6 +406,36 @@ impl Work<'_> {
     }
 }
 
+/// A one-parameter search by model runs: the error of every point of `grid`, then of the
+/// points `refine(best)` around the best one (a point tried before is not run again).
+/// Returns every (value, error) tried; `error` gives `None` where nothing was compared.
+pub(super) fn grid_then_refine(
+    work: &mut Work<'_>,
+    grid: Vec<f64>,
+    refine: impl Fn(f64) -> Vec<f64>,
+    mut error: impl FnMut(&mut Work<'_>, f64) -> Result<Option<f64>, DiagnoseError>,
+) -> Result<Vec<(f64, f64)>, DiagnoseError> {
+    let mut tried: Vec<(f64, f64)> = Vec::new();
+    let mut grid = grid;
+    for round in 0..2 {
+        for &x in &grid {
+            if tried.iter().any(|p| p.0 == x) {
+                continue;
+            }
+            if let Some(e) = error(work, x)? {
+                tried.push((x, e));
+            }
+        }
+        let Some(&(best, _)) = tried.iter().min_by(|a, b| a.1.total_cmp(&b.1)) else {
+            break;
+        };
+        if round == 0 {
+            grid = refine(best);
+        }
+    }
+    Ok(tried)
+}
+
 /// Tests split alternately: positions 0, 2, ... train, 1, 3, ... validation.
 pub(super) fn alternate(tests: &[usize]) -> (Vec<usize>, Vec<usize>) {
     let train = tests.iter().step_by(2).copied().collect();

@@ -30,7 +30,7 @@ use crate::config::{PhysicsSpec, TiltSpec};
 use crate::rom::Rom;
 
 use super::clearance::{ClearanceEvidence, TestClearance};
-use super::judge::{alternate, set_error, set_error_of, Candidate, Steps, Work};
+use super::judge::{alternate, grid_then_refine, set_error, set_error_of, Candidate, Steps, Work};
 use super::wear::test_clearance_by_runs;
 use super::{DiagnoseError, DiagnoseProgress};
 
@@ -130,31 +130,22 @@ pub(super) fn tilt_stage(
     };
     let start_tip = (closing / tip_edge).min(1.0).asin();
     let start_clamp = -(closing / clamp_edge).min(1.0).asin();
-    let mut grid: Vec<f64> = [start_tip, start_clamp]
+    let grid: Vec<f64> = [start_tip, start_clamp]
         .iter()
         .flat_map(|s| [0.6, 0.8, 1.0, 1.2, 1.5].map(|m| (m * s).clamp(-0.1, 0.1)))
         .collect();
-    let mut tried: Vec<(f64, f64)> = Vec::new();
-    for round in 0..2 {
-        for &angle in &grid {
-            if tried.iter().any(|p| p.0 == angle) {
-                continue;
-            }
+    let tried = grid_then_refine(
+        work,
+        grid,
+        |best| vec![0.9 * best, 1.1 * best],
+        |work, angle| {
             (work.progress)(DiagnoseProgress::Evaluation(format!(
                 "tilt {angle:.3e} rad about y on the train tests"
             )));
             let s = work.scores(&with(angle), &train)?;
-            if let Some(e) = set_error(&s, &train, Steps::All) {
-                tried.push((angle, e));
-            }
-        }
-        let Some(&(best, _)) = tried.iter().min_by(|a, b| a.1.total_cmp(&b.1)) else {
-            break;
-        };
-        if round == 0 {
-            grid = vec![0.9 * best, 1.1 * best];
-        }
-    }
+            Ok(set_error(&s, &train, Steps::All))
+        },
+    )?;
     let Some(&(angle, train_error)) = tried.iter().min_by(|a, b| a.1.total_cmp(&b.1)) else {
         work.accepted = after_clearance;
         return Ok(());

@@ -24,7 +24,7 @@ use serde_json::json;
 use crate::config::{ClearanceSpec, TestClearanceSpec, WearSpec};
 
 use super::clearance::{ClearanceEvidence, TestClearance};
-use super::judge::{alternate, set_error, Candidate, Steps, Work};
+use super::judge::{alternate, grid_then_refine, set_error, Candidate, Steps, Work};
 use super::outcome::EffectResult;
 use super::{DiagnoseError, DiagnoseProgress};
 
@@ -49,13 +49,20 @@ pub(super) fn test_clearance_by_runs(
         return Ok(None);
     };
     let (lo, hi) = (lo.min(hi), lo.max(hi));
-    let mut tried: Vec<(f64, f64)> = Vec::new();
-    let mut grid: Vec<f64> = (0..9).map(|k| lo + (hi - lo) * k as f64 / 8.0).collect();
-    for round in 0..2 {
-        for &c in &grid {
-            if tried.iter().any(|p| p.0 == c) {
-                continue;
-            }
+    let h = (hi - lo) / 8.0;
+    let grid: Vec<f64> = (0..9).map(|k| lo + (hi - lo) * k as f64 / 8.0).collect();
+    let tried = grid_then_refine(
+        work,
+        grid,
+        |best| {
+            vec![
+                best - 0.5 * h,
+                best - 0.25 * h,
+                best + 0.25 * h,
+                best + 0.5 * h,
+            ]
+        },
+        |work, c| {
             let mut ext = work.accepted.clone();
             // Per-test runs: the clearance of this test alone, no growth across tests.
             ext.wear = None;
@@ -70,23 +77,9 @@ pub(super) fn test_clearance_by_runs(
             });
             ext.clearance = Some(spec);
             let s = work.scores(&ext, &[t.test_index])?;
-            if let Some(e) = set_error(&s, &[t.test_index], Steps::All) {
-                tried.push((c, e));
-            }
-        }
-        let Some(&(best, _)) = tried.iter().min_by(|a, b| a.1.total_cmp(&b.1)) else {
-            break;
-        };
-        if round == 0 {
-            let h = (hi - lo) / 8.0;
-            grid = vec![
-                best - 0.5 * h,
-                best - 0.25 * h,
-                best + 0.25 * h,
-                best + 0.5 * h,
-            ];
-        }
-    }
+            Ok(set_error(&s, &[t.test_index], Steps::All))
+        },
+    )?;
     let Some(&(best, error)) = tried.iter().min_by(|a, b| a.1.total_cmp(&b.1)) else {
         return Ok(None);
     };
@@ -273,32 +266,23 @@ pub(super) fn wear_stage(
     };
     // The coefficient by whole-session runs scored on the train tests: a grid of 0.5-2 k0,
     // refined once around the best.
-    let mut tried: Vec<(f64, f64)> = Vec::new();
-    let mut grid: Vec<f64> = [0.5, 0.75, 1.0, 1.25, 1.5, 2.0]
+    let grid: Vec<f64> = [0.5, 0.75, 1.0, 1.25, 1.5, 2.0]
         .iter()
         .map(|m| m * k0)
         .collect();
-    for round in 0..2 {
-        for &k in &grid {
-            if tried.iter().any(|p| p.0 == k) {
-                continue;
-            }
+    let tried = grid_then_refine(
+        work,
+        grid,
+        |best| vec![0.88 * best, 1.12 * best],
+        |work, k| {
             let ext = with(k, None);
             (work.progress)(DiagnoseProgress::Evaluation(format!(
                 "wear coefficient {k:.3e} m/J over the whole session"
             )));
             let s = work.scores(&ext, &train)?;
-            if let Some(e) = set_error(&s, &train, Steps::All) {
-                tried.push((k, e));
-            }
-        }
-        let Some(&(best, _)) = tried.iter().min_by(|a, b| a.1.total_cmp(&b.1)) else {
-            break;
-        };
-        if round == 0 {
-            grid = vec![0.88 * best, 1.12 * best];
-        }
-    }
+            Ok(set_error(&s, &train, Steps::All))
+        },
+    )?;
     let Some(&(k, train_error)) = tried.iter().min_by(|a, b| a.1.total_cmp(&b.1)) else {
         return Ok(false);
     };

@@ -158,18 +158,15 @@ pub(super) fn clamp_stage(work: &mut Work<'_>, lin: &LinearEvidence) -> Result<(
         beams: beams.clone(),
     };
     ext.clamp_friction = Some(spec);
-    let cand = Candidate {
-        effect: "clamp_friction",
+    let cand = Candidate::new(
+        "clamp_friction",
         ext,
-        parameters: json!({"stiffness_fraction": sf, "half_slip_tip_amplitude": a_h, "beams": beams}),
-        n_params: 2,
-        evidence: json!({"modes": with.iter().map(|d| &d.mode).collect::<Vec<_>>(), "stiffness_fraction_over_half_slip_amplitude_per_m": r, "from_slopes_per_m": rho, "slopes_damping_and_frequency_per_m": ratios, "runs": tried.len()}),
-        alternatives: Vec::new(),
-        train,
-        validation,
-        steps: Steps::ImpactFree,
-        channel: None,
-    };
+        json!({"stiffness_fraction": sf, "half_slip_tip_amplitude": a_h, "beams": beams}),
+        2,
+        json!({"modes": with.iter().map(|d| &d.mode).collect::<Vec<_>>(), "stiffness_fraction_over_half_slip_amplitude_per_m": r, "from_slopes_per_m": rho, "slopes_damping_and_frequency_per_m": ratios, "runs": tried.len()}),
+        (train, validation),
+        Steps::ImpactFree,
+    );
     work.judge(cand)?;
     Ok(())
 }
@@ -297,12 +294,12 @@ fn clamp_by_runs(work: &mut Work<'_>, lin: &LinearEvidence) -> Result<Vec<String
         } else {
             Vec::new()
         };
-        let cand = Candidate {
-            effect: "clamp_friction",
-            ext: with_joint(sf, a_h),
-            parameters: json!({"stiffness_fraction": sf, "half_slip_tip_amplitude": a_h, "beams": [beam]}),
-            n_params: 2,
-            evidence: json!({
+        let cand = Candidate::new(
+            "clamp_friction",
+            with_joint(sf, a_h),
+            json!({"stiffness_fraction": sf, "half_slip_tip_amplitude": a_h, "beams": [beam]}),
+            2,
+            json!({
                 "mode": mode,
                 "fitted_by": "model runs on the higher level's tests (the resonance estimator has one level)",
                 "low_level_fit": {"test": low.test, "frequency_hz": low.frequency_hz, "damping_ratio": low.damping_ratio, "peak_tip_amplitude_m": low.peak_tip_amplitude_m},
@@ -310,12 +307,10 @@ fn clamp_by_runs(work: &mut Work<'_>, lin: &LinearEvidence) -> Result<Vec<String
                 "stiffness_share_per_slip_amplitude_per_m": sf / a_h,
                 "runs": tried.iter().map(|t| json!({"stiffness_fraction": t.0, "half_slip_tip_amplitude": t.1, "train_error": t.2})).collect::<Vec<_>>(),
             }),
-            alternatives,
-            train,
-            validation,
-            steps: Steps::ImpactFree,
-            channel: None,
-        };
+            (train, validation),
+            Steps::ImpactFree,
+        )
+        .with_alternatives(alternatives);
         work.judge(cand)?;
         if work.accepted.clamp_friction.is_some() {
             break;

@@ -10,7 +10,7 @@ use std::collections::HashMap;
 use crate::config::PhysicsSpec;
 
 use super::outcome::{EffectResult, Regime, SetError, StepScores, Undecided};
-use super::rerun::{ModelRunner, SessionSteps};
+use super::rerun::{ModelRunner, Reach, SessionSteps};
 use super::DiagnoseError;
 
 /// How many times finer than the twin's own step a candidate judged on the impact band is
@@ -128,6 +128,46 @@ pub(super) struct Candidate {
     pub(super) channel: Option<String>,
 }
 
+impl Candidate {
+    /// Candidate `effect`: the model `ext`, its `parameters` (`n_params` fitted) and the
+    /// `evidence` for it, fitted on the train tests and judged on the validation tests of
+    /// `split` over `steps`, on every channel, no alternatives named.
+    pub(super) fn new(
+        effect: &'static str,
+        ext: PhysicsSpec,
+        parameters: serde_json::Value,
+        n_params: usize,
+        evidence: serde_json::Value,
+        split: (Vec<usize>, Vec<usize>),
+        steps: Steps,
+    ) -> Candidate {
+        Candidate {
+            effect,
+            ext,
+            parameters,
+            n_params,
+            evidence,
+            alternatives: Vec::new(),
+            train: split.0,
+            validation: split.1,
+            steps,
+            channel: None,
+        }
+    }
+
+    /// Judged on the features of `channel` only (when given): the one channel it acts on.
+    pub(super) fn on_channel(mut self, channel: Option<String>) -> Candidate {
+        self.channel = channel;
+        self
+    }
+
+    /// With the other effects that explain the data as well.
+    pub(super) fn with_alternatives(mut self, alternatives: Vec<String>) -> Candidate {
+        self.alternatives = alternatives;
+        self
+    }
+}
+
 /// The diagnosis state: the runner, the model so far, the results.
 pub(super) struct Work<'a> {
     pub(super) runner: ModelRunner<'a>,
@@ -136,7 +176,7 @@ pub(super) struct Work<'a> {
     pub(super) accepted: PhysicsSpec,
     pub(super) effects: Vec<EffectResult>,
     pub(super) undecided: Vec<Undecided>,
-    cache: HashMap<(String, Vec<usize>, u32), Vec<StepScores>>,
+    cache: HashMap<(String, Vec<Reach>, u32), Vec<StepScores>>,
     pub(super) progress: &'a mut dyn FnMut(DiagnoseProgress),
 }
 
@@ -163,16 +203,29 @@ impl<'a> Work<'a> {
 }
 
 impl Work<'_> {
+    /// The compared steps of tests `tests` (every step) with extensions `ext`; a run made
+    /// before for the same model, tests and twin step is not made again.
     pub(super) fn scores(
         &mut self,
         ext: &PhysicsSpec,
         tests: &[usize],
     ) -> Result<Vec<StepScores>, DiagnoseError> {
-        let key = (ext.to_json(), tests.to_vec(), self.runner.refinement());
+        let reach: Vec<Reach> = tests.iter().map(|&t| (t, None)).collect();
+        self.scores_reach(ext, &reach)
+    }
+
+    /// [`Work::scores`] over each test's steps up to its given last one
+    /// ([`ModelRunner::run_reach`]).
+    pub(super) fn scores_reach(
+        &mut self,
+        ext: &PhysicsSpec,
+        reach: &[Reach],
+    ) -> Result<Vec<StepScores>, DiagnoseError> {
+        let key = (ext.to_json(), reach.to_vec(), self.runner.refinement());
         if let Some(s) = self.cache.get(&key) {
             return Ok(s.clone());
         }
-        let s = self.runner.run(ext, tests)?;
+        let s = self.runner.run_reach(ext, reach)?;
         self.cache.insert(key, s.clone());
         Ok(s)
     }
@@ -441,4 +494,15 @@ pub(super) fn alternate(tests: &[usize]) -> (Vec<usize>, Vec<usize>) {
     let train = tests.iter().step_by(2).copied().collect();
     let validation = tests.iter().skip(1).step_by(2).copied().collect();
     (train, validation)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn tests_split_alternately() {
+        assert_eq!(alternate(&[3, 5, 6, 9]), (vec![3, 6], vec![5, 9]));
+        assert_eq!(alternate(&[2]), (vec![2], vec![]));
+    }
 }

@@ -24,10 +24,13 @@
 
 mod clamp;
 pub mod clearance;
+mod clearance_fit;
 mod error;
 pub mod evidence;
+mod gains;
 mod judge;
 pub mod linear;
+mod modes;
 pub mod outcome;
 pub mod pipeline;
 pub mod rerun;

@@ -2,7 +2,9 @@
 //! judged by running the twin, with the hypothesis' extensions, over the recorded base motion
 //! of some tests and comparing it with the measurement step by step, as `replay --twin` does.
 //!
-//! A run covers whole tests, each group of consecutive tests in one stretch, from rest at the
+//! A run covers whole tests, or a test's steps up to one that ends the evidence (e.g. two
+//! steps past its first contact, [`ModelRunner::run_reach`]), each group of consecutive tests
+//! in one stretch, from rest at the
 //! start of the step before the group's first step (the lead-in: the previous test's last
 //! step, or the session's start): the twin's own state cannot be carried in from another
 //! model (a state belongs to the model that made it), and a free transient from rest decays
@@ -134,6 +136,29 @@ impl SessionSteps {
         }
     }
 
+    /// The step `past` steps after the first (`first`) or last measured contact step of test
+    /// `ti`, to cut a run there; `None` (the whole test) when the test has no contact or that
+    /// step is its last or beyond.
+    pub fn past_contact(&self, ti: usize, past: usize, first: bool) -> Option<usize> {
+        let mut contact = self
+            .steps
+            .iter()
+            .filter(|s| s.test_index == ti && !s.impact_free())
+            .map(|s| s.info.step);
+        let at = if first {
+            contact.next()
+        } else {
+            contact.last()
+        }? + past;
+        let last = self
+            .steps
+            .iter()
+            .filter(|s| s.test_index == ti)
+            .map(|s| s.info.step)
+            .max()?;
+        (at < last).then_some(at)
+    }
+
     /// The sample where the step before test `ti`'s first step starts (the lead-in), or
     /// `None` for the session's first step.
     fn lead_in(&self, ti: usize) -> Option<u64> {
@@ -141,6 +166,9 @@ impl SessionSteps {
         first.checked_sub(1).map(|k| self.starts[k].2)
     }
 }
+
+/// A test (index) and the last of its steps a run covers (`None`: all).
+pub type Reach = (usize, Option<usize>);
 
 /// What a model run did.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -236,21 +264,37 @@ impl<'a> ModelRunner<'a> {
         ext: &PhysicsSpec,
         tests: &[usize],
     ) -> Result<Vec<StepScores>, DiagnoseError> {
-        let mut wanted: Vec<usize> = tests.to_vec();
+        let reach: Vec<Reach> = tests.iter().map(|&t| (t, None)).collect();
+        self.run_reach(ext, &reach)
+    }
+
+    /// [`ModelRunner::run`] over the steps of each test up to its given last step (`None`:
+    /// every step): a run stops after the last step that carries the evidence. A test cut
+    /// short ends its stretch. With wear (the clearance carries across tests) every test runs
+    /// whole.
+    pub fn run_reach(
+        &mut self,
+        ext: &PhysicsSpec,
+        tests: &[Reach],
+    ) -> Result<Vec<StepScores>, DiagnoseError> {
+        let mut wanted: Vec<Reach> = tests.to_vec();
         wanted.sort_unstable();
-        wanted.dedup();
+        wanted.dedup_by_key(|r| r.0);
         // Stretches of consecutive tests; the whole session for wear.
-        let mut groups: Vec<Vec<usize>> = Vec::new();
+        let mut groups: Vec<Vec<Reach>> = Vec::new();
         if ext.wear.is_some() {
-            groups.push((0..self.steps.tests.len()).collect());
+            groups.push((0..self.steps.tests.len()).map(|t| (t, None)).collect());
         } else {
-            for &t in &wanted {
+            for &(t, last) in &wanted {
                 match groups.last_mut() {
-                    Some(g) if g.last() == Some(&(t.wrapping_sub(1))) => g.push(t),
-                    _ => groups.push(vec![t]),
+                    Some(g) if g.last().is_some_and(|p| p.0 + 1 == t && p.1.is_none()) => {
+                        g.push((t, last))
+                    }
+                    _ => groups.push(vec![(t, last)]),
                 }
             }
         }
+        let wanted: Vec<usize> = wanted.iter().map(|r| r.0).collect();
         let wall = std::time::Instant::now();
         let model = TwinModel {
             rom: self.rom,
@@ -317,23 +361,25 @@ impl<'a> ModelRunner<'a> {
         Ok((self.last_contact_work.clone(), scores))
     }
 
-    /// One stretch of consecutive tests `group`, from rest at its lead-in.
-    fn run_group(&self, model: &TwinModel<'_>, group: &[usize]) -> Result<GroupRun, DiagnoseError> {
+    /// One stretch of consecutive tests `group` (each up to its last step), from rest at its
+    /// lead-in.
+    fn run_group(&self, model: &TwinModel<'_>, group: &[Reach]) -> Result<GroupRun, DiagnoseError> {
         let rec = self.rec;
         let empty = GroupRun {
             scores: Vec::new(),
             rig_seconds: 0.0,
             work: Vec::new(),
         };
-        let Some(&first) = group.first() else {
+        let Some(&(first, _)) = group.first() else {
             return Ok(empty);
         };
-        let windows: Vec<&SessionStep> = self
-            .steps
-            .steps
-            .iter()
-            .filter(|s| group.contains(&s.test_index))
-            .collect();
+        let runs = |s: &SessionStep| {
+            group
+                .iter()
+                .any(|&(t, last)| t == s.test_index && last.is_none_or(|l| s.info.step <= l))
+        };
+        let windows: Vec<&SessionStep> = self.steps.steps.iter().filter(|s| runs(s)).collect();
+        let group: Vec<usize> = group.iter().map(|r| r.0).collect();
         let Some(last) = windows.last() else {
             return Ok(empty);
         };

@@ -13,9 +13,10 @@
 //! first), the axis fixed at `[0, 1]`. A slope across the beams (about x) is not fitted: the
 //! channels (bending along the beams, one contact voltage) carry no torsion, so it would be a
 //! smaller clearance to them. The angle starts from the clearance the train tests show before
-//! their first impact (the model-run clearance per test, [`super::wear::test_clearance_by_runs`]):
-//! `sin(angle) x_edge = c_model - c_measured`, for either edge; a grid of model runs of the
-//! train tests over both signs and 0.6-1.5 times that angle, refined once, fits it.
+//! their first impact (the model-run clearance per test,
+//! `clearance_fit::test_clearance_by_runs`): `sin(angle) x_edge = c_model - c_measured`, for
+//! either edge; a grid of model runs of the train tests (their steps up to two past the last
+//! measured contact) over both signs and 0.6-1.5 times that angle, refined once, fits it.
 //!
 //! Selection: the tilt is judged by the pipeline's rule against the model without the
 //! clearance offset (the two compete for the same evidence). Where the clearance offset was
@@ -30,8 +31,9 @@ use crate::config::{PhysicsSpec, TiltSpec};
 use crate::rom::Rom;
 
 use super::clearance::{ClearanceEvidence, TestClearance};
+use super::clearance_fit::test_clearance_by_runs;
 use super::judge::{alternate, grid_then_refine, set_error, set_error_of, Candidate, Steps, Work};
-use super::wear::test_clearance_by_runs;
+use super::rerun::Reach;
 use super::{DiagnoseError, DiagnoseProgress};
 
 /// The tilt axis fitted, `[x, y]`.
@@ -134,6 +136,12 @@ pub(super) fn tilt_stage(
         .iter()
         .flat_map(|s| [0.6, 0.8, 1.0, 1.2, 1.5].map(|m| (m * s).clamp(-0.1, 0.1)))
         .collect();
+    // The train tests up to two steps past their last measured contact: a tilt acts in
+    // contact (the steps after the band carry no evidence of it).
+    let train_reach: Vec<Reach> = train
+        .iter()
+        .map(|&t| (t, work.steps.past_contact(t, 2, false)))
+        .collect();
     let tried = grid_then_refine(
         work,
         grid,
@@ -142,7 +150,7 @@ pub(super) fn tilt_stage(
             (work.progress)(DiagnoseProgress::Evaluation(format!(
                 "tilt {angle:.3e} rad about y on the train tests"
             )));
-            let s = work.scores(&with(angle), &train)?;
+            let s = work.scores_reach(&with(angle), &train_reach)?;
             Ok(set_error(&s, &train, Steps::All))
         },
     )?;
@@ -151,7 +159,7 @@ pub(super) fn tilt_stage(
         return Ok(());
     };
     (work.progress)(DiagnoseProgress::Note(format!(
-        "tilt: {angle:.3e} rad about y by {} runs of the train tests (error {train_error:.3}; the edge closes {closing:.2e} m early)",
+        "tilt: {angle:.3e} rad about y by {} runs of the train tests' contact steps (error {train_error:.3}; the edge closes {closing:.2e} m early)",
         tried.len()
     )));
     // The contact channel's statistics on the validation tests, before and with the tilt and
@@ -175,18 +183,15 @@ pub(super) fn tilt_stage(
         },
         "angles_tried": tried.iter().map(|(a, e)| json!({"angle": a, "train_error": e})).collect::<Vec<_>>(),
     });
-    let cand = Candidate {
-        effect: "tilt",
-        ext: with(angle),
-        parameters: json!({"angle": angle, "axis": AXIS}),
-        n_params: 1,
+    let cand = Candidate::new(
+        "tilt",
+        with(angle),
+        json!({"angle": angle, "axis": AXIS}),
+        1,
         evidence,
-        alternatives: Vec::new(),
-        train,
-        validation,
-        steps: Steps::All,
-        channel: None,
-    };
+        (train, validation),
+        Steps::All,
+    );
     let tilt_ok = work.judge(cand)?;
     // The clearance offset judged before, if it was accepted.
     let Some(ci) = work

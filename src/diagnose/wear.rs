@@ -4,8 +4,8 @@
 //!
 //! 1. The clearance of every test that brackets it (impact-free steps, then contact;
 //!    [`super::clearance`], reference section 4, Table 2) is refined by model runs of that
-//!    test alone over its bracket ([`test_clearance_by_runs`], shared with the clearance
-//!    offset of the pipeline).
+//!    test alone over its bracket (`clearance_fit::test_clearance_by_runs`, shared with the
+//!    clearance and tilt stages).
 //! 2. The accumulated contact work `W` at the start of each test comes from one run of the
 //!    model as accepted so far over the whole session, with the wear counter on and a zero
 //!    coefficient ([`super::rerun::ModelRunner::contact_work`]): what the contact dissipated
@@ -21,78 +21,13 @@
 
 use serde_json::json;
 
-use crate::config::{ClearanceSpec, TestClearanceSpec, WearSpec};
+use crate::config::{ClearanceSpec, WearSpec};
 
 use super::clearance::{ClearanceEvidence, TestClearance};
+use super::clearance_fit::test_clearance_by_runs;
 use super::judge::{alternate, grid_then_refine, set_error, Candidate, Steps, Work};
 use super::outcome::EffectResult;
 use super::{DiagnoseError, DiagnoseProgress};
-
-/// A test's clearance refined by model runs.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub(super) struct RunClearance {
-    /// The clearance whose model run matched the test best, m.
-    pub clearance_m: f64,
-    /// Its error (RMS score over every step and channel of the test), -.
-    pub error: f64,
-}
-
-/// The clearance within test `t`'s bracket whose model run (the accepted model with that
-/// test's clearance set) matches the test best over every step and channel (where the first
-/// contact falls, how much contact follows): a grid of 9 over the bracket, refined once
-/// around the best point (13 runs of the test alone). `None` without a bracket.
-pub(super) fn test_clearance_by_runs(
-    work: &mut Work<'_>,
-    t: &TestClearance,
-) -> Result<Option<RunClearance>, DiagnoseError> {
-    let (Some(lo), Some(hi)) = (t.lower_bound_m, t.upper_bound_m) else {
-        return Ok(None);
-    };
-    let (lo, hi) = (lo.min(hi), lo.max(hi));
-    let h = (hi - lo) / 8.0;
-    let grid: Vec<f64> = (0..9).map(|k| lo + (hi - lo) * k as f64 / 8.0).collect();
-    let tried = grid_then_refine(
-        work,
-        grid,
-        |best| {
-            vec![
-                best - 0.5 * h,
-                best - 0.25 * h,
-                best + 0.25 * h,
-                best + 0.5 * h,
-            ]
-        },
-        |work, c| {
-            let mut ext = work.accepted.clone();
-            // Per-test runs: the clearance of this test alone, no growth across tests.
-            ext.wear = None;
-            let mut spec = ext.clearance.clone().unwrap_or(ClearanceSpec {
-                offset: 0.0,
-                tests: Vec::new(),
-            });
-            spec.tests.retain(|x| x.test != t.test);
-            spec.tests.push(TestClearanceSpec {
-                test: t.test.clone(),
-                clearance: c,
-            });
-            ext.clearance = Some(spec);
-            let s = work.scores(&ext, &[t.test_index])?;
-            Ok(set_error(&s, &[t.test_index], Steps::All))
-        },
-    )?;
-    let Some(&(best, error)) = tried.iter().min_by(|a, b| a.1.total_cmp(&b.1)) else {
-        return Ok(None);
-    };
-    (work.progress)(DiagnoseProgress::Note(format!(
-        "clearance of {}: {best:.4e} m by model runs (bracket {lo:.4e}-{hi:.4e} m, error {error:.3}, {} runs)",
-        t.test,
-        tried.len()
-    )));
-    Ok(Some(RunClearance {
-        clearance_m: best,
-        error,
-    }))
-}
 
 /// Least-squares line `y = a + k x`: (a, k, standard error of k, NaN with two points); `None`
 /// with fewer than two points or no spread in `x`.
@@ -306,18 +241,15 @@ pub(super) fn wear_stage(
     if offset != 0.0 {
         parameters["clearance_offset"] = json!(base_offset + offset);
     }
-    let cand = Candidate {
-        effect: "wear",
+    let cand = Candidate::new(
+        "wear",
         ext,
         parameters,
-        n_params: 1 + usize::from(offset != 0.0) + usize::from(max_growth.is_some()),
+        1 + usize::from(offset != 0.0) + usize::from(max_growth.is_some()),
         evidence,
-        alternatives: Vec::new(),
-        train,
-        validation,
-        steps: Steps::All,
-        channel: None,
-    };
+        (train, validation),
+        Steps::All,
+    );
     work.judge(cand)
 }
 

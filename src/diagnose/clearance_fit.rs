@@ -1,0 +1,153 @@
+//! The clearance fitted by model runs: a test's clearance within the bracket of its first
+//! contact ([`test_clearance_by_runs`], shared by the clearance, wear and tilt stages), and
+//! the clearance stage (stage 4): the train tests' clearances as one offset to the plan's,
+//! judged on the validation tests.
+
+use serde_json::json;
+
+use crate::config::{ClearanceSpec, TestClearanceSpec};
+
+use super::clearance::{ClearanceEvidence, TestClearance};
+use super::judge::{alternate, grid_then_refine, set_error, Candidate, Steps, Work};
+use super::{DiagnoseError, DiagnoseProgress};
+
+/// A test's clearance refined by model runs.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) struct RunClearance {
+    /// The clearance whose model run matched the test best, m.
+    pub clearance_m: f64,
+    /// Its error (RMS score over every step and channel of the test), -.
+    pub error: f64,
+}
+
+/// How many steps past a test's first measured contact the runs that fit its clearance go.
+const STEPS_PAST_FIRST_CONTACT: usize = 2;
+
+/// The clearance within test `t`'s bracket whose model run (the accepted model with that
+/// test's clearance set) matches the test best over every channel of its steps up to
+/// [`STEPS_PAST_FIRST_CONTACT`] past the measured first contact (where the first contact
+/// falls, how much contact follows it; the later steps, the rest of the band and past it,
+/// carry chaos and the twin's own step rather than the clearance, and cost the most): a
+/// grid of 9 over the bracket, refined once around the best point (13 runs of the test's
+/// first steps alone). `None` without a bracket.
+pub(super) fn test_clearance_by_runs(
+    work: &mut Work<'_>,
+    t: &TestClearance,
+) -> Result<Option<RunClearance>, DiagnoseError> {
+    let (Some(lo), Some(hi)) = (t.lower_bound_m, t.upper_bound_m) else {
+        return Ok(None);
+    };
+    let (lo, hi) = (lo.min(hi), lo.max(hi));
+    let through = work
+        .steps
+        .past_contact(t.test_index, STEPS_PAST_FIRST_CONTACT, true);
+    let h = (hi - lo) / 8.0;
+    let grid: Vec<f64> = (0..9).map(|k| lo + (hi - lo) * k as f64 / 8.0).collect();
+    let tried = grid_then_refine(
+        work,
+        grid,
+        |best| {
+            vec![
+                best - 0.5 * h,
+                best - 0.25 * h,
+                best + 0.25 * h,
+                best + 0.5 * h,
+            ]
+        },
+        |work, c| {
+            let mut ext = work.accepted.clone();
+            // Per-test runs: the clearance of this test alone, no growth across tests.
+            ext.wear = None;
+            let mut spec = ext.clearance.clone().unwrap_or(ClearanceSpec {
+                offset: 0.0,
+                tests: Vec::new(),
+            });
+            spec.tests.retain(|x| x.test != t.test);
+            spec.tests.push(TestClearanceSpec {
+                test: t.test.clone(),
+                clearance: c,
+            });
+            ext.clearance = Some(spec);
+            let s = work.scores_reach(&ext, &[(t.test_index, through)])?;
+            Ok(set_error(&s, &[t.test_index], Steps::All))
+        },
+    )?;
+    let Some(&(best, error)) = tried.iter().min_by(|a, b| a.1.total_cmp(&b.1)) else {
+        return Ok(None);
+    };
+    (work.progress)(DiagnoseProgress::Note(format!(
+        "clearance of {}: {best:.4e} m by model runs (bracket {lo:.4e}-{hi:.4e} m, error {error:.3}, {} runs)",
+        t.test,
+        tried.len()
+    )));
+    Ok(Some(RunClearance {
+        clearance_m: best,
+        error,
+    }))
+}
+
+/// Stage 4: the clearance per test, as an offset to the plan's.
+pub(super) fn clearance_stage(
+    work: &mut Work<'_>,
+    ce: &ClearanceEvidence,
+) -> Result<(), DiagnoseError> {
+    let bracketed: Vec<&TestClearance> = ce
+        .tests
+        .iter()
+        .filter(|t| t.clearance_m.is_some())
+        .collect();
+    if bracketed.len() < 2 {
+        work.undecided(
+            "clearance",
+            format!("{} test(s) bracket the clearance (impact-free steps, then contact); two are needed, one to fit and one to validate", bracketed.len()),
+        );
+        return Ok(());
+    }
+    let idx: Vec<usize> = bracketed.iter().map(|t| t.test_index).collect();
+    let (train, validation) = alternate(&idx);
+    // Per train test: the clearance within its bracket whose model run matches the test best
+    // (every step and channel: where the first contact falls, how much contact follows), on
+    // a grid refined once around the best point; the offset to the model's clearance is the
+    // mean over the train tests.
+    let mut fitted = Vec::new();
+    for t in bracketed.iter().filter(|t| train.contains(&t.test_index)) {
+        if let Some(best) = test_clearance_by_runs(work, t)? {
+            fitted.push((*t, best.clearance_m));
+        }
+    }
+    if fitted.is_empty() {
+        return Ok(());
+    }
+    let current = |t: &TestClearance| work.accepted.test_clearance(&t.test, t.plan_clearance_m);
+    let offs: Vec<f64> = fitted.iter().map(|(t, c)| c - current(t)).collect();
+    let offset = offs.iter().sum::<f64>() / offs.len() as f64;
+    let plan = bracketed[0].plan_clearance_m;
+    if offset.abs() < 0.02 * plan {
+        (work.progress)(DiagnoseProgress::Note(format!(
+            "clearance: the fitted offset {offset:+.2e} m is within 2 % of the plan's {plan:.3e} m"
+        )));
+        return Ok(());
+    }
+    let spread = if offs.len() > 1 {
+        (offs.iter().map(|o| (o - offset).powi(2)).sum::<f64>() / (offs.len() - 1) as f64).sqrt()
+    } else {
+        f64::NAN
+    };
+    let mut ext = work.accepted.clone();
+    let base_offset = ext.clearance.as_ref().map_or(0.0, |c| c.offset);
+    ext.clearance = Some(ClearanceSpec {
+        offset: base_offset + offset,
+        tests: Vec::new(),
+    });
+    let cand = Candidate::new(
+        "clearance",
+        ext,
+        json!({"offset": base_offset + offset, "tests": fitted.iter().map(|(t, c)| json!({"test": t.test, "clearance": c})).collect::<Vec<_>>()}),
+        1,
+        json!({"offset_m": offset, "offset_spread_m": spread.is_finite().then_some(spread), "plan_clearance_m": plan, "brackets_m": bracketed.iter().map(|t| json!({"test": t.test, "lower": t.lower_bound_m, "upper": t.upper_bound_m})).collect::<Vec<_>>()}),
+        (train, validation),
+        Steps::All,
+    );
+    work.judge(cand)?;
+    Ok(())
+}

@@ -216,4 +216,10 @@ fn print_diagnosis(d: &Diagnosis) {
         "model runs: {} ({:.0} s of rig time in {:.1} s), {:.1} s in all",
         d.cost.model_runs, d.cost.model_rig_seconds, d.cost.model_wall_seconds, d.wall_seconds
     );
+    for c in d.cost.stages.iter().filter(|c| c.model_runs > 0) {
+        println!(
+            "  {:<20} {:>4} runs, {:>7.0} s of rig time in {:>7.1} s",
+            c.stage, c.model_runs, c.model_rig_seconds, c.model_wall_seconds
+        );
+    }
 }

@@ -27,9 +27,10 @@ const STEPS_PAST_FIRST_CONTACT: usize = 2;
 /// test's clearance set) matches the test best over every channel of its steps up to
 /// [`STEPS_PAST_FIRST_CONTACT`] past the measured first contact (where the first contact
 /// falls, how much contact follows it; the later steps, the rest of the band and past it,
-/// carry chaos and the twin's own step rather than the clearance, and cost the most): a
-/// grid of 9 over the bracket, refined once around the best point (13 runs of the test's
-/// first steps alone). `None` without a bracket.
+/// carry chaos and the twin's own step rather than the clearance, and cost the most), from
+/// two steps before it (a state of open contact there, captured once, starts every run;
+/// [`Work::open_span`]): a grid of 9 over the bracket, refined once around the best point
+/// (13 runs of a few steps of the test). `None` without a bracket.
 pub(super) fn test_clearance_by_runs(
     work: &mut Work<'_>,
     t: &TestClearance,
@@ -38,10 +39,35 @@ pub(super) fn test_clearance_by_runs(
         return Ok(None);
     };
     let (lo, hi) = (lo.min(hi), lo.max(hi));
+    let h = (hi - lo) / 8.0;
+    let with_clearance = |work: &Work<'_>, c: f64| {
+        let mut ext = work.accepted.clone();
+        // Per-test runs: the clearance of this test alone, no growth across tests.
+        ext.wear = None;
+        let mut spec = ext.clearance.clone().unwrap_or(ClearanceSpec {
+            offset: 0.0,
+            tests: Vec::new(),
+        });
+        spec.tests.retain(|x| x.test != t.test);
+        spec.tests.push(TestClearanceSpec {
+            test: t.test.clone(),
+            clearance: c,
+        });
+        ext.clearance = Some(spec);
+        ext
+    };
+    // The steps compared: from two before the first measured contact (the steps before are
+    // the same for every clearance tried, run once: the smallest tried closes nothing there)
+    // to STEPS_PAST_FIRST_CONTACT after it.
     let through = work
         .steps
         .past_contact(t.test_index, STEPS_PAST_FIRST_CONTACT, true);
-    let h = (hi - lo) / 8.0;
+    let from = work
+        .steps
+        .first_contact(t.test_index)
+        .map_or(0, |f| f.saturating_sub(2));
+    let closest = with_clearance(work, lo - h);
+    let span = work.open_span(&closest, t.test_index, from, through)?;
     let grid: Vec<f64> = (0..9).map(|k| lo + (hi - lo) * k as f64 / 8.0).collect();
     let tried = grid_then_refine(
         work,
@@ -55,20 +81,8 @@ pub(super) fn test_clearance_by_runs(
             ]
         },
         |work, c| {
-            let mut ext = work.accepted.clone();
-            // Per-test runs: the clearance of this test alone, no growth across tests.
-            ext.wear = None;
-            let mut spec = ext.clearance.clone().unwrap_or(ClearanceSpec {
-                offset: 0.0,
-                tests: Vec::new(),
-            });
-            spec.tests.retain(|x| x.test != t.test);
-            spec.tests.push(TestClearanceSpec {
-                test: t.test.clone(),
-                clearance: c,
-            });
-            ext.clearance = Some(spec);
-            let s = work.scores_reach(&ext, &[(t.test_index, through)])?;
+            let ext = with_clearance(work, c);
+            let s = work.scores_spans(&ext, &[span])?;
             Ok(set_error(&s, &[t.test_index], Steps::All))
         },
     )?;

@@ -9,8 +9,8 @@ use std::collections::HashMap;
 
 use crate::config::PhysicsSpec;
 
-use super::outcome::{EffectResult, Regime, SetError, StepScores, Undecided};
-use super::rerun::{ModelRunner, Reach, SessionSteps};
+use super::outcome::{EffectResult, Regime, SetError, StageCost, StepScores, Undecided};
+use super::rerun::{ModelRunner, RunCost, SessionSteps, Span};
 use super::DiagnoseError;
 
 /// How many times finer than the twin's own step a candidate judged on the impact band is
@@ -176,8 +176,12 @@ pub(super) struct Work<'a> {
     pub(super) accepted: PhysicsSpec,
     pub(super) effects: Vec<EffectResult>,
     pub(super) undecided: Vec<Undecided>,
-    cache: HashMap<(String, Vec<Reach>, u32), Vec<StepScores>>,
+    cache: HashMap<(String, Vec<Span>, u32), Vec<StepScores>>,
     pub(super) progress: &'a mut dyn FnMut(DiagnoseProgress),
+    /// What the stages' model runs cost, as each ended.
+    pub(super) stage_costs: Vec<StageCost>,
+    /// The stage under way and the runner's cost at its start.
+    stage_start: Option<(&'static str, RunCost)>,
 }
 
 impl<'a> Work<'a> {
@@ -198,11 +202,33 @@ impl<'a> Work<'a> {
             undecided: Vec::new(),
             cache: HashMap::new(),
             progress,
+            stage_costs: Vec::new(),
+            stage_start: None,
         }
     }
 }
 
 impl Work<'_> {
+    /// Stage `stage` begins (`line` on the terminal); the stage before ends.
+    pub(super) fn stage(&mut self, stage: &'static str, line: impl Into<String>) {
+        self.end_stage();
+        self.stage_start = Some((stage, self.runner.cost));
+        (self.progress)(DiagnoseProgress::Stage(line.into()));
+    }
+
+    /// The stage under way ends: its model runs' cost is kept in `stage_costs`.
+    pub(super) fn end_stage(&mut self) {
+        if let Some((stage, at)) = self.stage_start.take() {
+            let c = self.runner.cost;
+            self.stage_costs.push(StageCost {
+                stage: stage.to_string(),
+                model_runs: c.runs - at.runs,
+                model_rig_seconds: c.rig_seconds - at.rig_seconds,
+                model_wall_seconds: c.wall_seconds - at.wall_seconds,
+            });
+        }
+    }
+
     /// The compared steps of tests `tests` (every step) with extensions `ext`; a run made
     /// before for the same model, tests and twin step is not made again.
     pub(super) fn scores(
@@ -210,24 +236,42 @@ impl Work<'_> {
         ext: &PhysicsSpec,
         tests: &[usize],
     ) -> Result<Vec<StepScores>, DiagnoseError> {
-        let reach: Vec<Reach> = tests.iter().map(|&t| (t, None)).collect();
-        self.scores_reach(ext, &reach)
+        let spans: Vec<Span> = tests.iter().map(|&t| Span::whole(t)).collect();
+        self.scores_spans(ext, &spans)
     }
 
-    /// [`Work::scores`] over each test's steps up to its given last one
-    /// ([`ModelRunner::run_reach`]).
-    pub(super) fn scores_reach(
+    /// [`Work::scores`] over the steps `spans` name ([`ModelRunner::run_spans`]).
+    pub(super) fn scores_spans(
         &mut self,
         ext: &PhysicsSpec,
-        reach: &[Reach],
+        spans: &[Span],
     ) -> Result<Vec<StepScores>, DiagnoseError> {
-        let key = (ext.to_json(), reach.to_vec(), self.runner.refinement());
+        let key = (ext.to_json(), spans.to_vec(), self.runner.refinement());
         if let Some(s) = self.cache.get(&key) {
             return Ok(s.clone());
         }
-        let s = self.runner.run_reach(ext, reach)?;
+        let s = self.runner.run_spans(ext, spans)?;
         self.cache.insert(key, s.clone());
         Ok(s)
+    }
+
+    /// The steps of test `test` from `from` through `through` for runs whose contact geometry
+    /// is nowhere closer than `closest`'s: from a state of open contact captured at `from`
+    /// with `closest` ([`ModelRunner::capture_open`]), or, where a pair closes before `from`
+    /// with `closest` (the earlier steps carry evidence then), every step through `through`.
+    pub(super) fn open_span(
+        &mut self,
+        closest: &PhysicsSpec,
+        test: usize,
+        from: usize,
+        through: Option<usize>,
+    ) -> Result<Span, DiagnoseError> {
+        let open = from > 0 && self.runner.capture_open(closest, test, from)?;
+        Ok(Span {
+            test,
+            from: if open { from } else { 0 },
+            through,
+        })
     }
 
     pub(super) fn names(&self, tests: &[usize]) -> Vec<String> {

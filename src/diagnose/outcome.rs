@@ -165,6 +165,22 @@ pub struct DiagnosisCost {
     pub model_rig_seconds: f64,
     /// Wall seconds in model runs, s.
     pub model_wall_seconds: f64,
+    /// The same per stage, in the order they ran.
+    pub stages: Vec<StageCost>,
+}
+
+/// The model runs of one stage of a diagnosis.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct StageCost {
+    /// The stage (`locate`, `sensor_gain`, `linear`, `clamp_friction`, `sensor_gain_again`,
+    /// `wear`, `clearance`, `tilt`, `show`).
+    pub stage: String,
+    /// Model runs (whole or per test).
+    pub model_runs: usize,
+    /// Rig seconds the model re-ran, s.
+    pub model_rig_seconds: f64,
+    /// Wall seconds in model runs, s.
+    pub model_wall_seconds: f64,
 }
 
 /// The result of a diagnosis (`rigtwin diagnose --json`).

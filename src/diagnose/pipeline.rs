@@ -47,7 +47,8 @@ use super::judge::{DiagnoseOptions, DiagnoseProgress, Work};
 use super::linear::{linear_modes_of, LinearOptions};
 use super::modes::linear_stage;
 use super::outcome::{
-    Diagnosis, DiagnosisCost, EffectResult, Located, Regime, RegimeScores, StepScores, Verdict,
+    Diagnosis, DiagnosisCost, EffectResult, Located, Regime, RegimeScores, StageCost, StepScores,
+    Verdict,
 };
 use super::rerun::{ModelRunner, SessionSteps};
 use super::{DiagnoseError, EvidenceError};
@@ -147,11 +148,12 @@ pub fn diagnose(
     )));
     let t0 = std::time::Instant::now();
     let before = whole_session(input, &steps, &given)?;
-    let mut cost = DiagnosisCost {
+    let mut stages = vec![StageCost {
+        stage: "locate".into(),
         model_runs: 1,
         model_rig_seconds: rec.rig_seconds(),
         model_wall_seconds: t0.elapsed().as_secs_f64(),
-    };
+    }];
     let mut located: Vec<Located> = before
         .iter()
         .flat_map(|s| {
@@ -186,16 +188,15 @@ pub fn diagnose(
     let mut work = Work::new(runner, &steps, opts.clone(), given.clone(), progress);
 
     // 1. Sensor sensitivities.
-    (work.progress)(DiagnoseProgress::Stage(
-        "identify: sensor sensitivities".into(),
-    ));
+    work.stage("sensor_gain", "identify: sensor sensitivities");
     let ev = session_evidence(rec, &[])?;
     let sensors = sensor_stage(&mut work, &ev, &before)?;
 
     // 2. Linear frequency and damping of 1FU and 1FL.
-    (work.progress)(DiagnoseProgress::Stage(
-        "identify: linear frequency and damping of 1FU and 1FL (impact-free steps)".into(),
-    ));
+    work.stage(
+        "linear",
+        "identify: linear frequency and damping of 1FU and 1FL (impact-free steps)",
+    );
     let gains: Vec<(String, f64)> = work
         .accepted
         .sensor_gains
@@ -214,9 +215,10 @@ pub fn diagnose(
     };
     if let Some(lin) = &linear {
         linear_stage(&mut work, input.rom, lin)?;
-        (work.progress)(DiagnoseProgress::Stage(
-            "identify: amplitude dependence without contact (the clamp's friction)".into(),
-        ));
+        work.stage(
+            "clamp_friction",
+            "identify: amplitude dependence without contact (the clamp's friction)",
+        );
         super::clamp::clamp_stage(&mut work, lin)?;
     }
 
@@ -233,23 +235,26 @@ pub fn diagnose(
         ..
     } = GainSplit::of(&steps);
     if since && !free_train.is_empty() && !free_validation.is_empty() {
-        (work.progress)(DiagnoseProgress::Stage(
-            "identify: the beam channels' sensitivities against the corrected model".into(),
-        ));
+        work.stage(
+            "sensor_gain_again",
+            "identify: the beam channels' sensitivities against the corrected model",
+        );
         let accepted = work.accepted.clone();
         let scores = work.scores(&accepted, &free)?;
         unpartnered_gains(&mut work, &scores, &free_train, &free_validation)?;
     }
 
     // 4. Clearance per test.
-    (work.progress)(DiagnoseProgress::Stage(
-        "identify: clearance per test before the first impact".into(),
-    ));
+    work.stage(
+        "clearance_per_test",
+        "identify: clearance per test before the first impact",
+    );
     let mut ce = clearance_per_test_of(&ev, &ClearanceOptions::of_rig(input.cfg))?;
     let before_contact = work.accepted.clone();
-    (work.progress)(DiagnoseProgress::Stage(
-        "identify: the clearance per test against the contact work before it (wear)".into(),
-    ));
+    work.stage(
+        "wear",
+        "identify: the clearance per test against the contact work before it (wear)",
+    );
     let worn = super::wear::wear_stage(&mut work, &mut ce)?;
     if worn {
         work.undecided(
@@ -257,15 +262,22 @@ pub fn diagnose(
             "not fitted on top of the wear: the clearance changes over the session, and a tilt's early edge contact would be fitted against a moving clearance",
         );
     } else {
+        work.stage(
+            "clearance",
+            "identify: the clearance as an offset to the plan's (model runs within the brackets)",
+        );
         clearance_stage(&mut work, &ce)?;
-        (work.progress)(DiagnoseProgress::Stage(
-            "identify: tilt against the clearance (contact-regime statistics)".into(),
-        ));
+        work.stage(
+            "tilt",
+            "identify: tilt against the clearance (contact-regime statistics)",
+        );
         super::tilt::tilt_stage(&mut work, input.rom, &before_contact, &ce)?;
     }
     let clearance = Some(ce);
 
     // Show: the whole session with the accepted effects.
+    work.end_stage();
+    stages.append(&mut work.stage_costs);
     let any = work.effects.iter().any(|e| e.accepted);
     let after = if any {
         (work.progress)(DiagnoseProgress::Stage(
@@ -273,9 +285,12 @@ pub fn diagnose(
         ));
         let t = std::time::Instant::now();
         let s = whole_session(input, &steps, &work.accepted)?;
-        cost.model_runs += 1;
-        cost.model_rig_seconds += rec.rig_seconds();
-        cost.model_wall_seconds += t.elapsed().as_secs_f64();
+        stages.push(StageCost {
+            stage: "show".into(),
+            model_runs: 1,
+            model_rig_seconds: rec.rig_seconds(),
+            model_wall_seconds: t.elapsed().as_secs_f64(),
+        });
         s
     } else {
         before.clone()
@@ -336,9 +351,12 @@ pub fn diagnose(
         .collect();
     validation_tests.sort();
     validation_tests.dedup();
-    cost.model_runs += work.runner.cost.runs;
-    cost.model_rig_seconds += work.runner.cost.rig_seconds;
-    cost.model_wall_seconds += work.runner.cost.wall_seconds;
+    let cost = DiagnosisCost {
+        model_runs: stages.iter().map(|c| c.model_runs).sum(),
+        model_rig_seconds: stages.iter().map(|c| c.model_rig_seconds).sum(),
+        model_wall_seconds: stages.iter().map(|c| c.model_wall_seconds).sum(),
+        stages,
+    };
     Ok(Diagnosis {
         verdict,
         threshold: opts.threshold,

@@ -136,6 +136,14 @@ impl SessionSteps {
         }
     }
 
+    /// The first step of test `ti` with measured contact.
+    pub fn first_contact(&self, ti: usize) -> Option<usize> {
+        self.steps
+            .iter()
+            .find(|s| s.test_index == ti && !s.impact_free())
+            .map(|s| s.info.step)
+    }
+
     /// The step `past` steps after the first (`first`) or last measured contact step of test
     /// `ti`, to cut a run there; `None` (the whole test) when the test has no contact or that
     /// step is its last or beyond.
@@ -167,8 +175,46 @@ impl SessionSteps {
     }
 }
 
-/// A test (index) and the last of its steps a run covers (`None`: all).
-pub type Reach = (usize, Option<usize>);
+/// The steps of a test a run compares: `from` (a step index) through `through` (`None`: the
+/// last). A run starts at the test's lead-in whatever `from` is, unless a state of open
+/// contact captured at `from` can stand in for the steps before it
+/// ([`ModelRunner::capture_open`]): the compared steps are the same either way.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct Span {
+    /// Test index.
+    pub test: usize,
+    /// First compared step.
+    pub from: usize,
+    /// Last compared step (`None`: the test's last).
+    pub through: Option<usize>,
+}
+
+impl Span {
+    /// Every step of test `test`.
+    pub fn whole(test: usize) -> Span {
+        Span {
+            test,
+            from: 0,
+            through: None,
+        }
+    }
+
+    /// Whether step `s` is compared.
+    fn covers(&self, s: &SessionStep) -> bool {
+        s.test_index == self.test
+            && s.info.step >= self.from
+            && self.through.is_none_or(|l| s.info.step <= l)
+    }
+}
+
+/// A state of open contact captured at the start of a step ([`ModelRunner::capture_open`]).
+struct OpenStart {
+    test: usize,
+    step: usize,
+    /// The extensions it was captured with (the closest contact geometry of those it serves).
+    captured_with: PhysicsSpec,
+    state: crate::twin::TwinState,
+}
 
 /// What a model run did.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -199,6 +245,10 @@ pub struct ModelRunner<'a> {
     /// Per test of the session: the dissipated contact work at its start in the last run, J
     /// (`None`: not run, or no wear in the model).
     last_contact_work: Vec<Option<f64>>,
+    /// States of open contact that can start runs ([`ModelRunner::capture_open`]).
+    open_starts: Vec<OpenStart>,
+    /// Every capture tried: (test, step, extensions) and whether it was kept.
+    captures: std::collections::HashMap<(usize, usize, String), bool>,
 }
 
 /// What one stretch of tests gave.
@@ -235,6 +285,8 @@ impl<'a> ModelRunner<'a> {
             jobs: jobs.max(1),
             cost: RunCost::default(),
             last_contact_work: Vec::new(),
+            open_starts: Vec::new(),
+            captures: std::collections::HashMap::new(),
         }
     }
 
@@ -264,37 +316,44 @@ impl<'a> ModelRunner<'a> {
         ext: &PhysicsSpec,
         tests: &[usize],
     ) -> Result<Vec<StepScores>, DiagnoseError> {
-        let reach: Vec<Reach> = tests.iter().map(|&t| (t, None)).collect();
-        self.run_reach(ext, &reach)
+        let spans: Vec<Span> = tests.iter().map(|&t| Span::whole(t)).collect();
+        self.run_spans(ext, &spans)
     }
 
-    /// [`ModelRunner::run`] over the steps of each test up to its given last step (`None`:
-    /// every step): a run stops after the last step that carries the evidence. A test cut
-    /// short ends its stretch. With wear (the clearance carries across tests) every test runs
-    /// whole.
-    pub fn run_reach(
+    /// [`ModelRunner::run`] over the steps `spans` name (one span per test): a run stops after
+    /// the last step that carries the evidence, and starts from a captured state of open
+    /// contact where one serves ([`ModelRunner::capture_open`]). A test cut short or started
+    /// from a state runs alone. With wear (the clearance carries across tests) every test
+    /// runs whole, from the session's start.
+    pub fn run_spans(
         &mut self,
         ext: &PhysicsSpec,
-        tests: &[Reach],
+        spans: &[Span],
     ) -> Result<Vec<StepScores>, DiagnoseError> {
-        let mut wanted: Vec<Reach> = tests.to_vec();
+        let mut wanted: Vec<Span> = spans.to_vec();
         wanted.sort_unstable();
-        wanted.dedup_by_key(|r| r.0);
-        // Stretches of consecutive tests; the whole session for wear.
-        let mut groups: Vec<Vec<Reach>> = Vec::new();
+        wanted.dedup_by_key(|r| r.test);
+        // Stretches of consecutive tests (with the state each starts from); the whole
+        // session for wear.
+        let mut groups: Vec<(Vec<Span>, Option<usize>)> = Vec::new();
         if ext.wear.is_some() {
-            groups.push((0..self.steps.tests.len()).map(|t| (t, None)).collect());
+            groups.push(((0..self.steps.tests.len()).map(Span::whole).collect(), None));
         } else {
-            for &(t, last) in &wanted {
+            for &span in &wanted {
+                let start = self.open_start_for(ext, &span);
                 match groups.last_mut() {
-                    Some(g) if g.last().is_some_and(|p| p.0 + 1 == t && p.1.is_none()) => {
-                        g.push((t, last))
+                    Some((g, None))
+                        if start.is_none()
+                            && g.last().is_some_and(|p| {
+                                p.test + 1 == span.test && p.through.is_none()
+                            }) =>
+                    {
+                        g.push(span)
                     }
-                    _ => groups.push(vec![(t, last)]),
+                    _ => groups.push((vec![span], start)),
                 }
             }
         }
-        let wanted: Vec<usize> = wanted.iter().map(|r| r.0).collect();
         let wall = std::time::Instant::now();
         let model = TwinModel {
             rom: self.rom,
@@ -308,9 +367,10 @@ impl<'a> ModelRunner<'a> {
             let done: Vec<_> = std::thread::scope(|s| {
                 let handles: Vec<_> = chunk
                     .iter()
-                    .map(|g| {
+                    .map(|(g, start)| {
                         let model = &model;
-                        s.spawn(move || this.run_group(model, g))
+                        let start = start.map(|i| &this.open_starts[i]);
+                        s.spawn(move || this.run_group(model, g, start))
                     })
                     .collect();
                 handles
@@ -334,10 +394,167 @@ impl<'a> ModelRunner<'a> {
             }
         }
         out.sort_by_key(|s| (s.test_index, s.step));
-        out.retain(|s| wanted.contains(&s.test_index));
+        out.retain(|s| wanted.iter().any(|w| w.test == s.test_index));
         self.cost.wall_seconds += wall.elapsed().as_secs_f64();
         self.last_contact_work = work;
         Ok(out)
+    }
+
+    /// Runs test `test` with extensions `ext` from its lead-in to the start of its step
+    /// `step` and keeps the state there, if no contact pair closed on the way, to start later
+    /// runs of that test's steps from `step` on ([`Span`]) with extensions whose contact
+    /// geometry is nowhere closer than `ext`'s (and that differ from `ext` in nothing else):
+    /// with the contact open, the motion up to there does not depend on the geometry, so
+    /// those runs compare exactly what runs from rest would. Returns whether it was kept.
+    pub fn capture_open(
+        &mut self,
+        ext: &PhysicsSpec,
+        test: usize,
+        step: usize,
+    ) -> Result<bool, DiagnoseError> {
+        let key = (test, step, ext.to_json());
+        if let Some(&kept) = self.captures.get(&key) {
+            return Ok(kept);
+        }
+        let kept = self.capture(ext, test, step)?;
+        self.captures.insert(key, kept);
+        Ok(kept)
+    }
+
+    /// [`ModelRunner::capture_open`] without the memory of captures tried.
+    fn capture(
+        &mut self,
+        ext: &PhysicsSpec,
+        test: usize,
+        step: usize,
+    ) -> Result<bool, DiagnoseError> {
+        if ext.wear.is_some() {
+            return Ok(false);
+        }
+        let Some(&(_, _, at)) = self
+            .steps
+            .starts
+            .iter()
+            .find(|s| s.0 == test && s.1 == step)
+        else {
+            return Ok(false);
+        };
+        let wall = std::time::Instant::now();
+        let model = TwinModel {
+            rom: self.rom,
+            extensions: ext.clone(),
+            circuit: self.base.circuit.clone(),
+            contact_threshold_v: self.base.contact_threshold_v,
+        };
+        let (mut twin, start, mut clearances) = self.twin_at(&model, self.steps.lead_in(test))?;
+        let dt = self.rec.layout.dt();
+        for b in &self.rec.blocks[start..] {
+            if b.first_sample >= at {
+                break;
+            }
+            while let Some(c) = clearances.next_due(b.first_sample) {
+                twin.set_clearance(c)?;
+            }
+            twin.push_block(b)?;
+            self.cost.rig_seconds += b.len as f64 * dt;
+        }
+        self.cost.runs += 1;
+        self.cost.wall_seconds += wall.elapsed().as_secs_f64();
+        let Some(state) = twin.state() else {
+            return Ok(false);
+        };
+        if state.rom.counters().closed_steps > 0 {
+            return Ok(false);
+        }
+        self.open_starts
+            .retain(|o| !(o.test == test && o.step == step));
+        self.open_starts.push(OpenStart {
+            test,
+            step,
+            captured_with: ext.clone(),
+            state,
+        });
+        Ok(true)
+    }
+
+    /// The captured open state (index) that can start `span` with extensions `ext`: same
+    /// test and step, the same extensions but for the contact's geometry, no wear, and every
+    /// pair's initial gap at least the captured one's.
+    fn open_start_for(&self, ext: &PhysicsSpec, span: &Span) -> Option<usize> {
+        if span.from == 0 || ext.wear.is_some() {
+            return None;
+        }
+        let strip = |e: &PhysicsSpec| {
+            let mut e = e.clone();
+            e.clearance = None;
+            e.tilt = None;
+            e.to_json()
+        };
+        let own = strip(ext);
+        let at = self
+            .steps
+            .starts
+            .iter()
+            .find(|s| s.0 == span.test && s.1 == span.from)?
+            .2;
+        self.open_starts.iter().position(|o| {
+            o.test == span.test
+                && o.step == span.from
+                && strip(&o.captured_with) == own
+                && self.no_closer(ext, &o.captured_with, at)
+        })
+    }
+
+    /// Whether every pair's initial gap with extensions `ext` at sample `at` is at least its
+    /// gap with extensions `than` (clearance and tilt).
+    fn no_closer(&self, ext: &PhysicsSpec, than: &PhysicsSpec, at: u64) -> bool {
+        let gaps = |e: &PhysicsSpec| {
+            let mut sched = ClearanceSchedule::of_events(
+                self.beam_length,
+                e.clearance.as_ref(),
+                &self.rec.events,
+            );
+            let mut c = sched.first().unwrap_or(0.0);
+            while let Some(x) = sched.next_due(at) {
+                c = x;
+            }
+            let offsets = e.tilt.as_ref().map(|t| {
+                crate::physics::tilt::gap_offsets(&self.rom.pair_position, &self.rom.pair_area, t)
+            });
+            (0..self.rom.n_pairs())
+                .map(|k| c + offsets.as_ref().map_or(0.0, |o| o[k]))
+                .collect::<Vec<f64>>()
+        };
+        gaps(ext).iter().zip(gaps(than)).all(|(a, b)| *a >= b)
+    }
+
+    /// A twin of `model` at rest at the block holding sample `from` (the session's first
+    /// block for `None`), with the clearance in force there: (twin, block index, the
+    /// clearance schedule from there on).
+    fn twin_at(
+        &self,
+        model: &TwinModel<'_>,
+        from: Option<u64>,
+    ) -> Result<(crate::twin::Twin, usize, ClearanceSchedule), DiagnoseError> {
+        let rec = self.rec;
+        let from = from.unwrap_or(0);
+        let start = rec
+            .blocks
+            .iter()
+            .position(|b| b.first_sample + b.len as u64 > from)
+            .unwrap_or(rec.blocks.len());
+        let mut clearances = ClearanceSchedule::of_events(
+            self.beam_length,
+            model.extensions.clearance.as_ref(),
+            &rec.events,
+        );
+        let begin = rec.blocks.get(start).map_or(0, |b| b.first_sample);
+        let mut clearance = clearances.first().unwrap_or(0.0);
+        while let Some(c) = clearances.next_due(begin) {
+            clearance = c;
+        }
+        let twin = crate::twin::Twin::new(model, &self.spec, &rec.layout, clearance)?;
+        Ok((twin, start, clearances))
     }
 
     /// The model's dissipated contact work `W` (J, `physics::wear`) at the start of every
@@ -361,25 +578,30 @@ impl<'a> ModelRunner<'a> {
         Ok((self.last_contact_work.clone(), scores))
     }
 
-    /// One stretch of consecutive tests `group` (each up to its last step), from rest at its
-    /// lead-in.
-    fn run_group(&self, model: &TwinModel<'_>, group: &[Reach]) -> Result<GroupRun, DiagnoseError> {
+    /// One stretch of consecutive tests (the steps `group` names), from rest at its lead-in
+    /// or from the open state `start`.
+    fn run_group(
+        &self,
+        model: &TwinModel<'_>,
+        group: &[Span],
+        start: Option<&OpenStart>,
+    ) -> Result<GroupRun, DiagnoseError> {
         let rec = self.rec;
         let empty = GroupRun {
             scores: Vec::new(),
             rig_seconds: 0.0,
             work: Vec::new(),
         };
-        let Some(&(first, _)) = group.first() else {
+        let Some(first) = group.first().map(|s| s.test) else {
             return Ok(empty);
         };
-        let runs = |s: &SessionStep| {
-            group
-                .iter()
-                .any(|&(t, last)| t == s.test_index && last.is_none_or(|l| s.info.step <= l))
-        };
-        let windows: Vec<&SessionStep> = self.steps.steps.iter().filter(|s| runs(s)).collect();
-        let group: Vec<usize> = group.iter().map(|r| r.0).collect();
+        let windows: Vec<&SessionStep> = self
+            .steps
+            .steps
+            .iter()
+            .filter(|s| group.iter().any(|g| g.covers(s)))
+            .collect();
+        let group: Vec<usize> = group.iter().map(|r| r.test).collect();
         let Some(last) = windows.last() else {
             return Ok(empty);
         };
@@ -392,23 +614,17 @@ impl<'a> ModelRunner<'a> {
         }
         let mut work = Vec::new();
         let end = last.info.record_end_sample();
-        let from = self.steps.lead_in(first).unwrap_or(0);
-        let start = rec
-            .blocks
-            .iter()
-            .position(|b| b.first_sample + b.len as u64 > from)
-            .unwrap_or(rec.blocks.len());
-        let mut clearances = ClearanceSchedule::of_events(
-            self.beam_length,
-            model.extensions.clearance.as_ref(),
-            &rec.events,
-        );
-        let begin = rec.blocks.get(start).map_or(0, |b| b.first_sample);
-        let mut clearance = clearances.first().unwrap_or(0.0);
-        while let Some(c) = clearances.next_due(begin) {
-            clearance = c;
-        }
-        let mut twin = crate::twin::Twin::new(model, &self.spec, &rec.layout, clearance)?;
+        let (mut twin, start, mut clearances) = match start {
+            None => self.twin_at(model, self.steps.lead_in(first))?,
+            Some(o) => {
+                // NOTE: the state was captured before the block at its `next_sample`, which
+                // `twin_at` finds; no test starts after it in this one-test group.
+                let (mut twin, k, clearances) = self.twin_at(model, Some(o.state.next_sample))?;
+                twin.set_open_state(&o.state, &o.captured_with)?;
+                test_starts.clear();
+                (twin, k, clearances)
+            }
+        };
         let dt = rec.layout.dt();
         let mut pending: VecDeque<(StepInfo, StepSummary)> = windows
             .iter()

@@ -15,8 +15,9 @@
 //! smaller clearance to them. The angle starts from the clearance the train tests show before
 //! their first impact (the model-run clearance per test,
 //! `clearance_fit::test_clearance_by_runs`): `sin(angle) x_edge = c_model - c_measured`, for
-//! either edge; a grid of model runs of the train tests (their steps up to two past the last
-//! measured contact) over both signs and 0.6-1.5 times that angle, refined once, fits it.
+//! either edge; a grid of model runs of the train tests (their steps from two before the first
+//! measured contact to two past the last, started from a state of open contact) over both
+//! signs and 0.6-1.5 times that angle, refined once, fits it.
 //!
 //! Selection: the tilt is judged by the pipeline's rule against the model without the
 //! clearance offset (the two compete for the same evidence). Where the clearance offset was
@@ -27,13 +28,13 @@
 
 use serde_json::json;
 
-use crate::config::{PhysicsSpec, TiltSpec};
+use crate::config::{ClearanceSpec, PhysicsSpec, TestClearanceSpec, TiltSpec};
 use crate::rom::Rom;
 
 use super::clearance::{ClearanceEvidence, TestClearance};
 use super::clearance_fit::test_clearance_by_runs;
 use super::judge::{alternate, grid_then_refine, set_error, set_error_of, Candidate, Steps, Work};
-use super::rerun::Reach;
+use super::rerun::Span;
 use super::{DiagnoseError, DiagnoseProgress};
 
 /// The tilt axis fitted, `[x, y]`.
@@ -136,12 +137,39 @@ pub(super) fn tilt_stage(
         .iter()
         .flat_map(|s| [0.6, 0.8, 1.0, 1.2, 1.5].map(|m| (m * s).clamp(-0.1, 0.1)))
         .collect();
-    // The train tests up to two steps past their last measured contact: a tilt acts in
-    // contact (the steps after the band carry no evidence of it).
-    let train_reach: Vec<Reach> = train
-        .iter()
-        .map(|&t| (t, work.steps.past_contact(t, 2, false)))
-        .collect();
+    // The train tests' steps from two before their first measured contact to two past their
+    // last: a tilt acts in contact. The steps before are the same for every angle tried, run
+    // once: with the clearance closed by the largest edge closing tried, nothing closes there.
+    let widest = grid.iter().fold(0.0f64, |m, a| m.max(a.abs())) * 1.1;
+    let closing_max = widest.sin() * tip_edge.max(clamp_edge);
+    let mut closest = base.clone();
+    let mut spec = closest.clearance.clone().unwrap_or(ClearanceSpec {
+        offset: 0.0,
+        tests: Vec::new(),
+    });
+    for &ti in &train {
+        let name = &work.steps.tests[ti];
+        let plan = bracketed
+            .iter()
+            .find(|b| b.test_index == ti)
+            .map_or(0.0, |b| b.plan_clearance_m);
+        let c = base.test_clearance(name, plan) - closing_max;
+        spec.tests.retain(|x| &x.test != name);
+        spec.tests.push(TestClearanceSpec {
+            test: name.clone(),
+            clearance: c,
+        });
+    }
+    closest.clearance = Some(spec);
+    let mut train_spans: Vec<Span> = Vec::new();
+    for &ti in &train {
+        let from = work
+            .steps
+            .first_contact(ti)
+            .map_or(0, |f| f.saturating_sub(2));
+        let through = work.steps.past_contact(ti, 2, false);
+        train_spans.push(work.open_span(&closest, ti, from, through)?);
+    }
     let tried = grid_then_refine(
         work,
         grid,
@@ -150,7 +178,7 @@ pub(super) fn tilt_stage(
             (work.progress)(DiagnoseProgress::Evaluation(format!(
                 "tilt {angle:.3e} rad about y on the train tests"
             )));
-            let s = work.scores_reach(&with(angle), &train_reach)?;
+            let s = work.scores_spans(&with(angle), &train_spans)?;
             Ok(set_error(&s, &train, Steps::All))
         },
     )?;

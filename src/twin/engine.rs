@@ -29,6 +29,7 @@
 //! the gap in the block's output. A block that starts before the end of the last one is
 //! rejected (the state is left as it was).
 
+use crate::config::PhysicsSpec;
 use crate::physics::contact_detection::SampleDetector;
 use crate::rig::daq::{DaqBlock, DaqLayout};
 use crate::sim::driven::{DrivenError, DrivenRom, SensorStep};
@@ -94,6 +95,10 @@ pub struct Twin {
     map: InputMap,
     /// The model's identity in warm-start states ([`TwinState::model`]).
     identity: String,
+    /// The same without the contact's geometry ([`Twin::set_open_state`]).
+    open_identity: String,
+    /// The ROM's part of both.
+    rom_identity: String,
     after_gap: AfterGap,
     steps_per_sample: u32,
     /// `k / N` for `k = 1..=N`.
@@ -168,13 +173,14 @@ impl Twin {
         let detector =
             SampleDetector::new(&observation.circuit, dt, observation.contact_threshold_v);
         let weights = (1..=n).map(|k| f64::from(k) / f64::from(n)).collect();
-        let identity = format!(
-            "ROM {} ({} modes, {} pairs), extensions {}, dt {dt:e} s",
+        let rom_identity = format!(
+            "ROM {} ({} modes, {} pairs)",
             model.rom.meta.config_hash,
             model.rom.n_modes(),
             model.rom.n_pairs(),
-            model.extensions.to_json()
         );
+        let open_identity = identity(&rom_identity, &without_geometry(&model.extensions), dt);
+        let identity = identity(&rom_identity, &model.extensions, dt);
         Ok(Twin {
             rom,
             effects,
@@ -182,6 +188,8 @@ impl Twin {
             observation,
             map,
             identity,
+            open_identity,
+            rom_identity,
             after_gap: spec.after_gap,
             steps_per_sample: n,
             weights,
@@ -326,6 +334,44 @@ impl Twin {
         Ok(())
     }
 
+    /// Restores `state`, captured by a twin whose model differed from this one's at most in
+    /// the contact's geometry (`captured_with`: its extensions; the clearance and the tilt may
+    /// differ) before any pair had closed since rest. While the contact stays open the motion
+    /// does not depend on that geometry, so this twin continues bit for bit as if it had run
+    /// from rest with its own geometry, provided its own gaps stayed open up to there too
+    /// (e.g. its geometry is nowhere closer than the captured one's: the caller's part). The
+    /// clearance stays this twin's. Fails, changing nothing, when a pair had closed, when
+    /// wear is on (its state depends on the contact), or when the models differ otherwise.
+    pub fn set_open_state(
+        &mut self,
+        state: &TwinState,
+        captured_with: &PhysicsSpec,
+    ) -> Result<(), TwinError> {
+        let captured = identity(&self.rom_identity, captured_with, self.dt());
+        let open = identity(
+            &self.rom_identity,
+            &without_geometry(captured_with),
+            self.dt(),
+        );
+        if captured != state.model || open != self.open_identity {
+            return Err(StateError::Model {
+                state: state.model.clone(),
+                twin: self.identity.clone(),
+            }
+            .into());
+        }
+        if state.effects.wear.is_some() {
+            return Err(StateError::Open("wear is on").into());
+        }
+        if state.rom.counters().closed_steps > 0 || state.rom.lambda().iter().any(|&l| l != 0.0) {
+            return Err(StateError::Open("a contact pair had closed").into());
+        }
+        let mut own = state.clone();
+        own.model = self.identity.clone();
+        own.effects.nominal_clearance = self.effects.state().nominal_clearance;
+        self.set_state(&own)
+    }
+
     /// Runs the twin over one DAQ block (see the module docs). Fails, leaving the twin as it
     /// was, on a block that does not fit the layout or starts before the end of the last one.
     pub fn push_block(&mut self, block: &DaqBlock) -> Result<TwinBlock, TwinError> {
@@ -442,4 +488,18 @@ impl Twin {
         self.last_seq = input.seq;
         Ok(out)
     }
+}
+
+/// A model's identity in warm-start states: its ROM's (`rom`), extensions `ext`, twin step
+/// `dt` (s).
+fn identity(rom: &str, ext: &PhysicsSpec, dt: f64) -> String {
+    format!("{rom}, extensions {}, dt {dt:e} s", ext.to_json())
+}
+
+/// Extensions `ext` without the contact's geometry (clearance, tilt).
+fn without_geometry(ext: &PhysicsSpec) -> PhysicsSpec {
+    let mut e = ext.clone();
+    e.clearance = None;
+    e.tilt = None;
+    e
 }

@@ -99,6 +99,12 @@ pub enum StateError {
     /// A scalar is not finite.
     #[error("twin state: {0} is not finite")]
     NonFinite(&'static str),
+    /// A state restored into a model of another contact geometry
+    /// ([`super::Twin::set_open_state`]) was not captured with the contact open.
+    #[error(
+        "twin state: not a state of open contact ({0}): it can be restored only into its own model"
+    )]
+    Open(&'static str),
 }
 
 /// Where warm-start states are captured: at the start of every step, i.e. before the first

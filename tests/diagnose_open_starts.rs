@@ -1,0 +1,129 @@
+//! The diagnosis' model runs started from a captured state of open contact
+//! (`ModelRunner::capture_open`, `Span`): the clearance and tilt fits run many contact
+//! geometries over the same steps, and the steps before the first contact are the same for
+//! all of them. Guards, on a session of the simulated rig sweeping down into the impact band:
+//! - a run of a test's steps from a state captured two steps before the first contact, with
+//!   a clearance no smaller than the capture's, compares exactly (bit for bit) what a run of
+//!   the same steps from rest compares, for less rig time;
+//! - a geometry closer than the capture's (a smaller clearance, or a tilt whose edge closes
+//!   below it) is run from rest instead, with the same results as without any capture;
+//! - a capture during which a pair closed is not kept.
+
+mod cli_support;
+mod default_rom;
+
+use cli_support::{default_rig_with, rigtwin, text};
+use rigtwin::config::{ClearanceSpec, PhysicsSpec, RigConfig, TiltSpec};
+use rigtwin::diagnose::rerun::{ModelRunner, SessionSteps, Span};
+use rigtwin::session::replay::replay;
+use rigtwin::twin::TwinModel;
+
+/// 2e-5 l down from 1.03 omega_2 in 0.01 steps into the band: the first steps impact-free.
+const PLAN: &str = r#"
+name = "open-starts"
+[defaults]
+clearance = 2.33e-3
+settle_periods = 40
+record_periods = 30
+steps_per_period = 1000
+
+[[test]]
+name = "down"
+level = 2e-5
+direction = "down"
+omega_start = 1.03
+omega_end = 0.98
+steps = 6
+"#;
+
+fn offset(o: f64) -> PhysicsSpec {
+    PhysicsSpec {
+        clearance: Some(ClearanceSpec {
+            offset: o,
+            tests: Vec::new(),
+        }),
+        ..PhysicsSpec::default()
+    }
+}
+
+#[test]
+fn runs_from_an_open_state_compare_what_runs_from_rest_do() {
+    let dir = tempfile::tempdir().unwrap();
+    let rig = default_rig_with(dir.path(), "[safety]\ndaq_timeout_s = 30\n");
+    let plan = dir.path().join("plan.toml");
+    std::fs::write(&plan, PLAN).unwrap();
+    let log = dir.path().join("s.mcap");
+    let o = rigtwin(&[
+        "run",
+        rig.to_str().unwrap(),
+        "--plan",
+        plan.to_str().unwrap(),
+        "--quiet",
+        "--out",
+        log.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let r = replay(&log).unwrap();
+    let cfg = RigConfig::default_rig();
+    let rom = default_rom::default_rom();
+    let steps = SessionSteps::of(&r.recording, &r.summary);
+    let runner = || {
+        ModelRunner::new(
+            &r.recording,
+            &steps,
+            TwinModel::of_config(rom, &cfg),
+            &cfg.twin,
+            cfg.rig.beam_length,
+            1,
+        )
+    };
+    let first = steps.first_contact(0).expect("the sweep reaches the band");
+    assert!(first >= 3, "first contact at step {first}: too early for the test");
+    let from = first - 2;
+    let span = Span {
+        test: 0,
+        from,
+        through: Some(first + 1),
+    };
+
+    // Captured with a clearance 5e-5 m smaller than the plan's; run with the plan's and a
+    // larger one (no closer), and with smaller ones (closer: from rest).
+    let closest = offset(-5e-5);
+    let mut warm = runner();
+    assert!(warm.capture_open(&closest, 0, from).unwrap());
+    let capture_cost = warm.cost.rig_seconds;
+    let mut cold = runner();
+    let tilted = PhysicsSpec {
+        tilt: Some(TiltSpec {
+            angle: 0.05,
+            axis: [0.0, 1.0],
+        }),
+        ..PhysicsSpec::default()
+    };
+    for (ext, served) in [
+        (PhysicsSpec::default(), true),
+        (offset(1e-4), true),
+        (offset(-5e-5), true),
+        (offset(-1e-4), false),
+        (tilted, false),
+    ] {
+        let (w0, c0) = (warm.cost.rig_seconds, cold.cost.rig_seconds);
+        let a = warm.run_spans(&ext, &[span]).unwrap();
+        let b = cold.run_spans(&ext, &[span]).unwrap();
+        assert_eq!(a, b, "{ext:?}");
+        assert!(a.iter().all(|s| s.step >= from && s.step <= first + 1));
+        assert_eq!(a.len(), 4, "{ext:?}");
+        assert!(a.iter().all(|s| !s.features.is_empty()), "{ext:?}");
+        let (dw, dc) = (warm.cost.rig_seconds - w0, cold.cost.rig_seconds - c0);
+        if served {
+            assert!(dw < 0.75 * dc, "{ext:?}: {dw} s from the state, {dc} s from rest");
+        } else {
+            assert_eq!(dw, dc, "{ext:?}: run from rest");
+        }
+    }
+    assert!(capture_cost > 0.0);
+
+    // A clearance so small that the probes touch before the capture's step: not kept.
+    let mut touching = runner();
+    assert!(!touching.capture_open(&offset(-6.5e-4), 0, from).unwrap());
+}

@@ -213,6 +213,8 @@ struct OpenStart {
     step: usize,
     /// The extensions it was captured with (the closest contact geometry of those it serves).
     captured_with: PhysicsSpec,
+    /// The twin step's refinement it was captured at.
+    refinement: u32,
     state: crate::twin::TwinState,
 }
 
@@ -247,7 +249,7 @@ pub struct ModelRunner<'a> {
     last_contact_work: Vec<Option<f64>>,
     /// States of open contact that can start runs ([`ModelRunner::capture_open`]).
     open_starts: Vec<OpenStart>,
-    /// Every capture tried: (test, step, extensions) and whether it was kept.
+    /// Every capture tried: (test, step, extensions and refinement) and whether it was kept.
     captures: std::collections::HashMap<(usize, usize, String), bool>,
 }
 
@@ -412,7 +414,7 @@ impl<'a> ModelRunner<'a> {
         test: usize,
         step: usize,
     ) -> Result<bool, DiagnoseError> {
-        let key = (test, step, ext.to_json());
+        let key = (test, step, format!("{} x{}", ext.to_json(), self.refinement));
         if let Some(&kept) = self.captures.get(&key) {
             return Ok(kept);
         }
@@ -466,12 +468,11 @@ impl<'a> ModelRunner<'a> {
         if state.rom.counters().closed_steps > 0 {
             return Ok(false);
         }
-        self.open_starts
-            .retain(|o| !(o.test == test && o.step == step));
         self.open_starts.push(OpenStart {
             test,
             step,
             captured_with: ext.clone(),
+            refinement: self.refinement,
             state,
         });
         Ok(true)
@@ -500,6 +501,7 @@ impl<'a> ModelRunner<'a> {
         self.open_starts.iter().position(|o| {
             o.test == span.test
                 && o.step == span.from
+                && o.refinement == self.refinement
                 && strip(&o.captured_with) == own
                 && self.no_closer(ext, &o.captured_with, at)
         })

@@ -18,7 +18,9 @@
 //!   beams), `wear`, `tilt` (2e-3 rad), `sensor gains` (a platform accelerometer and a tip),
 //!   and `all` of them at once: the cost of each extension against `impacts`.
 //!
-//! `--case TEXT` runs only the cases whose name contains TEXT.
+//! `--case TEXT` runs only the cases whose name contains TEXT. `--contact-nodes AxB` gives the
+//! twin's ROM a coarser contact patch (`[reduction] contact_nodes`, a model change; issue 16,
+//! fourth pass).
 //!
 //! Each case settles for `--settle` periods, then runs `--seconds` of data `--repeat` times
 //! from the settled twin (sync core, `Twin::push_block`, one JSON line per run), then once
@@ -46,6 +48,7 @@ struct Args {
     seconds: f64,
     settle: f64,
     case: Option<String>,
+    contact_nodes: Option<[usize; 2]>,
 }
 
 fn parse_args() -> Args {
@@ -54,6 +57,7 @@ fn parse_args() -> Args {
         seconds: 10.0,
         settle: 200.0,
         case: None,
+        contact_nodes: None,
     };
     let mut it = std::env::args().skip(1);
     while let Some(arg) = it.next() {
@@ -67,6 +71,16 @@ fn parse_args() -> Args {
             "--seconds" => a.seconds = val("--seconds"),
             "--settle" => a.settle = val("--settle"),
             "--case" => a.case = it.next(),
+            "--contact-nodes" => {
+                let v = it.next().expect("--contact-nodes needs AxB, e.g. 8x11");
+                let (y, x) = v
+                    .split_once('x')
+                    .expect("--contact-nodes as AxB, e.g. 8x11");
+                a.contact_nodes = Some([
+                    y.parse().expect("--contact-nodes: a count"),
+                    x.parse().expect("--contact-nodes: a count"),
+                ]);
+            }
             "--bench" => {}
             other => panic!("unknown argument {other}"),
         }
@@ -120,7 +134,9 @@ struct Case {
 
 fn main() {
     let args = parse_args();
-    let cfg = RigConfig::default_rig();
+    let mut cfg = RigConfig::default_rig();
+    cfg.reduction.contact_nodes = args.contact_nodes;
+    cfg.validate().expect("--contact-nodes: a valid patch");
     let dir = std::env::var_os("RIGTWIN_CACHE")
         .map(PathBuf::from)
         .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/rom-cache"));
@@ -139,7 +155,7 @@ fn main() {
     let block_s = layout.block_size as f64 / fs;
     let spec = TwinSpec::default();
     eprintln!(
-        "default ROM: {} modes, {} pairs, f(1FU) = {:.2} Hz; DAQ {fs} Hz, {} samples per block",
+        "ROM: {} modes, {} pairs, f(1FU) = {:.2} Hz; DAQ {fs} Hz, {} samples per block",
         rom.n_modes(),
         rom.n_pairs(),
         w2 / (2.0 * PI),

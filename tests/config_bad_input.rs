@@ -237,6 +237,19 @@ fn contact_node_counts_below_two() {
         "contact.nodes",
         "at least 2 nodes",
     );
+    // The model's own patch (`[reduction] contact_nodes`) is checked alike.
+    let text = set("reduction", "cutoff_ratio", "180.0\ncontact_nodes = [8, 1]");
+    assert_invalid(&text, "reduction.contact_nodes", "at least 2 nodes");
+    let text = set(
+        "reduction",
+        "cutoff_ratio",
+        "180.0\ncontact_nodes = [200, 200]",
+    );
+    assert_invalid(
+        &text,
+        "reduction.contact_nodes",
+        "at most 10000 contact pairs",
+    );
 }
 
 #[test]

@@ -160,6 +160,25 @@ fn probes_weigh_about_20_g() {
     }
 }
 
+/// `[reduction] contact_nodes` meshes the model with its own patch grid (the twin's coarser
+/// patch, issue 16), and it is part of the model's hash (a ROM cache key).
+#[test]
+fn model_patch_follows_reduction_contact_nodes() {
+    let mut cfg = reference();
+    let default_hash = cfg.canonical_hash();
+    cfg.reduction.contact_nodes = Some([8, 11]);
+    cfg.validate().unwrap();
+    assert_eq!(cfg.model().patch_nodes(), [8, 11]);
+    let mesh = mesh_rig(cfg.model()).unwrap();
+    assert_eq!(mesh.contact_pairs.len(), 88);
+    let pr = &cfg.parts.protrusion;
+    let area: f64 = mesh.contact_pairs.iter().map(|c| c.area).sum();
+    assert!((area - pr.length * pr.width).abs() < 1e-12 * area);
+    assert_ne!(cfg.canonical_hash(), default_hash);
+    cfg.reduction.contact_nodes = None;
+    assert_eq!(cfg.canonical_hash(), default_hash);
+}
+
 #[test]
 fn contact_patch_has_192_pairs_across_the_clearance() {
     let cfg = reference();

@@ -108,6 +108,7 @@ pub(crate) fn run(a: FirmwareSimArgs) -> anyhow::Result<()> {
         cutoff_ratio: Some(cfg.truth.cutoff_ratio),
         cutoff_hz: None,
         modes: None,
+        contact_nodes: None,
     };
     let (truth, _, _) = super::models::cached_rom(&truth_cfg, a.rebuild, a.quiet)?;
     let spec = SimRigSpec::from_config(&cfg);

@@ -59,13 +59,15 @@ pub(crate) fn cached_rom(
 }
 
 /// The simulated rig's truth ROM: the rig description's structure with modes up to
-/// `[truth] cutoff_ratio` x f(1FU) (more than the twin's).
+/// `[truth] cutoff_ratio` x f(1FU) (more than the twin's), on the `[contact] nodes` patch
+/// (the model's `[reduction] contact_nodes`, if any, is the twin's only).
 pub(crate) fn truth_rom(cfg: &RigConfig, rebuild: bool, quiet: bool) -> anyhow::Result<Rom> {
     let mut truth_cfg = cfg.clone();
     truth_cfg.reduction = crate::config::ReductionSpec {
         cutoff_ratio: Some(cfg.truth.cutoff_ratio),
         cutoff_hz: None,
         modes: None,
+        contact_nodes: None,
     };
     let (truth, _, _) = cached_rom(&truth_cfg, rebuild, quiet)?;
     Ok(truth)

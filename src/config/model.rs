@@ -49,6 +49,12 @@ pub struct RigModel<'a> {
 }
 
 impl<'a> RigModel<'a> {
+    /// The contact patch grid the model is meshed with, `[across y, along x]`:
+    /// `[reduction] contact_nodes` when given, else `[contact] nodes`.
+    pub fn patch_nodes(&self) -> [usize; 2] {
+        self.reduction.contact_nodes.unwrap_or(self.contact.nodes)
+    }
+
     /// SHA-256 (lower-case hex) of the canonical serialisation (JSON of the parsed model
     /// sections): comments, whitespace, key order and number spelling do not change it;
     /// explicit defaults hash like omitted ones.

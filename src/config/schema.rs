@@ -371,7 +371,8 @@ impl Default for ProbeMesh {
     }
 }
 
-/// `[reduction]`: how many free-interface modes the ROM keeps. Exactly one of the keys;
+/// `[reduction]`: how many free-interface modes the ROM keeps (exactly one of `cutoff_ratio`,
+/// `cutoff_hz`, `modes`) and optionally the model's own contact patch (`contact_nodes`);
 /// default `cutoff_ratio = 180` (the ROM builder turns it into its mode selection:
 /// `ModeSelection::from(&ReductionSpec)` in `rom::build`).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, Default)]
@@ -386,6 +387,18 @@ pub struct ReductionSpec {
     /// Keep this many lowest modes.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub modes: Option<usize>,
+    /// The model ROM's contact patch grid [across y, along x], each at least 2, in place of
+    /// `[contact] nodes`; the simulated rig's truth ROM keeps `[contact] nodes`. Not a mode
+    /// selection (may be given beside one). Default: none (the model uses `[contact] nodes`).
+    // NOTE: a MODEL change, for speed in held contact: the contact solve's cost grows with
+    // the pairs (dense Delassus matrix, 3 rows per pair), and held contact on the default
+    // 12 x 16 patch keeps the twin near 1.5 x real time. On the default rig an 8 x 11 patch
+    // (88 pairs) ran held contact 3.8 x faster with the outputs within the chaotic spread of
+    // the default patch (velocity RMS within 2.2 %, contact fraction within 7 %, mean normal
+    // force within 2.3 %); 6 x 8 moved the impacts' contact fraction by +27 % (BENCHMARKS.md
+    // "Held contact, fourth pass").
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub contact_nodes: Option<[usize; 2]>,
 }
 
 /// Materials by name.

@@ -255,22 +255,29 @@ fn layers(c: &Check, cfg: &RigModel) -> Result<(), ConfigError> {
     Ok(())
 }
 
-fn contact(c: &Check, cfg: &RigModel) -> Result<(), ConfigError> {
-    let k = &cfg.contact;
-    if k.nodes.iter().any(|&n| n < 2) {
+/// A contact patch grid `[across y, along x]` (`[contact] nodes`, `[reduction]
+/// contact_nodes`): at least 2 nodes along each edge, at most 10000 pairs.
+fn patch_nodes(c: &Check, key: &str, nodes: [usize; 2]) -> Result<(), ConfigError> {
+    if nodes.iter().any(|&n| n < 2) {
         return Err(c.fail(
-            "contact.nodes",
-            format!("[{}, {}]", k.nodes[0], k.nodes[1]),
+            key,
+            format!("[{}, {}]", nodes[0], nodes[1]),
             "at least 2 nodes along each edge of the patch ([across y, along x])",
         ));
     }
-    if k.nodes[0] * k.nodes[1] > 10_000 {
+    if nodes[0].saturating_mul(nodes[1]) > 10_000 {
         return Err(c.fail(
-            "contact.nodes",
-            format!("[{}, {}]", k.nodes[0], k.nodes[1]),
+            key,
+            format!("[{}, {}]", nodes[0], nodes[1]),
             "at most 10000 contact pairs",
         ));
     }
+    Ok(())
+}
+
+fn contact(c: &Check, cfg: &RigModel) -> Result<(), ConfigError> {
+    let k = &cfg.contact;
+    patch_nodes(c, "contact.nodes", k.nodes)?;
     c.positive("contact.clearance", k.clearance, "m")?;
     if !(k.friction.is_finite() && k.friction >= 0.0) {
         return Err(c.fail(
@@ -448,6 +455,9 @@ fn reduction(c: &Check, cfg: &RigModel) -> Result<(), ConfigError> {
     }
     if r.modes == Some(0) {
         return Err(c.fail("reduction.modes", 0, "at least 1 mode"));
+    }
+    if let Some(nodes) = r.contact_nodes {
+        patch_nodes(c, "reduction.contact_nodes", nodes)?;
     }
     Ok(())
 }

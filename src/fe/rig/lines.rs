@@ -38,7 +38,7 @@ impl Lines {
         let pe = m.probes.element;
         let pg = m.probes.growth;
         let be = m.blocks.element;
-        let [ny, nx] = cfg.contact.nodes;
+        let [ny, nx] = cfg.patch_nodes();
         let sx = (g.patch_x.1 - g.patch_x.0) / (nx - 1) as f64;
         let sy = (g.patch_y.1 - g.patch_y.0) / (ny - 1) as f64;
         let sz = sx.min(sy);

@@ -59,6 +59,11 @@ fn comparable(mut d: Value) -> Value {
     d["wall_seconds"] = Value::Null;
     d["model"] = Value::Null;
     d["cost"]["model_wall_seconds"] = Value::Null;
+    if let Some(stages) = d["cost"]["stages"].as_array_mut() {
+        for s in stages {
+            s["model_wall_seconds"] = Value::Null;
+        }
+    }
     d
 }
 

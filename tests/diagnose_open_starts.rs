@@ -78,7 +78,10 @@ fn runs_from_an_open_state_compare_what_runs_from_rest_do() {
         )
     };
     let first = steps.first_contact(0).expect("the sweep reaches the band");
-    assert!(first >= 3, "first contact at step {first}: too early for the test");
+    assert!(
+        first >= 3,
+        "first contact at step {first}: too early for the test"
+    );
     let from = first - 2;
     let span = Span {
         test: 0,
@@ -116,7 +119,10 @@ fn runs_from_an_open_state_compare_what_runs_from_rest_do() {
         assert!(a.iter().all(|s| !s.features.is_empty()), "{ext:?}");
         let (dw, dc) = (warm.cost.rig_seconds - w0, cold.cost.rig_seconds - c0);
         if served {
-            assert!(dw < 0.75 * dc, "{ext:?}: {dw} s from the state, {dc} s from rest");
+            assert!(
+                dw < 0.75 * dc,
+                "{ext:?}: {dw} s from the state, {dc} s from rest"
+            );
         } else {
             assert_eq!(dw, dc, "{ext:?}: run from rest");
         }

@@ -325,8 +325,8 @@ impl<'a> ModelRunner<'a> {
     /// [`ModelRunner::run`] over the steps `spans` name (one span per test): a run stops after
     /// the last step that carries the evidence, and starts from a captured state of open
     /// contact where one serves ([`ModelRunner::capture_open`]). A test cut short or started
-    /// from a state runs alone. With wear (the clearance carries across tests) every test
-    /// runs whole, from the session's start.
+    /// from a state runs alone. With wear (the clearance carries across tests) one run goes
+    /// from the session's start through the last test asked for, every test between whole.
     pub fn run_spans(
         &mut self,
         ext: &PhysicsSpec,
@@ -339,7 +339,18 @@ impl<'a> ModelRunner<'a> {
         // session for wear.
         let mut groups: Vec<(Vec<Span>, Option<usize>)> = Vec::new();
         if ext.wear.is_some() {
-            groups.push(((0..self.steps.tests.len()).map(Span::whole).collect(), None));
+            // From the session's start through the last test asked for.
+            let last = wanted.last().map_or(0, |s| s.test);
+            let group = (0..=last)
+                .map(|t| {
+                    wanted
+                        .iter()
+                        .find(|s| s.test == t)
+                        .copied()
+                        .unwrap_or(Span::whole(t))
+                })
+                .collect();
+            groups.push((group, None));
         } else {
             for &span in &wanted {
                 let start = self.open_start_for(ext, &span);
@@ -414,7 +425,11 @@ impl<'a> ModelRunner<'a> {
         test: usize,
         step: usize,
     ) -> Result<bool, DiagnoseError> {
-        let key = (test, step, format!("{} x{}", ext.to_json(), self.refinement));
+        let key = (
+            test,
+            step,
+            format!("{} x{}", ext.to_json(), self.refinement),
+        );
         if let Some(&kept) = self.captures.get(&key) {
             return Ok(kept);
         }
@@ -560,14 +575,16 @@ impl<'a> ModelRunner<'a> {
     }
 
     /// The model's dissipated contact work `W` (J, `physics::wear`) at the start of every
-    /// test, over the whole session run with extensions `ext` (wear on, with a zero coefficient
-    /// when `ext` has none: `W` is counted whatever the coefficient; the clearances stay
-    /// `ext`'s), with the compared steps of that run. The contact work of a test before its
-    /// first impact is its start's: the clearance measured there has seen exactly this `W`.
+    /// test up to test `through` (index), over the session run from its start with extensions
+    /// `ext` (wear on, with a zero coefficient when `ext` has none: `W` is counted whatever the
+    /// coefficient; the clearances stay `ext`'s) to the end of test `through`'s first step.
+    /// The contact work of a test before its first impact is its start's: the clearance
+    /// measured there has seen exactly this `W`.
     pub fn contact_work(
         &mut self,
         ext: &PhysicsSpec,
-    ) -> Result<(Vec<Option<f64>>, Vec<StepScores>), DiagnoseError> {
+        through: usize,
+    ) -> Result<Vec<Option<f64>>, DiagnoseError> {
         let mut ext = ext.clone();
         if ext.wear.is_none() {
             ext.wear = Some(crate::config::WearSpec {
@@ -575,9 +592,13 @@ impl<'a> ModelRunner<'a> {
                 max_growth: None,
             });
         }
-        let all: Vec<usize> = (0..self.steps.tests.len()).collect();
-        let scores = self.run(&ext, &all)?;
-        Ok((self.last_contact_work.clone(), scores))
+        let spans = [Span {
+            test: through,
+            from: 0,
+            through: Some(0),
+        }];
+        self.run_spans(&ext, &spans)?;
+        Ok(self.last_contact_work.clone())
     }
 
     /// One stretch of consecutive tests (the steps `group` names), from rest at its lead-in

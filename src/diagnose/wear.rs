@@ -7,9 +7,10 @@
 //!    test alone over its bracket (`clearance_fit::test_clearance_by_runs`, shared with the
 //!    clearance and tilt stages).
 //! 2. The accumulated contact work `W` at the start of each test comes from one run of the
-//!    model as accepted so far over the whole session, with the wear counter on and a zero
-//!    coefficient ([`super::rerun::ModelRunner::contact_work`]): what the contact dissipated
-//!    before the test's first impact.
+//!    model as accepted so far from the session's start to the last bracketed test's first
+//!    step, with the wear counter on and a zero coefficient
+//!    ([`super::rerun::ModelRunner::contact_work`]): what the contact dissipated before the
+//!    test's first impact.
 //! 3. The clearances against `W`: a straight line `c - c_plan = a + k W`. A constant offset
 //!    has no trend with `W` (`k` within 3 standard errors of zero, or a growth over the
 //!    session below 2 % of the plan's clearance): no wear, the pipeline's clearance stage
@@ -90,7 +91,14 @@ pub(super) fn wear_stage(
         return Ok(false);
     }
     let accepted = work.accepted.clone();
-    let (contact_work, _) = work.runner.contact_work(&accepted)?;
+    let last = ce
+        .tests
+        .iter()
+        .filter(|t| is_bracketed(t))
+        .map(|t| t.test_index)
+        .max()
+        .unwrap_or(0);
+    let contact_work = work.runner.contact_work(&accepted, last)?;
     for t in &mut ce.tests {
         t.accumulated_contact_work_j = contact_work.get(t.test_index).copied().flatten();
     }

@@ -371,7 +371,7 @@ impl<'a> ModelRunner<'a> {
         let mut out = TwinWindows::new(twin.observation(), self.spec.tolerance);
         let mut compared = Vec::new();
         let mut rig_seconds = 0.0;
-        for b in &rec.blocks[start..] {
+        for b in rec.base_blocks(start) {
             if b.first_sample >= end {
                 break;
             }
@@ -393,7 +393,7 @@ impl<'a> ModelRunner<'a> {
                     work.push((t, 0.0));
                 }
             }
-            let tb = twin.push_block(b)?;
+            let tb = twin.push_block(&b)?;
             rig_seconds += b.len as f64 * dt;
             out.push(&tb);
             compared.extend(out.complete(&mut pending, dt, false));

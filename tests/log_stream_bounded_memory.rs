@@ -1,6 +1,6 @@
 //! Issue 15: `stream_session` reads a session log in memory bounded by its largest chunk, not
 //! by the file: a counting allocator measures the peak of the bytes allocated while a log of
-//! 40 MB of message payloads (1 MiB chunks) is streamed, and while it is read whole
+//! over 30 MB of message payloads (1 MiB chunks) is streamed, and while it is read whole
 //! (`read_session`, which keeps every message: the measure must tell the two apart). The
 //! streamed read hands over the same messages as the whole read, in the same order.
 
@@ -59,7 +59,7 @@ fn streaming_holds_a_chunk_not_the_file() {
     let path = dir.path().join("big.mcap");
     let (log, join) = SessionLog::create(&path, LogOptions::default(), vec![], vec![]).unwrap();
     let daq = log.channel::<Block>("/daq").unwrap();
-    // Incompressible-ish counts: about 40 MB of JSON payloads in 1 MiB chunks.
+    // Incompressible-ish counts: over 30 MB of JSON payloads in 1 MiB chunks.
     let mut state = 7u64;
     let mut payload_bytes = 0usize;
     for seq in 0..4000u64 {
@@ -77,7 +77,7 @@ fn streaming_holds_a_chunk_not_the_file() {
             .unwrap();
     }
     join.close().unwrap();
-    assert!(payload_bytes > 40_000_000, "{payload_bytes}");
+    assert!(payload_bytes > 30_000_000, "{payload_bytes}");
 
     let mut streamed = Vec::new();
     let (stream_peak, s) = peak_of(|| {

@@ -31,6 +31,7 @@ steps_per_period = 1000
 [[test]]
 name = "low"
 level = 0.2e-5
+direction = "up"
 steps = 2
 omega_start = 0.99
 omega_end = 1.0

@@ -6,6 +6,11 @@
 //! ([`Missing`]: `complete` false, the rig time and steps lost; a session cut off while it ran
 //! is `aborted`, with the cut as its reason). The twin re-run on a recording is the sibling
 //! module `twin_replay`'s.
+//!
+//! [`replay`] streams the file (two passes: the small topics, then the DAQ blocks) and keeps
+//! a [`Recording`] of what its consumers need: the platform accelerometers' counts of every
+//! block and every channel's only inside the record windows, packed. [`replay_read`] does the
+//! same over a log read whole, with the same result.
 
 use std::path::Path;
 

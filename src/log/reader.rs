@@ -95,7 +95,7 @@ pub struct SessionRead {
     pub library: String,
     /// Channels in order of appearance.
     pub channels: Vec<ChannelInfo>,
-    /// Every message, in file order.
+    /// Every message, in file order (empty from [`stream_session`], which hands them over).
     pub messages: Vec<LoggedMessage>,
     /// Metadata records, in file order.
     pub metadata: Vec<MetadataRecord>,

@@ -249,6 +249,7 @@ fn a_stripped_log_keeps_no_trace_of_the_hidden_physics_and_replays_the_same() {
     let (a, b) = (&r1.recording, &r0.recording);
     assert!(!b.blocks.is_empty() && !b.twin_states.is_empty());
     assert!(a.blocks == b.blocks, "recording blocks differ");
+    assert!(a == b, "recording counts differ");
     assert_eq!(a.layout, b.layout);
     assert_eq!(a.events, b.events);
     assert_eq!(a.gaps, b.gaps);

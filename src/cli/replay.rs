@@ -130,13 +130,10 @@ pub(crate) fn run(a: ReplayArgs) -> anyhow::Result<()> {
             super::extensions_line(&twin_model.extensions)
         );
         let mut copy = match &a.out {
-            Some(out) => {
-                let session = crate::log::read_session(&a.file)?;
-                Some(
-                    TwinLogCopy::create(out, &session, &source, r.recording.layout.dt())
-                        .with_context(|| format!("--out {}", out.display()))?,
-                )
-            }
+            Some(out) => Some(
+                TwinLogCopy::create(out, &a.file, &source, r.recording.layout.dt())
+                    .with_context(|| format!("--out {}", out.display()))?,
+            ),
             None => None,
         };
         let sink: &mut dyn TwinSink = match &mut copy {

@@ -465,14 +465,14 @@ impl<'a> ModelRunner<'a> {
         };
         let (mut twin, start, mut clearances) = self.twin_at(&model, self.steps.lead_in(test))?;
         let dt = self.rec.layout.dt();
-        for b in &self.rec.blocks[start..] {
+        for b in self.rec.base_blocks(start) {
             if b.first_sample >= at {
                 break;
             }
             while let Some(c) = clearances.next_due(b.first_sample) {
                 twin.set_clearance(c)?;
             }
-            twin.push_block(b)?;
+            twin.push_block(&b)?;
             self.cost.rig_seconds += b.len as f64 * dt;
         }
         self.cost.runs += 1;
@@ -656,7 +656,7 @@ impl<'a> ModelRunner<'a> {
         let mut out = TwinWindows::new(twin.observation(), self.spec.tolerance);
         let mut compared = Vec::new();
         let mut rig_seconds = 0.0;
-        for b in &rec.blocks[start..] {
+        for b in rec.base_blocks(start) {
             if b.first_sample >= end {
                 break;
             }
@@ -678,7 +678,7 @@ impl<'a> ModelRunner<'a> {
                     work.push((t, 0.0));
                 }
             }
-            let tb = twin.push_block(b)?;
+            let tb = twin.push_block(&b)?;
             rig_seconds += b.len as f64 * dt;
             out.push(&tb);
             compared.extend(out.complete(&mut pending, dt, false));

@@ -32,8 +32,8 @@ mod tests;
 pub use error::{LogError, LogReadError};
 pub use options::{Compression, LogOptions};
 pub use reader::{
-    read_session, read_session_bytes, ChannelInfo, LoggedMessage, RigtwinInfo, SchemaInfo,
-    SessionRead,
+    read_session, read_session_bytes, stream_session, ChannelInfo, LoggedMessage, RigtwinInfo,
+    SchemaInfo, SessionRead,
 };
 pub use staged::{stale_partials, write_atomically, Staged};
 pub use writer::{

@@ -3,6 +3,11 @@
 //! (then `complete` is false and `note` says what was lost). Typed access by topic with
 //! [`SessionRead::decode`]; [`SessionRead::require_rigtwin`] tells a rigtwin session from an
 //! MCAP file written by another tool.
+//!
+//! [`stream_session`] reads a file of any length in bounded memory: it hands every message to
+//! a visitor as the walk reaches it (a chunk at a time: the file is read record by record,
+//! never whole) and keeps only the rest (channels, metadata, attachments: small). Both read
+//! the file with the same walk (`scan`), so they see the same messages.
 
 use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
@@ -11,7 +16,7 @@ use std::sync::Arc;
 use mcap::records::Record;
 use serde::de::DeserializeOwned;
 
-use super::scan::scan;
+use super::scan::{scan, summary_channels, Input};
 use super::writer::{Attachment, MetadataRecord};
 use super::{LogReadError, FORMAT_VERSION, RIGTWIN_METADATA};
 
@@ -90,7 +95,7 @@ pub struct SessionRead {
     pub library: String,
     /// Channels in order of appearance.
     pub channels: Vec<ChannelInfo>,
-    /// Every message, in file order.
+    /// Every message, in file order (empty from [`stream_session`], which hands them over).
     pub messages: Vec<LoggedMessage>,
     /// Metadata records, in file order.
     pub metadata: Vec<MetadataRecord>,
@@ -98,26 +103,32 @@ pub struct SessionRead {
     pub attachments: Vec<Attachment>,
 }
 
-/// Reads the session log at `path` (the whole file into memory), recovering what a crash left.
+/// Reads the session log at `path` (every message into memory; the file is read a record at
+/// a time), recovering what a crash left.
 pub fn read_session(path: impl AsRef<Path>) -> Result<SessionRead, LogReadError> {
     let path = path.as_ref();
-    let bytes = std::fs::read(path).map_err(|source| LogReadError::Io {
+    let file = std::fs::File::open(path).map_err(|source| LogReadError::Io {
         path: path.to_path_buf(),
         source,
     })?;
-    read_session_bytes(path, &bytes)
+    let mut input = Input::file(&file, path)?;
+    read_input(path, &mut input)
 }
 
 /// Like [`read_session`] for a file already in memory; `path` names it in errors.
 pub fn read_session_bytes(path: &Path, bytes: &[u8]) -> Result<SessionRead, LogReadError> {
+    read_input(path, &mut Input::Memory(bytes))
+}
+
+fn read_input(path: &Path, input: &mut Input<'_>) -> Result<SessionRead, LogReadError> {
     let mut builder = Builder::default();
-    let mut end = scan(path, bytes, |offset, record| {
+    let mut end = scan(path, input, |offset, record| {
         if let Err((opcode, reason)) = builder.add(record) {
             builder.damage.push(format!(
                 "byte offset {offset}: record (opcode {opcode:#04x}) ignored: {reason}"
             ));
         }
-        Ok(())
+        Ok::<(), LogReadError>(())
     })?;
     builder.resolve_orphans();
     end.damage.append(&mut builder.damage);
@@ -126,12 +137,88 @@ pub fn read_session_bytes(path: &Path, bytes: &[u8]) -> Result<SessionRead, LogR
         complete: end.complete,
         note: end.lost,
         damage: end.damage,
-        file_bytes: bytes.len() as u64,
+        file_bytes: input.len() as u64,
         valid_bytes: end.valid_bytes,
         profile: builder.profile,
         library: builder.library,
         channels: builder.channels.into_iter().map(|(c, _)| c).collect(),
         messages: builder.messages,
+        metadata: builder.metadata,
+        attachments: builder.attachments,
+    })
+}
+
+/// Reads the session log at `path` in bounded memory: every message goes to `visit` in file
+/// order as the walk reaches it, with its topic (also one whose channel record was lost with
+/// a damaged chunk, when the summary section names it), and is not kept. Returns the rest: a
+/// [`SessionRead`] whose `messages` is empty. The file is read a record at a time (at most one
+/// chunk and its decompressed records are held). Errors of `visit` stop the walk.
+///
+/// The same messages as [`read_session`] reaches, in the same order, except a message whose
+/// channel is defined only after it in the data section and not in the summary (the writer
+/// never does that): [`read_session`] keeps it, this drops it and says so in `damage`.
+pub fn stream_session<E: From<LogReadError>>(
+    path: &Path,
+    mut visit: impl FnMut(&LoggedMessage) -> Result<(), E>,
+) -> Result<SessionRead, E> {
+    let file = std::fs::File::open(path).map_err(|source| LogReadError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let mut input = Input::file(&file, path)?;
+    // The channels the summary defines: a message whose channel record was in a damaged chunk
+    // gets its topic where it is read (read_session resolves such orphans at the end).
+    let mut known = Builder::default();
+    if input.len() > 0 {
+        for record in summary_channels(&mut input)? {
+            // NOTE: an inconsistent summary record is ignored here; the walk reports it.
+            let _ = known.add(record);
+        }
+    }
+    let mut builder = Builder {
+        stream: true,
+        ..Builder::default()
+    };
+    let mut dropped = 0usize;
+    let mut end = scan(path, &mut input, |offset, record| -> Result<(), E> {
+        match builder.add(record) {
+            Err((opcode, reason)) => builder.damage.push(format!(
+                "byte offset {offset}: record (opcode {opcode:#04x}) ignored: {reason}"
+            )),
+            Ok(Some(mut m)) => {
+                if &*m.topic == NO_TOPIC {
+                    match known.channel_index.get(&m.channel_id) {
+                        Some(&c) => m.topic = Arc::clone(&known.channels[c].1),
+                        None => {
+                            dropped += 1;
+                            return Ok(());
+                        }
+                    }
+                }
+                visit(&m)?;
+            }
+            Ok(None) => {}
+        }
+        Ok(())
+    })?;
+    if dropped > 0 {
+        builder.damage.push(format!(
+            "{dropped} messages on channels not defined before them in the readable file (nor \
+             in its summary) were dropped"
+        ));
+    }
+    end.damage.append(&mut builder.damage);
+    Ok(SessionRead {
+        path: path.to_path_buf(),
+        complete: end.complete,
+        note: end.lost,
+        damage: end.damage,
+        file_bytes: input.len() as u64,
+        valid_bytes: end.valid_bytes,
+        profile: builder.profile,
+        library: builder.library,
+        channels: builder.channels.into_iter().map(|(c, _)| c).collect(),
+        messages: Vec::new(),
         metadata: builder.metadata,
         attachments: builder.attachments,
     })
@@ -154,6 +241,9 @@ struct Builder {
     orphans: Vec<usize>,
     /// Records that did not fit (damage), for people.
     damage: Vec<String>,
+    /// Messages are handed back by [`Builder::add`] instead of kept (orphans with an empty
+    /// topic).
+    stream: bool,
 }
 
 /// The topic of a message whose channel is not known yet.
@@ -183,8 +273,9 @@ impl Builder {
         }
     }
 
-    /// Takes one record; on an inconsistency its opcode and what is wrong.
-    fn add(&mut self, record: Record<'static>) -> Result<(), (u8, String)> {
+    /// Takes one record (a message is handed back when streaming); on an inconsistency its
+    /// opcode and what is wrong.
+    fn add(&mut self, record: Record<'static>) -> Result<Option<LoggedMessage>, (u8, String)> {
         use mcap::records::op;
         match record {
             Record::Header(h) => {
@@ -246,18 +337,24 @@ impl Builder {
                 let topic = match self.channel_index.get(&header.channel_id) {
                     Some(&i) => Arc::clone(&self.channels[i].1),
                     None => {
-                        self.orphans.push(self.messages.len());
+                        if !self.stream {
+                            self.orphans.push(self.messages.len());
+                        }
                         NO_TOPIC.into()
                     }
                 };
-                self.messages.push(LoggedMessage {
+                let m = LoggedMessage {
                     channel_id: header.channel_id,
                     topic,
                     sequence: header.sequence,
                     log_time: header.log_time,
                     publish_time: header.publish_time,
                     data: data.into_owned(),
-                });
+                };
+                if self.stream {
+                    return Ok(Some(m));
+                }
+                self.messages.push(m);
             }
             Record::Metadata(m) => self.metadata.push((m.name, m.metadata)),
             Record::Attachment { header, data, .. } => self.attachments.push(Attachment {
@@ -269,7 +366,7 @@ impl Builder {
             // session needs.
             _ => {}
         }
-        Ok(())
+        Ok(None)
     }
 }
 

@@ -1,5 +1,8 @@
-//! Walks the records of an MCAP file held in memory, from the start, without needing the
-//! footer or summary: the crash-recovery and salvage core of the reader.
+//! Walks the records of an MCAP file, from the start, without needing the footer or summary:
+//! the crash-recovery and salvage core of the reader. The file is held in memory
+//! ([`Input::Memory`]) or read from disk record by record ([`Input::File`]: what is held at a
+//! time is one record, i.e. one compressed chunk, and its records decompressed), with the same
+//! walk and the same results.
 //!
 //! A file cut off anywhere (SIGKILL, disk full) ends in an incomplete record: the walk stops
 //! there and reports everything before it plus a description of what was lost. Damage after
@@ -16,7 +19,9 @@
 //! parsed, and every record inside must end inside the chunk. Chunks are all or nothing.
 
 use std::borrow::Cow;
+use std::fs::File;
 use std::io::Read;
+use std::os::unix::fs::FileExt;
 use std::path::Path;
 
 use mcap::records::{op, Record};
@@ -45,36 +50,133 @@ pub(super) struct ScanEnd {
     pub(super) damage: Vec<String>,
 }
 
+/// The bytes the walk reads.
+pub(super) enum Input<'a> {
+    /// A file already in memory.
+    Memory(&'a [u8]),
+    /// A file on disk, read a record at a time into `buf`.
+    File {
+        /// The open file.
+        file: &'a File,
+        /// Its path, for errors.
+        path: &'a Path,
+        /// Its length, bytes.
+        len: usize,
+        /// The bytes last read.
+        buf: Vec<u8>,
+    },
+}
+
+/// A read buffer larger than this (a damaged length) is released after use, bytes.
+const KEEP_BUFFER_BYTES: usize = 64 << 20;
+
+impl<'a> Input<'a> {
+    /// A file on disk (its length as opened).
+    pub(super) fn file(file: &'a File, path: &'a Path) -> Result<Input<'a>, LogReadError> {
+        let io = |source| LogReadError::Io {
+            path: path.to_path_buf(),
+            source,
+        };
+        let len = file.metadata().map_err(io)?.len();
+        let len = usize::try_from(len).map_err(|_| {
+            io(std::io::Error::new(
+                std::io::ErrorKind::InvalidData,
+                "the file is larger than the address space",
+            ))
+        })?;
+        Ok(Input::File {
+            file,
+            path,
+            len,
+            buf: Vec::new(),
+        })
+    }
+
+    /// Length, bytes.
+    pub(super) fn len(&self) -> usize {
+        match self {
+            Input::Memory(b) => b.len(),
+            Input::File { len, .. } => *len,
+        }
+    }
+
+    /// Bytes `from..to` (within the input).
+    fn get(&mut self, from: usize, to: usize) -> Result<&[u8], LogReadError> {
+        match self {
+            Input::Memory(b) => Ok(&b[from..to]),
+            Input::File {
+                file, path, buf, ..
+            } => {
+                if buf.capacity() > KEEP_BUFFER_BYTES && to - from <= KEEP_BUFFER_BYTES {
+                    *buf = Vec::new();
+                }
+                buf.clear();
+                buf.resize(to - from, 0);
+                file.read_exact_at(buf, from as u64)
+                    .map_err(|source| LogReadError::Io {
+                        path: path.to_path_buf(),
+                        source,
+                    })?;
+                Ok(&buf[..])
+            }
+        }
+    }
+
+    /// Bytes `from..to` as an owned copy (for a few bytes).
+    fn copy(&mut self, from: usize, to: usize) -> Result<Vec<u8>, LogReadError> {
+        Ok(self.get(from, to)?.to_vec())
+    }
+
+    /// Whether bytes `from..` are all zero.
+    fn zero_from(&mut self, from: usize) -> Result<bool, LogReadError> {
+        const PIECE: usize = 1 << 20;
+        let len = self.len();
+        let mut at = from;
+        while at < len {
+            let to = (at + PIECE).min(len);
+            if self.get(at, to)?.iter().any(|&b| b != 0) {
+                return Ok(false);
+            }
+            at = to;
+        }
+        Ok(true)
+    }
+}
+
 /// Calls `visit(offset, record)` for every readable record, chunk contents in place of the
 /// chunk (`offset` is then the chunk's). Skips damaged records (listed in
 /// [`ScanEnd::damage`]); stops at the first incomplete record.
-pub(super) fn scan(
+pub(super) fn scan<E: From<LogReadError>>(
     path: &Path,
-    bytes: &[u8],
-    mut visit: impl FnMut(u64, Record<'static>) -> Result<(), LogReadError>,
-) -> Result<ScanEnd, LogReadError> {
+    input: &mut Input<'_>,
+    mut visit: impl FnMut(u64, Record<'static>) -> Result<(), E>,
+) -> Result<ScanEnd, E> {
     let magic = mcap::MAGIC;
-    let len = bytes.len();
+    let len = input.len();
     if len == 0 {
         return Err(LogReadError::Empty {
             path: path.to_path_buf(),
-        });
+        }
+        .into());
     }
-    if !bytes.starts_with(magic) {
-        if len < magic.len() && magic.starts_with(bytes) {
+    let head = input.copy(0, len.min(magic.len()))?;
+    if !head.starts_with(magic) {
+        if len < magic.len() && magic.starts_with(&head) {
             return Err(LogReadError::TruncatedMagic {
                 path: path.to_path_buf(),
                 len,
-            });
+            }
+            .into());
         }
         return Err(LogReadError::NotMcap {
             path: path.to_path_buf(),
-            found: describe_start(bytes),
-        });
+            found: describe_start(&head),
+        }
+        .into());
     }
     // A file that ends with the magic was closed; a record running past its end is damage,
     // not a cut.
-    let looks_closed = len >= 2 * magic.len() && bytes.ends_with(magic);
+    let looks_closed = len >= 2 * magic.len() && input.copy(len - magic.len(), len)? == magic;
     let mut damage: Vec<String> = Vec::new();
     let mut pos = magic.len();
     let mut data_end = false;
@@ -86,9 +188,11 @@ pub(super) fn scan(
         damage,
     };
     loop {
-        let rest = &bytes[pos..];
         if footer_seen {
-            if rest != magic && magic.starts_with(rest) {
+            // What follows the footer (its length, and the bytes when few).
+            let rest_len = len - pos;
+            let rest = input.copy(pos, pos + rest_len.min(magic.len() + 1))?;
+            if rest != magic && magic.starts_with(&rest) {
                 return Ok(end(
                     false,
                     pos,
@@ -102,14 +206,13 @@ pub(super) fn scan(
             }
             if rest != magic {
                 damage.push(format!(
-                    "byte offset {pos}: {} bytes after the footer where the closing magic \
-                     belongs (ignored)",
-                    rest.len()
+                    "byte offset {pos}: {rest_len} bytes after the footer where the closing \
+                     magic belongs (ignored)"
                 ));
             }
             return Ok(end(true, len, None, damage));
         }
-        if rest.is_empty() {
+        if pos == len {
             if data_end {
                 return Ok(end(
                     false,
@@ -146,7 +249,7 @@ pub(super) fn scan(
         if data_end {
             // The summary: everything in it is also in the data section; damage to it costs
             // nothing, so the walk reads what parses and stops at the first problem.
-            match next_record(bytes, pos) {
+            match next_record(input, pos)? {
                 Ok((record_end, Record::Footer(f))) => {
                     footer_seen = true;
                     visit(pos as u64, Record::Footer(f))?;
@@ -178,7 +281,7 @@ pub(super) fn scan(
             }
             continue;
         }
-        if rest.len() < RECORD_PREFIX {
+        if len - pos < RECORD_PREFIX {
             return Ok(end(
                 false,
                 pos,
@@ -186,11 +289,12 @@ pub(super) fn scan(
                 damage,
             ));
         }
-        let opcode = rest[0];
-        if opcode == 0 && rest.iter().all(|&b| b == 0) {
+        let prefix = input.copy(pos, pos + RECORD_PREFIX)?;
+        let opcode = prefix[0];
+        if opcode == 0 && input.zero_from(pos)? {
             return Ok(end(false, pos, lost(pos, "a zero-filled tail"), damage));
         }
-        let length = u64::from_le_bytes(rest[1..RECORD_PREFIX].try_into().expect("8 bytes"));
+        let length = u64::from_le_bytes(prefix[1..RECORD_PREFIX].try_into().expect("8 bytes"));
         let fits = usize::try_from(length)
             .ok()
             .and_then(|l| l.checked_add(pos + RECORD_PREFIX))
@@ -204,7 +308,7 @@ pub(super) fn scan(
             return Ok(end(false, pos, lost(pos, &what), damage));
         }
         let parsed = if fits {
-            next_record(bytes, pos)
+            next_record(input, pos)?
         } else {
             Err(format!("its length {length} runs past the end of the file"))
         };
@@ -244,8 +348,8 @@ pub(super) fn scan(
                     Err(reason) => reason,
                     Ok(_) => format!("unknown opcode {opcode:#04x}"),
                 };
-                let summary = summary_start(bytes).filter(|&s| s > pos);
-                match resync(bytes, pos + 1, summary.unwrap_or(len)) {
+                let summary = summary_start(input)?.filter(|&s| s > pos);
+                match resync(input, pos + 1, summary.unwrap_or(len))? {
                     Some(next) => {
                         damage.push(format!(
                             "byte offset {pos}: a damaged record ({reason}); {} bytes up to the \
@@ -292,8 +396,37 @@ fn known(opcode: u8) -> bool {
     (op::HEADER..=op::DATA_END).contains(&opcode)
 }
 
-/// The record at `pos` (which must fit in `bytes`) and the offset after it, or what is wrong.
-fn next_record(bytes: &[u8], pos: usize) -> Result<(usize, Record<'_>), String> {
+/// The record at `pos` and the offset after it, or what is wrong with it (the outer error:
+/// the file could not be read).
+#[allow(clippy::type_complexity)]
+fn next_record<'i>(
+    input: &'i mut Input<'_>,
+    pos: usize,
+) -> Result<Result<(usize, Record<'i>), String>, LogReadError> {
+    let len = input.len();
+    if len.saturating_sub(pos) < RECORD_PREFIX {
+        return Ok(Err("a record's opcode and length are cut off".into()));
+    }
+    let prefix = input.copy(pos, pos + RECORD_PREFIX)?;
+    let length = u64::from_le_bytes(prefix[1..RECORD_PREFIX].try_into().expect("8 bytes"));
+    let Some(end) = usize::try_from(length)
+        .ok()
+        .and_then(|l| l.checked_add(pos + RECORD_PREFIX))
+        .filter(|&e| e <= len)
+    else {
+        return Ok(Err(format!(
+            "its length {length} runs past the end of the file"
+        )));
+    };
+    let body = input.get(pos + RECORD_PREFIX, end)?;
+    Ok(mcap::parse_record(prefix[0], body)
+        .map(|record| (end, record))
+        .map_err(|e| format!("opcode {:#04x}: {e}", prefix[0])))
+}
+
+/// The record at `pos` of `bytes` (a chunk's records) and the offset after it, or what is
+/// wrong.
+fn record_in(bytes: &[u8], pos: usize) -> Result<(usize, Record<'_>), String> {
     let rest = &bytes[pos..];
     if rest.len() < RECORD_PREFIX {
         return Err("a record's opcode and length are cut off".into());
@@ -311,30 +444,66 @@ fn next_record(bytes: &[u8], pos: usize) -> Result<(usize, Record<'_>), String> 
 
 /// Where the summary section starts, as the footer at the end of a closed file says (`None`
 /// without an intact footer, or without a summary).
-fn summary_start(bytes: &[u8]) -> Option<usize> {
+pub(super) fn summary_start(input: &mut Input<'_>) -> Result<Option<usize>, LogReadError> {
     // Footer: opcode, length 20, summary start, summary offset start, summary CRC.
     const FOOTER: usize = RECORD_PREFIX + 20;
     let magic = mcap::MAGIC;
-    let at = bytes.len().checked_sub(magic.len() + FOOTER)?;
-    if !bytes.ends_with(magic) || at < magic.len() {
-        return None;
+    let len = input.len();
+    let Some(at) = len.checked_sub(magic.len() + FOOTER) else {
+        return Ok(None);
+    };
+    if at < magic.len() || input.copy(len - magic.len(), len)? != magic {
+        return Ok(None);
     }
-    match next_record(bytes, at) {
+    Ok(match next_record(input, at)? {
         Ok((_, Record::Footer(f))) => usize::try_from(f.summary_start)
             .ok()
             .filter(|&s| s >= magic.len() && s < at),
         _ => None,
+    })
+}
+
+/// The schema and channel records of the summary section of a closed file (read up to the
+/// first record that does not parse; none without an intact footer), in order.
+pub(super) fn summary_channels(
+    input: &mut Input<'_>,
+) -> Result<Vec<Record<'static>>, LogReadError> {
+    let mut out = Vec::new();
+    let Some(mut pos) = summary_start(input)? else {
+        return Ok(out);
+    };
+    loop {
+        match next_record(input, pos)? {
+            Ok((_, Record::Footer(_))) | Err(_) => return Ok(out),
+            Ok((end, record)) => {
+                if matches!(record, Record::Schema { .. } | Record::Channel(_)) {
+                    out.push(record.into_owned());
+                }
+                pos = end;
+            }
+        }
     }
 }
 
 /// The offset of the first chunk in `from..until` that parses and passes its CRC.
-fn resync(bytes: &[u8], from: usize, until: usize) -> Option<usize> {
-    (from..until.min(bytes.len().saturating_sub(RECORD_PREFIX)))
-        .filter(|&p| bytes[p] == op::CHUNK)
-        .find(|&p| match next_record(bytes, p) {
-            Ok((_, Record::Chunk { header, data })) => read_chunk(&header, &data).is_ok(),
-            _ => false,
-        })
+fn resync(input: &mut Input<'_>, from: usize, until: usize) -> Result<Option<usize>, LogReadError> {
+    const PIECE: usize = 1 << 16;
+    let stop = until.min(input.len().saturating_sub(RECORD_PREFIX));
+    let mut at = from;
+    while at < stop {
+        let to = (at + PIECE).min(stop);
+        let piece = input.copy(at, to)?;
+        for (i, _) in piece.iter().enumerate().filter(|(_, &b)| b == op::CHUNK) {
+            let p = at + i;
+            if let Ok((_, Record::Chunk { header, data })) = next_record(input, p)? {
+                if read_chunk(&header, &data).is_ok() {
+                    return Ok(Some(p));
+                }
+            }
+        }
+        at = to;
+    }
+    Ok(None)
 }
 
 /// Decompresses a chunk (to at most the size it claims), checks its size and CRC, then parses
@@ -381,7 +550,7 @@ fn read_chunk(
     let mut pos = 0;
     while pos < raw.len() {
         let (end, record) =
-            next_record(&raw, pos).map_err(|e| format!("a record inside at {pos}: {e}"))?;
+            record_in(&raw, pos).map_err(|e| format!("a record inside at {pos}: {e}"))?;
         records.push(record.into_owned());
         pos = end;
     }
@@ -433,14 +602,24 @@ mod tests {
 
     #[test]
     fn magic_alone_is_an_incomplete_empty_session() {
-        let end = scan(Path::new("x.mcap"), mcap::MAGIC, |_, _| Ok(())).unwrap();
+        let end = scan::<LogReadError>(
+            Path::new("x.mcap"),
+            &mut Input::Memory(mcap::MAGIC),
+            |_, _| Ok(()),
+        )
+        .unwrap();
         assert!(!end.complete);
         assert_eq!(end.valid_bytes, 8);
     }
 
     #[test]
     fn prefix_of_magic_is_reported_as_cut_magic() {
-        let err = scan(Path::new("x.mcap"), &mcap::MAGIC[..5], |_, _| Ok(())).unwrap_err();
+        let err = scan::<LogReadError>(
+            Path::new("x.mcap"),
+            &mut Input::Memory(&mcap::MAGIC[..5]),
+            |_, _| Ok(()),
+        )
+        .unwrap_err();
         assert!(
             matches!(err, LogReadError::TruncatedMagic { len: 5, .. }),
             "{err}"

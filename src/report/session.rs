@@ -11,9 +11,9 @@ use std::path::{Path, PathBuf};
 
 use crate::control::summary::SummaryError;
 use crate::control::{window_signals, StepInfo};
-use crate::log::{log_time_ns, read_session, LogReadError, SessionRead};
+use crate::log::{log_time_ns, LogReadError, SessionRead};
 use crate::plan::Direction;
-use crate::session::replay::{recording, replay, window_counts, ReplayError};
+use crate::session::replay::{replay_whole, window_counts, ReplayError};
 use crate::session::topics::{
     TwinStepMessage, SESSION_METADATA, TOPIC_TWIN_BLOCKS, TOPIC_TWIN_STEPS,
 };
@@ -122,9 +122,8 @@ pub fn session_figures(
     file: &Path,
     out: &Path,
 ) -> Result<(Vec<PathBuf>, SessionSummary), SessionReportError> {
-    let r = replay(file)?;
-    let session = read_session(file)?;
-    let rec = recording(&session)?;
+    let (session, r) = replay_whole(file)?;
+    let rec = &r.recording;
     std::fs::create_dir_all(out).map_err(|source| SessionReportError::Io {
         path: out.display().to_string(),
         source,
@@ -194,7 +193,7 @@ pub fn session_figures(
     }
     let mut histories = Vec::new();
     for info in &nearest {
-        let Some(counts) = window_counts(&rec, info) else {
+        let Some(counts) = window_counts(rec, info) else {
             continue;
         };
         let w = window_signals(&rec.layout, info, &counts).map_err(|source| {

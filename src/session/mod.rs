@@ -18,6 +18,7 @@
 
 pub mod live;
 pub mod mcap;
+mod packed;
 pub mod recorder;
 pub mod replay;
 pub mod run;

@@ -15,8 +15,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::control::{StepInfo, StepSummary};
 use crate::log::{
-    log_time_ns, Attachment, LogChannel, LogError, LogHandle, LogJoin, LogOptions, LogStats,
-    MetadataRecord, SessionLog, SessionRead, RIGTWIN_METADATA,
+    log_time_ns, stream_session, Attachment, LogChannel, LogError, LogHandle, LogJoin, LogOptions,
+    LogReadError, LogStats, MetadataRecord, SessionLog, RIGTWIN_METADATA,
 };
 use crate::signal::features::CONTACT_CHANNEL;
 use crate::signal::{Feature, SignalError};
@@ -51,6 +51,9 @@ pub enum TwinReplayError {
     /// Writing the copy of the session log failed.
     #[error("twin log: {0}")]
     Log(#[from] LogError),
+    /// Reading the session log to copy failed.
+    #[error("twin log: {0}")]
+    Read(#[from] LogReadError),
     /// A message could not be serialised.
     #[error("twin log: {0}")]
     Serialize(#[from] serde_json::Error),
@@ -290,14 +293,14 @@ fn run_member(
     let mut clearances = schedule.clone();
     while clearances.next_due(state.next_sample).is_some() {}
     let mut out = TwinWindows::new(o, tolerance);
-    for b in &rec.blocks[start..] {
+    for b in rec.base_blocks(start) {
         if b.first_sample >= info.record_end_sample() {
             break;
         }
         while let Some(c) = clearances.next_due(b.first_sample) {
             twin.set_clearance(c)?;
         }
-        out.push(&twin.push_block(b)?);
+        out.push(&twin.push_block(&b)?);
     }
     match out.features(info, rec.layout.dt(), channels) {
         Some(Ok(f)) => Ok(Some(f)),
@@ -403,7 +406,7 @@ pub fn replay_twin(
         }
         Ok(())
     };
-    for b in &rec.blocks {
+    for b in rec.base_blocks(0) {
         while let Some(c) = clearances.next_due(b.first_sample) {
             twin.set_clearance(c)?;
         }
@@ -416,7 +419,7 @@ pub fn replay_twin(
                 }
             }
         }
-        let tb = twin.push_block(b)?;
+        let tb = twin.push_block(&b)?;
         stats.blocks += 1;
         stats.solver_failures += tb.solver_failure_count();
         sink.block(&tb)?;
@@ -611,14 +614,14 @@ pub fn replay_twin_steps(
             });
         };
         let mut out = TwinWindows::new(&o, spec.tolerance);
-        for b in &rec.blocks[start..] {
+        for b in rec.base_blocks(start) {
             if b.first_sample >= info.record_end_sample() {
                 break;
             }
             while let Some(c) = clearances.next_due(b.first_sample) {
                 twin.set_clearance(c)?;
             }
-            let tb = twin.push_block(b)?;
+            let tb = twin.push_block(&b)?;
             stats.blocks += 1;
             rig_seconds += b.len as f64 * dt;
             stats.solver_failures += tb.solver_failure_count();
@@ -683,12 +686,13 @@ impl std::fmt::Debug for TwinLogCopy {
 }
 
 impl TwinLogCopy {
-    /// Creates `path` and copies `session` into it (all but its twin topics); the twin's output
-    /// follows through [`TwinSink`]. `model` says which model the twin runs (for the metadata),
-    /// `dt` is the DAQ sample interval, s.
+    /// Creates `path` and copies the session log `source` into it (all but its twin topics,
+    /// streamed: the source is read twice, never whole); the twin's output follows through
+    /// [`TwinSink`]. `model` says which model the twin runs (for the metadata), `dt` is the DAQ
+    /// sample interval, s.
     pub fn create(
         path: &Path,
-        session: &SessionRead,
+        source: &Path,
         model: &str,
         dt: f64,
     ) -> Result<TwinLogCopy, TwinReplayError> {
@@ -697,11 +701,11 @@ impl TwinLogCopy {
             std::fs::metadata(p).ok().map(|m| (m.dev(), m.ino()))
         };
         let same_path = matches!(
-            (path.canonicalize(), session.path.canonicalize()),
+            (path.canonicalize(), source.canonicalize()),
             (Ok(a), Ok(b)) if a == b
         );
         let same_inode = matches!(
-            (identity(path), identity(&session.path)),
+            (identity(path), identity(source)),
             (Some(a), Some(b)) if a == b
         );
         if same_path || same_inode {
@@ -709,6 +713,8 @@ impl TwinLogCopy {
                 path: path.display().to_string(),
             });
         }
+        // The channels, metadata and attachments first: the copy is created with them.
+        let session = stream_session(source, |_| Ok::<(), LogReadError>(()))?;
         let mut metadata: Vec<MetadataRecord> = session
             .metadata
             .iter()
@@ -738,11 +744,12 @@ impl TwinLogCopy {
             let raw = handle.raw_channel(&c.topic, &schema.name, schema.data.clone())?;
             channels.insert(c.id, raw);
         }
-        for m in &session.messages {
+        stream_session(source, |m| {
             if let Some(raw) = channels.get(&m.channel_id) {
                 handle.log_json_waiting(raw, m.log_time, m.data.clone())?;
             }
-        }
+            Ok::<(), TwinReplayError>(())
+        })?;
         Ok(TwinLogCopy {
             blocks: handle.channel(TOPIC_TWIN_BLOCKS)?,
             states: handle.channel(TOPIC_TWIN_STATE)?,

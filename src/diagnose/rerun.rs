@@ -368,12 +368,7 @@ impl<'a> ModelRunner<'a> {
             }
         }
         let wall = std::time::Instant::now();
-        let model = TwinModel {
-            rom: self.rom,
-            extensions: ext.clone(),
-            circuit: self.base.circuit.clone(),
-            contact_threshold_v: self.base.contact_threshold_v,
-        };
+        let model = self.model(ext);
         let mut results: Vec<Result<GroupRun, DiagnoseError>> = Vec::new();
         let this: &ModelRunner<'_> = self;
         for chunk in groups.chunks(this.jobs) {
@@ -457,12 +452,7 @@ impl<'a> ModelRunner<'a> {
             return Ok(false);
         };
         let wall = std::time::Instant::now();
-        let model = TwinModel {
-            rom: self.rom,
-            extensions: ext.clone(),
-            circuit: self.base.circuit.clone(),
-            contact_threshold_v: self.base.contact_threshold_v,
-        };
+        let model = self.model(ext);
         let (mut twin, start, mut clearances) = self.twin_at(&model, self.steps.lead_in(test))?;
         let dt = self.rec.layout.dt();
         for b in self.rec.base_blocks(start) {
@@ -543,6 +533,16 @@ impl<'a> ModelRunner<'a> {
                 .collect::<Vec<f64>>()
         };
         gaps(ext).iter().zip(gaps(than)).all(|(a, b)| *a >= b)
+    }
+
+    /// The model with extensions `ext` (ROM and contact observation the runner's).
+    fn model(&self, ext: &PhysicsSpec) -> TwinModel<'a> {
+        TwinModel {
+            rom: self.rom,
+            extensions: ext.clone(),
+            circuit: self.base.circuit.clone(),
+            contact_threshold_v: self.base.contact_threshold_v,
+        }
     }
 
     /// A twin of `model` at rest at the block holding sample `from` (the session's first

@@ -16,7 +16,7 @@ use std::sync::Arc;
 use mcap::records::Record;
 use serde::de::DeserializeOwned;
 
-use super::scan::{scan, summary_channels, Input};
+use super::scan::{scan, summary_channels, Input, ScanEnd};
 use super::writer::{Attachment, MetadataRecord};
 use super::{LogReadError, FORMAT_VERSION, RIGTWIN_METADATA};
 
@@ -122,7 +122,7 @@ pub fn read_session_bytes(path: &Path, bytes: &[u8]) -> Result<SessionRead, LogR
 
 fn read_input(path: &Path, input: &mut Input<'_>) -> Result<SessionRead, LogReadError> {
     let mut builder = Builder::default();
-    let mut end = scan(path, input, |offset, record| {
+    let end = scan(path, input, |offset, record| {
         if let Err((opcode, reason)) = builder.add(record) {
             builder.damage.push(format!(
                 "byte offset {offset}: record (opcode {opcode:#04x}) ignored: {reason}"
@@ -131,21 +131,8 @@ fn read_input(path: &Path, input: &mut Input<'_>) -> Result<SessionRead, LogRead
         Ok::<(), LogReadError>(())
     })?;
     builder.resolve_orphans();
-    end.damage.append(&mut builder.damage);
-    Ok(SessionRead {
-        path: path.to_path_buf(),
-        complete: end.complete,
-        note: end.lost,
-        damage: end.damage,
-        file_bytes: input.len() as u64,
-        valid_bytes: end.valid_bytes,
-        profile: builder.profile,
-        library: builder.library,
-        channels: builder.channels.into_iter().map(|(c, _)| c).collect(),
-        messages: builder.messages,
-        metadata: builder.metadata,
-        attachments: builder.attachments,
-    })
+    let messages = std::mem::take(&mut builder.messages);
+    Ok(builder.finish(path, end, input.len() as u64, messages))
 }
 
 /// Reads the session log at `path` in bounded memory: every message goes to `visit` in file
@@ -180,7 +167,7 @@ pub fn stream_session<E: From<LogReadError>>(
         ..Builder::default()
     };
     let mut dropped = 0usize;
-    let mut end = scan(path, &mut input, |offset, record| -> Result<(), E> {
+    let end = scan(path, &mut input, |offset, record| -> Result<(), E> {
         match builder.add(record) {
             Err((opcode, reason)) => builder.damage.push(format!(
                 "byte offset {offset}: record (opcode {opcode:#04x}) ignored: {reason}"
@@ -207,21 +194,7 @@ pub fn stream_session<E: From<LogReadError>>(
              in its summary) were dropped"
         ));
     }
-    end.damage.append(&mut builder.damage);
-    Ok(SessionRead {
-        path: path.to_path_buf(),
-        complete: end.complete,
-        note: end.lost,
-        damage: end.damage,
-        file_bytes: input.len() as u64,
-        valid_bytes: end.valid_bytes,
-        profile: builder.profile,
-        library: builder.library,
-        channels: builder.channels.into_iter().map(|(c, _)| c).collect(),
-        messages: Vec::new(),
-        metadata: builder.metadata,
-        attachments: builder.attachments,
-    })
+    Ok(builder.finish(path, end, input.len() as u64, Vec::new()))
 }
 
 /// Collects records into the parts of a [`SessionRead`].
@@ -250,6 +223,32 @@ struct Builder {
 const NO_TOPIC: &str = "";
 
 impl Builder {
+    /// The [`SessionRead`] of file `path` (`file_bytes` long) whose walk ended as `end`, with
+    /// `messages` (the builder's damage joins the walk's).
+    fn finish(
+        mut self,
+        path: &Path,
+        mut end: ScanEnd,
+        file_bytes: u64,
+        messages: Vec<LoggedMessage>,
+    ) -> SessionRead {
+        end.damage.append(&mut self.damage);
+        SessionRead {
+            path: path.to_path_buf(),
+            complete: end.complete,
+            note: end.lost,
+            damage: end.damage,
+            file_bytes,
+            valid_bytes: end.valid_bytes,
+            profile: self.profile,
+            library: self.library,
+            channels: self.channels.into_iter().map(|(c, _)| c).collect(),
+            messages,
+            metadata: self.metadata,
+            attachments: self.attachments,
+        }
+    }
+
     /// Gives orphaned messages the topic of their channel (defined later, e.g. in the
     /// summary); drops those whose channel never appears.
     fn resolve_orphans(&mut self) {

@@ -52,7 +52,7 @@ fn the_demo_plan_on_the_nominal_rig_is_no_mismatch_and_says_what_it_cannot_decid
 }
 
 #[test]
-#[ignore = "identify.toml: about 10 min to record and 12 min of CPU to diagnose (28 min wall on the loaded 2 cores)"]
+#[ignore = "identify.toml: about 10 min to record and 10 min to diagnose on the 2 cores"]
 fn identify_plan_on_the_nominal_rig_is_no_mismatch() {
     let dir = tempfile::tempdir().unwrap();
     let started = std::time::Instant::now();

@@ -156,7 +156,7 @@ impl SessionSteps {
         let at = if first {
             contact.next()
         } else {
-            contact.last()
+            contact.next_back()
         }? + past;
         let last = self
             .steps

@@ -1,5 +1,5 @@
 //! Lossless compact storage of DAQ counts for a recording held in memory
-//! ([`super::replay::Recording`]): a channel's samples in frames of [`FRAME`] samples, each
+//! (`replay::Recording`): a channel's samples in frames of [`FRAME`] samples, each
 //! frame its first value and the differences between neighbouring samples, zigzag-coded and
 //! bit-packed at the frame's widest difference. A 24-bit channel whose noise spans a few hundred
 //! counts takes 11-13 bits a sample instead of 32. Only data this module packed are unpacked.

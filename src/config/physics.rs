@@ -291,6 +291,34 @@ impl PhysicsSpec {
         test_clearance(self.clearance.as_ref(), test, plan_m)
     }
 
+    /// These extensions with test `test`'s clearance set to `clearance_m` (m), replacing its
+    /// entry of `clearance.tests` if it had one.
+    pub fn with_test_clearance(&self, test: &str, clearance_m: f64) -> PhysicsSpec {
+        let mut spec = self.clearance.clone().unwrap_or(ClearanceSpec {
+            offset: 0.0,
+            tests: Vec::new(),
+        });
+        spec.tests.retain(|x| x.test != test);
+        spec.tests.push(TestClearanceSpec {
+            test: test.to_string(),
+            clearance: clearance_m,
+        });
+        PhysicsSpec {
+            clearance: Some(spec),
+            ..self.clone()
+        }
+    }
+
+    /// These extensions without the contact's geometry (clearance, tilt): what a model's
+    /// motion depends on while the contact stays open.
+    pub fn without_contact_geometry(&self) -> PhysicsSpec {
+        PhysicsSpec {
+            clearance: None,
+            tilt: None,
+            ..self.clone()
+        }
+    }
+
     /// Checks every field against the range in its documentation; `daq` gives the channel
     /// names the sensor gains may use. Keys are named `<prefix>.<...>` (`prefix`:
     /// `truth.variants` or `model`). Mode labels are checked against the ROM when the model

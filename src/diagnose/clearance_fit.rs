@@ -5,7 +5,7 @@
 
 use serde_json::json;
 
-use crate::config::{ClearanceSpec, PhysicsSpec, TestClearanceSpec};
+use crate::config::{ClearanceSpec, PhysicsSpec};
 
 use super::clearance::{ClearanceEvidence, TestClearance};
 use super::judge::{alternate, grid_then_refine, set_error, Candidate, Steps, Work};
@@ -43,19 +43,9 @@ pub(super) fn test_clearance_by_runs(
     };
     let (lo, hi) = (lo.min(hi), lo.max(hi));
     let with_clearance = |work: &Work<'_>, c: f64| {
-        let mut ext = work.accepted.clone();
+        let mut ext = work.accepted.with_test_clearance(&t.test, c);
         // Per-test runs: the clearance of this test alone, no growth across tests.
         ext.wear = None;
-        let mut spec = ext.clearance.clone().unwrap_or(ClearanceSpec {
-            offset: 0.0,
-            tests: Vec::new(),
-        });
-        spec.tests.retain(|x| x.test != t.test);
-        spec.tests.push(TestClearanceSpec {
-            test: t.test.clone(),
-            clearance: c,
-        });
-        ext.clearance = Some(spec);
         ext
     };
     // The steps compared: from two before the first measured contact (the steps before are

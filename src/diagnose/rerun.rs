@@ -3,7 +3,7 @@
 //! of some tests and comparing it with the measurement step by step, as `replay --twin` does.
 //!
 //! A run covers whole tests, or a test's steps up to one that ends the evidence (e.g. two
-//! steps past its first contact, [`ModelRunner::run_reach`]), each group of consecutive tests
+//! steps past its first contact, [`ModelRunner::run_spans`]), each group of consecutive tests
 //! in one stretch, from rest at the
 //! start of the step before the group's first step (the lead-in: the previous test's last
 //! step, or the session's start): the twin's own state cannot be carried in from another
@@ -490,12 +490,7 @@ impl<'a> ModelRunner<'a> {
         if span.from == 0 || ext.wear.is_some() {
             return None;
         }
-        let strip = |e: &PhysicsSpec| {
-            let mut e = e.clone();
-            e.clearance = None;
-            e.tilt = None;
-            e.to_json()
-        };
+        let strip = |e: &PhysicsSpec| e.without_contact_geometry().to_json();
         let own = strip(ext);
         let at = self
             .steps
@@ -516,15 +511,12 @@ impl<'a> ModelRunner<'a> {
     /// gap with extensions `than` (clearance and tilt).
     fn no_closer(&self, ext: &PhysicsSpec, than: &PhysicsSpec, at: u64) -> bool {
         let gaps = |e: &PhysicsSpec| {
-            let mut sched = ClearanceSchedule::of_events(
+            let c = ClearanceSchedule::of_events(
                 self.beam_length,
                 e.clearance.as_ref(),
                 &self.rec.events,
-            );
-            let mut c = sched.first().unwrap_or(0.0);
-            while let Some(x) = sched.next_due(at) {
-                c = x;
-            }
+            )
+            .in_force_at(at);
             let offsets = e.tilt.as_ref().map(|t| {
                 crate::physics::tilt::gap_offsets(&self.rom.pair_position, &self.rom.pair_area, t)
             });
@@ -566,10 +558,7 @@ impl<'a> ModelRunner<'a> {
             &rec.events,
         );
         let begin = rec.blocks.get(start).map_or(0, |b| b.first_sample);
-        let mut clearance = clearances.first().unwrap_or(0.0);
-        while let Some(c) = clearances.next_due(begin) {
-            clearance = c;
-        }
+        let clearance = clearances.in_force_at(begin);
         let twin = crate::twin::Twin::new(model, &self.spec, &rec.layout, clearance)?;
         Ok((twin, start, clearances))
     }

@@ -28,7 +28,7 @@
 
 use serde_json::json;
 
-use crate::config::{ClearanceSpec, PhysicsSpec, TestClearanceSpec, TiltSpec};
+use crate::config::{PhysicsSpec, TiltSpec};
 use crate::rom::Rom;
 
 use super::clearance::{ClearanceEvidence, TestClearance};
@@ -143,24 +143,14 @@ pub(super) fn tilt_stage(
     let widest = grid.iter().fold(0.0f64, |m, a| m.max(a.abs())) * 1.1;
     let closing_max = widest.sin() * tip_edge.max(clamp_edge);
     let mut closest = base.clone();
-    let mut spec = closest.clearance.clone().unwrap_or(ClearanceSpec {
-        offset: 0.0,
-        tests: Vec::new(),
-    });
     for &ti in &train {
         let name = &work.steps.tests[ti];
         let plan = bracketed
             .iter()
             .find(|b| b.test_index == ti)
             .map_or(0.0, |b| b.plan_clearance_m);
-        let c = base.test_clearance(name, plan) - closing_max;
-        spec.tests.retain(|x| &x.test != name);
-        spec.tests.push(TestClearanceSpec {
-            test: name.clone(),
-            clearance: c,
-        });
+        closest = closest.with_test_clearance(name, base.test_clearance(name, plan) - closing_max);
     }
-    closest.clearance = Some(spec);
     let mut train_spans: Vec<Span> = Vec::new();
     for &ti in &train {
         let from = work

@@ -63,6 +63,17 @@ impl ClearanceSchedule {
         self.pending.front().map(|&(_, c)| c)
     }
 
+    /// The clearance in force for the block starting at `first_sample`, m: the last of those
+    /// due by then (removed from the schedule), or the first scheduled one when none is due
+    /// yet (0 with none at all).
+    pub fn in_force_at(&mut self, first_sample: u64) -> f64 {
+        let mut c = self.first().unwrap_or(0.0);
+        while let Some(x) = self.next_due(first_sample) {
+            c = x;
+        }
+        c
+    }
+
     /// The next clearance due before the block starting at `first_sample`, m, removed from
     /// the schedule; call until `None` and apply each in order.
     pub fn next_due(&mut self, first_sample: u64) -> Option<f64> {

@@ -179,7 +179,11 @@ impl Twin {
             model.rom.n_modes(),
             model.rom.n_pairs(),
         );
-        let open_identity = identity(&rom_identity, &without_geometry(&model.extensions), dt);
+        let open_identity = identity(
+            &rom_identity,
+            &model.extensions.without_contact_geometry(),
+            dt,
+        );
         let identity = identity(&rom_identity, &model.extensions, dt);
         Ok(Twin {
             rom,
@@ -350,7 +354,7 @@ impl Twin {
         let captured = identity(&self.rom_identity, captured_with, self.dt());
         let open = identity(
             &self.rom_identity,
-            &without_geometry(captured_with),
+            &captured_with.without_contact_geometry(),
             self.dt(),
         );
         if captured != state.model || open != self.open_identity {
@@ -494,12 +498,4 @@ impl Twin {
 /// `dt` (s).
 fn identity(rom: &str, ext: &PhysicsSpec, dt: f64) -> String {
     format!("{rom}, extensions {}, dt {dt:e} s", ext.to_json())
-}
-
-/// Extensions `ext` without the contact's geometry (clearance, tilt).
-fn without_geometry(ext: &PhysicsSpec) -> PhysicsSpec {
-    let mut e = ext.clone();
-    e.clearance = None;
-    e.tilt = None;
-    e
 }

@@ -11,8 +11,9 @@
 
 mod cli_support;
 mod default_rom;
+mod diagnose_support;
 
-use cli_support::{default_rig_with, rigtwin, text};
+use diagnose_support::sim_session;
 use rigtwin::config::{ClearanceSpec, PhysicsSpec, RigConfig, TiltSpec};
 use rigtwin::diagnose::rerun::{ModelRunner, SessionSteps, Span};
 use rigtwin::session::replay::replay;
@@ -49,20 +50,7 @@ fn offset(o: f64) -> PhysicsSpec {
 #[test]
 fn runs_from_an_open_state_compare_what_runs_from_rest_do() {
     let dir = tempfile::tempdir().unwrap();
-    let rig = default_rig_with(dir.path(), "[safety]\ndaq_timeout_s = 30\n");
-    let plan = dir.path().join("plan.toml");
-    std::fs::write(&plan, PLAN).unwrap();
-    let log = dir.path().join("s.mcap");
-    let o = rigtwin(&[
-        "run",
-        rig.to_str().unwrap(),
-        "--plan",
-        plan.to_str().unwrap(),
-        "--quiet",
-        "--out",
-        log.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", text(&o));
+    let (log, _) = sim_session(dir.path(), "down", "[safety]\ndaq_timeout_s = 30\n", PLAN);
     let r = replay(&log).unwrap();
     let cfg = RigConfig::default_rig();
     let rom = default_rom::default_rom();

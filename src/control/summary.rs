@@ -14,8 +14,8 @@ use crate::rig::channels::{ChannelMap, LOWER_MID, LOWER_TIP, UPPER_MID, UPPER_TI
 use crate::rig::daq::ChannelKind;
 use crate::rig::DaqLayout;
 use crate::signal::{
-    demodulate, integrate_periodic, window_features, Feature, FeatureWindow, PeriodGrid,
-    SignalError, StepMetrics, StepRecord,
+    demodulate, integrate_periodic, noise_floor, window_features, Feature, FeatureWindow,
+    NoiseFloor, PeriodGrid, SignalError, StepMetrics, StepRecord,
 };
 
 /// What the session knew about a step when its record window ended (logged with the
@@ -106,6 +106,13 @@ pub struct StepSummary {
     /// before they existed.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub features: Vec<Feature>,
+    /// The white noise floor of every compared beam channel over the window
+    /// ([`crate::signal::noise`]): the model's channels get the same noise before their
+    /// features are compared. Empty for a window with contact (the estimate would measure the
+    /// impacts' ringing, and the noise is negligible beside an impacting response's
+    /// amplitudes) and in summaries written before it was measured.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub noise_floor: Vec<NoiseFloor>,
 }
 
 impl StepSummary {
@@ -299,6 +306,20 @@ pub fn summarize(
         contact: &w.closed,
     })
     .map_err(sig)?;
+    // With contact in the window the fourth difference measures the impacts' ringing, not
+    // the sensors (crate::signal::noise): no floor, and none is needed beside the amplitudes
+    // of an impacting response.
+    let noise_floor = if w.closed.iter().any(|&c| c) {
+        Vec::new()
+    } else {
+        channels
+            .iter()
+            .map(|(name, v)| NoiseFloor {
+                channel: name.to_string(),
+                rms: noise_floor(v),
+            })
+            .collect()
+    };
     Ok(StepSummary {
         omega_ratio: info.omega_ratio,
         metrics,
@@ -315,6 +336,7 @@ pub fn summarize(
             !within
         }),
         features,
+        noise_floor,
     })
 }
 

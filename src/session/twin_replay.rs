@@ -19,7 +19,7 @@ use crate::log::{
     LogReadError, LogStats, MetadataRecord, SessionLog, RIGTWIN_METADATA,
 };
 use crate::signal::features::CONTACT_CHANNEL;
-use crate::signal::{Feature, SignalError};
+use crate::signal::{Feature, NoiseFloor, SignalError};
 use crate::twin::{
     ClearanceSchedule, ComparisonTolerance, Completed, Observation, StepStarts, Twin, TwinBlock,
     TwinComparison, TwinError, TwinModel, TwinSamples, TwinSpec, TwinState, TwinWindows,
@@ -221,7 +221,7 @@ impl<'r> Ensemble<'r> {
             self.tolerance,
             self.options.perturbation,
         );
-        let channels = &channels;
+        let (channels, noise) = (&channels, c.observation_noise.as_slice());
         let runs: Vec<Result<Vec<MemberRun>, TwinReplayError>> = std::thread::scope(|scope| {
             let handles: Vec<_> = self
                 .twins
@@ -241,7 +241,7 @@ impl<'r> Ensemble<'r> {
                                     relative,
                                 );
                                 let f = run_member(
-                                    twin, rec, schedule, &s, info, o, tolerance, channels,
+                                    twin, rec, schedule, &s, info, o, tolerance, channels, noise,
                                 )?;
                                 Ok((m, f))
                             })
@@ -270,7 +270,8 @@ impl<'r> Ensemble<'r> {
 type MemberRun = (usize, Option<Vec<Feature>>);
 
 /// One run of `twin` from `state` through the end of the record window of `info`: its
-/// features over the window (`None` if the recording does not hold the state's block).
+/// features over the window, the measurement's noise floor `noise` laid on its channels
+/// (`None` if the recording does not hold the state's block).
 #[allow(clippy::too_many_arguments)]
 fn run_member(
     twin: &mut Twin,
@@ -281,6 +282,7 @@ fn run_member(
     o: &Observation,
     tolerance: ComparisonTolerance,
     channels: &[&str],
+    noise: &[NoiseFloor],
 ) -> Result<Option<Vec<Feature>>, TwinReplayError> {
     let start = rec
         .blocks
@@ -302,7 +304,7 @@ fn run_member(
         }
         out.push(&twin.push_block(&b)?);
     }
-    match out.features(info, rec.layout.dt(), channels) {
+    match out.features(info, rec.layout.dt(), channels, noise) {
         Some(Ok(f)) => Ok(Some(f)),
         Some(Err(source)) => Err(TwinReplayError::Metrics {
             test: info.test.clone(),

@@ -2,7 +2,7 @@
 //! whole-period bookkeeping and quadrature ([`periods`]), the step metrics of the reference's
 //! frequency-response figures ([`metrics`]), synchronous demodulation of the fundamental in
 //! batch and streaming form ([`demod`]), contact intervals, impacts per period and impact
-//! clusters ([`mod@contact_activity`]), drift-free integration of measured accelerations ([`integrate`]), the analytic Morlet wavelet transform ([`wavelet`]), half-harmonic band spectra and their
+//! clusters ([`mod@contact_activity`]), drift-free integration of measured accelerations ([`integrate`]), sensor noise floors ([`noise`]), the analytic Morlet wavelet transform ([`wavelet`]), half-harmonic band spectra and their
 //! log-spectral distance ([`spectrum`]) and
 //! the relative RMS error of the convergence studies ([`relative_error`]).
 //!
@@ -18,6 +18,7 @@ pub mod features;
 mod fft;
 pub mod integrate;
 pub mod metrics;
+pub mod noise;
 pub mod periods;
 pub mod relative_error;
 pub mod spectrum;
@@ -32,6 +33,7 @@ pub use error::SignalError;
 pub use features::{ensemble_features, window_features, Feature, FeatureWindow};
 pub use integrate::integrate_periodic;
 pub use metrics::{step_metrics, MetricsParams, StepMetrics, StepRecord};
+pub use noise::{add_white_noise, noise_floor, NoiseFloor};
 pub use periods::PeriodGrid;
 pub use relative_error::relative_rms_error;
 pub use spectrum::{band_spectrum, spectrum_distance_db, SPECTRUM_BANDS};

@@ -17,8 +17,8 @@ use crate::rig::channels::{
 };
 use crate::signal::features::CONTACT_CHANNEL;
 use crate::signal::{
-    ensemble_features, integrate_periodic, spectrum_distance_db, window_features, Feature,
-    FeatureWindow, PeriodGrid, SignalError, StepMetrics, StepRecord,
+    add_white_noise, ensemble_features, integrate_periodic, spectrum_distance_db, window_features,
+    Feature, FeatureWindow, NoiseFloor, PeriodGrid, SignalError, StepMetrics, StepRecord,
 };
 // The lower and upper tip's indices in the twin's sensors (`TWIN_SENSORS`).
 use crate::sim::driven::{LOWER_MID, LOWER_TIP, UPPER_MID, UPPER_TIP};
@@ -60,6 +60,10 @@ pub struct TwinComparison {
     /// twin's own sub-windows.
     #[serde(default)]
     pub ensemble_members: usize,
+    /// The measurement's noise floor laid on the model's channels before their features were
+    /// taken ([`crate::signal::noise`]); empty when the measurement has none.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub observation_noise: Vec<NoiseFloor>,
 }
 
 /// One compared feature of one channel: the measurement and the model, each with its spread
@@ -124,6 +128,18 @@ fn score(
 }
 
 /// The largest score (NaN scores, from broken windows, count as the largest).
+/// The seed of the noise laid on the model's channel `channel` over the record window of
+/// `info`: the window's place in the session and the channel, nothing of the run.
+fn observation_seed(info: &StepInfo, channel: &str) -> u64 {
+    let k = COMPARED_CHANNELS
+        .iter()
+        .position(|c| *c == channel)
+        .unwrap_or(COMPARED_CHANNELS.len()) as u64;
+    info.record_first_sample
+        .wrapping_mul(0x9E37_79B9_7F4A_7C15)
+        .wrapping_add(k + 1)
+}
+
 fn max_score(features: &[FeatureComparison]) -> Option<f64> {
     features.iter().map(|f| f.score).reduce(|a, b| {
         if a.is_nan() || b.is_nan() {
@@ -284,10 +300,15 @@ impl TwinWindows {
         self.gaps.retain(|&(_, to)| to > self.first);
     }
 
-    /// The twin's observed channels over the record window of `info` (samples `dt` s apart):
-    /// `None` while the window is not complete, or when the twin missed samples of it (an
-    /// input gap).
-    fn window(&self, info: &StepInfo, dt: f64) -> Option<Result<Window, SignalError>> {
+    /// The twin's observed channels over the record window of `info` (samples `dt` s apart),
+    /// with the measurement's white noise `noise` laid on them: `None` while the window is
+    /// not complete, or when the twin missed samples of it (an input gap).
+    fn window(
+        &self,
+        info: &StepInfo,
+        dt: f64,
+        noise: &[NoiseFloor],
+    ) -> Option<Result<Window, SignalError>> {
         let (from, to) = (info.record_first_sample, info.record_end_sample());
         if from < self.first || to > self.end() {
             return None;
@@ -330,6 +351,26 @@ impl TwinWindows {
                 apply(o, v);
             }
         }
+        // The measurement's noise on each channel, from a seed of the window and the channel:
+        // every run of the model over this window (ensemble members, fits) gets the same
+        // realisation. The tip series behind the metrics get their sensor's: the upper tip is
+        // read by the vibrometer where there is one.
+        let floor = |name: &str| noise.iter().find(|f| f.channel == name).map(|f| f.rms);
+        let seed = |name: &str| observation_seed(info, name);
+        for (name, v) in beams.iter_mut() {
+            if let Some(rms) = floor(name) {
+                add_white_noise(v, rms, seed(name));
+            }
+        }
+        let upper_sensor = [VIBROMETER, UPPER_TIP_CHANNEL]
+            .into_iter()
+            .find(|n| floor(n).is_some());
+        if let Some(name) = upper_sensor {
+            add_white_noise(&mut upper, floor(name).unwrap_or(0.0), seed(name));
+        }
+        if let Some(rms) = floor(LOWER_TIP_CHANNEL) {
+            add_white_noise(&mut lower, rms, seed(LOWER_TIP_CHANNEL));
+        }
         Some(Ok(Window {
             upper,
             lower,
@@ -348,9 +389,10 @@ impl TwinWindows {
         info: &StepInfo,
         dt: f64,
         channels: &[&str],
+        noise: &[NoiseFloor],
     ) -> Option<Result<Vec<Feature>, SignalError>> {
         Some(
-            self.window(info, dt)?
+            self.window(info, dt, noise)?
                 .and_then(|w| w.features(info, dt, channels)),
         )
     }
@@ -364,7 +406,7 @@ impl TwinWindows {
         measured: &StepSummary,
         dt: f64,
     ) -> Option<Result<TwinComparison, SignalError>> {
-        let w = match self.window(info, dt)? {
+        let w = match self.window(info, dt, &measured.noise_floor)? {
             Ok(w) => w,
             Err(e) => return Some(Err(e)),
         };
@@ -384,6 +426,7 @@ impl TwinWindows {
             let mut c = compare(m, &measured.metrics);
             c.features = score(&measured.features, &features?, &self.tolerance);
             c.max_score = max_score(&c.features);
+            c.observation_noise = measured.noise_floor.clone();
             Ok(c)
         }))
     }
@@ -486,5 +529,6 @@ fn compare(twin: StepMetrics, measured: &StepMetrics) -> TwinComparison {
         features: Vec::new(),
         max_score: None,
         ensemble_members: 0,
+        observation_noise: Vec::new(),
     }
 }

@@ -742,3 +742,115 @@ fn a_restored_state_continues_bit_for_bit_and_another_model_is_refused() {
     let err = new().set_state(&bad).unwrap_err().to_string();
     assert!(err.contains("contact_voltage"), "{err}");
 }
+
+/// Like with like for noise: the vibrometer reads the upper tip with white noise 3 % of its
+/// amplitude, which raises the measured per-period amplitudes by about 4 % (the module docs of
+/// `crate::signal::noise`); a model that is the rig exactly scores that as a mismatch unless
+/// the measurement's noise floor is laid on its channels, as the comparison does.
+#[test]
+fn the_measured_noise_floor_is_laid_on_the_model() {
+    use crate::control::summary::summarize;
+    use crate::control::StepInfo;
+    let lay = crate::rig::channels::layout(&crate::config::DaqSpec::default());
+    let dt = lay.dt();
+    let (f, periods) = (40.0, 60); // 256 samples a period
+    let n = periods * 256;
+    let w = 2.0 * PI * f;
+    let (a_b, v) = (2.0, 0.01); // base acceleration, relative tip velocity amplitudes
+                                // Relative velocities of the twin's sensors (lower_tip, lower_mid, upper_tip, upper_mid).
+    let phase = [0.5, 0.5, 0.0, 0.0];
+    let scale = [1.0, 0.5, 1.0, 0.5];
+    let rel = |k: usize, t: f64| scale[k] * v * (w * t + phase[k]).sin();
+    let d_rel = |k: usize, t: f64| scale[k] * v * w * (w * t + phase[k]).cos();
+    let mut noise = crate::signal::noise::Gaussian::new(9);
+    let sigma = 0.03 * v;
+    let mut counts = Vec::with_capacity(n * lay.channels.len());
+    for ch in &lay.channels {
+        counts.extend((0..n).map(|i| {
+            let t = i as f64 * dt;
+            let value = match ch.name.as_str() {
+                "vibrometer" => -a_b / w * (w * t).cos() + rel(2, t) + sigma * noise.next(),
+                "upper_tip" => a_b * (w * t).sin() + d_rel(2, t),
+                "upper_mid" => a_b * (w * t).sin() + d_rel(3, t),
+                "lower_tip" => a_b * (w * t).sin() + d_rel(0, t),
+                "lower_mid" => a_b * (w * t).sin() + d_rel(1, t),
+                "contact_voltage" => 5.0,
+                _ => a_b * (w * t).sin(),
+            };
+            (value / ch.scale).round() as i32
+        }));
+    }
+    let info = StepInfo {
+        test: "t".into(),
+        step: 0,
+        omega_ratio: 1.0,
+        omega: w,
+        base_amp_target: a_b / (w * w),
+        drive_amplitude: 0.1,
+        settle_seconds: 1.0,
+        settled: true,
+        record_first_sample: 0,
+        record_samples: n,
+        contact_threshold_v: 2.5,
+        record_attempt: 1,
+        record_tolerance: None,
+    };
+    let measured = summarize(&lay, &info, &counts).unwrap();
+    let vib_floor = measured
+        .noise_floor
+        .iter()
+        .find(|f| f.channel == "vibrometer")
+        .unwrap()
+        .rms;
+    assert!((vib_floor / sigma - 1.0).abs() < 0.05, "{vib_floor}");
+
+    let o = Observation::nominal(&crate::config::ContactCircuitSpec::default(), 2.5);
+    let mut out = TwinWindows::new(&o, crate::twin::ComparisonTolerance::default());
+    for b in 0..n / BLOCK {
+        let first = (b * BLOCK) as u64;
+        let t = |i: usize| (first as usize + i) as f64 * dt;
+        out.push(&TwinBlock {
+            seq: b as u64,
+            first_sample: first,
+            time: t(0),
+            len: BLOCK,
+            velocity: (0..4)
+                .flat_map(|k| (0..BLOCK).map(move |i| rel(k, t(i))))
+                .collect(),
+            base_acceleration: (0..BLOCK).map(|i| a_b * (w * t(i)).sin()).collect(),
+            contact: vec![false; BLOCK],
+            normal_force: vec![0.0; BLOCK],
+            tangential_force: vec![0.0; BLOCK],
+            solver_failures: vec![0; BLOCK],
+            gap: None,
+            restarts: Vec::new(),
+        });
+    }
+    let score = |m: &crate::control::StepSummary, feature: &str| {
+        let c = out.compare(&info, m, dt).unwrap().unwrap();
+        c.features
+            .iter()
+            .find(|x| x.channel == "vibrometer" && x.feature == feature)
+            .unwrap()
+            .clone()
+    };
+    for feature in ["amp_p10", "amp_p50", "amp_p90"] {
+        let with = score(&measured, feature);
+        assert!(with.score < 1.0, "{with:?}");
+        let bare = crate::control::StepSummary {
+            noise_floor: Vec::new(),
+            ..measured.clone()
+        };
+        let without = score(&bare, feature);
+        assert!(
+            without.score > 3.0 && without.measured / without.model > 1.03,
+            "{without:?}"
+        );
+    }
+    // The accelerometers' floor is their quantisation's; their features match either way.
+    let c = out.compare(&info, &measured, dt).unwrap().unwrap();
+    assert_eq!(c.observation_noise, measured.noise_floor);
+    for x in c.features.iter().filter(|x| x.channel != "vibrometer") {
+        assert!(x.score < 1.0, "{x:?}");
+    }
+}

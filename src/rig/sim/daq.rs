@@ -7,35 +7,11 @@
 //! contact channel: its minimum over the period), so
 //! DAQ sample `n` stands at rig time `n / sample_rate` exactly.
 
-use rand::{Rng, SeedableRng};
-use rand_chacha::ChaCha8Rng;
-
 use crate::rig::daq::{ChannelKind, DaqLayout};
+use crate::signal::noise::Gaussian;
 
 use super::filter::Butterworth4;
 use super::spec::DaqSpec;
-
-/// Standard normal deviates by the Box-Muller transform (both deviates of a pair used).
-#[derive(Clone, Debug)]
-struct Gaussian {
-    rng: ChaCha8Rng,
-    spare: Option<f64>,
-}
-
-impl Gaussian {
-    fn next(&mut self) -> f64 {
-        if let Some(z) = self.spare.take() {
-            return z;
-        }
-        // u1 in (0, 1] so that ln(u1) is finite.
-        let u1 = 1.0 - self.rng.gen::<f64>();
-        let u2 = self.rng.gen::<f64>();
-        let r = (-2.0 * u1.ln()).sqrt();
-        let (s, c) = (std::f64::consts::TAU * u2).sin_cos();
-        self.spare = Some(r * s);
-        r * c
-    }
-}
 
 /// Counts for a physical value: `round(value / scale)` clipped to `+-full_scale_counts`;
 /// returns whether it clipped (a non-finite value reads 0 and counts as clipped).
@@ -115,10 +91,7 @@ impl Daq {
                 .collect(),
             dead: vec![false; nc],
             over_range: vec![false; nc],
-            noise: Gaussian {
-                rng: ChaCha8Rng::seed_from_u64(spec.noise_seed),
-                spare: None,
-            },
+            noise: Gaussian::new(spec.noise_seed),
         }
     }
 
@@ -251,10 +224,7 @@ mod tests {
 
     #[test]
     fn gaussian_has_unit_variance() {
-        let mut g = Gaussian {
-            rng: ChaCha8Rng::seed_from_u64(3),
-            spare: None,
-        };
+        let mut g = Gaussian::new(3);
         let n = 200_000;
         let (mut s, mut s2) = (0.0, 0.0);
         for _ in 0..n {

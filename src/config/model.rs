@@ -55,6 +55,15 @@ impl<'a> RigModel<'a> {
         self.reduction.contact_nodes.unwrap_or(self.contact.nodes)
     }
 
+    /// The key [`RigModel::patch_nodes`] comes from, for error messages.
+    pub fn patch_nodes_key(&self) -> &'static str {
+        if self.reduction.contact_nodes.is_some() {
+            "reduction.contact_nodes"
+        } else {
+            "contact.nodes"
+        }
+    }
+
     /// SHA-256 (lower-case hex) of the canonical serialisation (JSON of the parsed model
     /// sections): comments, whitespace, key order and number spelling do not change it;
     /// explicit defaults hash like omitted ones.

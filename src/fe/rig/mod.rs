@@ -7,8 +7,8 @@
 //! Grid lines are chosen so that touching faces conform:
 //! - x: both beams share one set of lines (clamp, free span, probe seat, tip); the blocks take
 //!   the beams' lines inside the clamp.
-//! - plan of the probes: the seat edges, the contact patch lines (uniform, `contact.nodes`)
-//!   and lines graded from the patch spacing up to `mesh.probes.element`; both probes and
+//! - plan of the probes: the seat edges, the contact patch lines (uniform, `contact.nodes`,
+//!   or `reduction.contact_nodes` when given) and lines graded from the patch spacing up to `mesh.probes.element`; both probes and
 //!   the protrusion share them.
 //! - the beams under the seat take a subset of the probe's plan lines (about
 //!   `mesh.beams.seat_element` apart along x, `width_element` across), so every beam face
@@ -187,7 +187,7 @@ pub fn mesh_rig(cfg: RigModel<'_>) -> Result<Mesh, ConfigError> {
         for (i, ax) in area_x.iter().enumerate() {
             let upper_node = prot.global(i, j, 0);
             let q = b.mesh.nodes[upper_node];
-            let lower_node = lprobe.node_at(&b, q[0], q[1], lp_top, "contact.nodes")?;
+            let lower_node = lprobe.node_at(&b, q[0], q[1], lp_top, cfg.patch_nodes_key())?;
             b.mesh.contact_pairs.push(ContactPair {
                 lower: lower_node,
                 upper: upper_node,

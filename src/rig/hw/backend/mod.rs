@@ -8,7 +8,7 @@
 //! after each block it consumed), TIME_SYNC_REQUEST once per second, and supervises the
 //! device's heartbeat; one thread per serial device answers requests and polls STATUS.
 //! Everything counted goes to [`RigStatus::link`]; faults that end the test (link gone,
-//! heartbeat lost, interlock, amplifier overload, over-range) become [`RigFault`]s or
+//! heartbeat lost, interlock, amplifier overload, over-range) become [`RigFault`](crate::rig::daq::RigFault)s or
 //! [`RigError::Link`] so the session aborts with its ramp-down, which goes over the link too.
 
 use std::collections::VecDeque;

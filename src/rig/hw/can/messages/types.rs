@@ -216,7 +216,7 @@ impl DriveStatus {
 pub struct HostHeartbeat {
     /// Counter.
     pub counter: u32,
-    /// Last block consumed ([`NO_BLOCK`] = none).
+    /// Last block consumed ([`NO_BLOCK`](super::table::NO_BLOCK) = none).
     pub consumed: u32,
 }
 

@@ -8,8 +8,8 @@
 //! - x: both beams share one set of lines (clamp, free span, probe seat, tip); the blocks take
 //!   the beams' lines inside the clamp.
 //! - plan of the probes: the seat edges, the contact patch lines (uniform, `contact.nodes`,
-//!   or `reduction.contact_nodes` when given) and lines graded from the patch spacing up to `mesh.probes.element`; both probes and
-//!   the protrusion share them.
+//!   or `reduction.contact_nodes` when given) and lines graded from the patch spacing up to
+//!   `mesh.probes.element`; both probes and the protrusion share them.
 //! - the beams under the seat take a subset of the probe's plan lines (about
 //!   `mesh.beams.seat_element` apart along x, `width_element` across), so every beam face
 //!   node under the seat coincides with a probe face node; the probe-beam layer springs sit

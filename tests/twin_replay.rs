@@ -466,7 +466,23 @@ fn a_twin_that_falls_behind_skips_visibly_and_does_not_stall_the_session() {
     ]);
     let out = text(&o);
     assert!(o.status.success(), "{out}");
-    assert!(out.contains(" 0 overruns"), "{out}");
+    // A twin that stalled the producer would make most blocks overrun (it is throttled to a
+    // quarter of real time); a loaded machine makes a few overrun on its own.
+    let (blocks, overruns): (u64, u64) = out
+        .lines()
+        .find_map(|l| {
+            let rest = l.strip_prefix("session: ")?;
+            let blocks = rest.split(' ').next()?.parse().ok()?;
+            let overruns = rest
+                .strip_suffix(" overruns")?
+                .rsplit(' ')
+                .next()?
+                .parse()
+                .ok()?;
+            Some((blocks, overruns))
+        })
+        .unwrap_or_else(|| panic!("no session line: {out}"));
+    assert!(blocks > 50 && overruns * 10 < blocks, "{out}");
     let skipped: u64 = out
         .lines()
         .find_map(|l| {

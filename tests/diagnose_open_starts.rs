@@ -7,7 +7,9 @@
 //!   the same steps from rest compares, for less rig time;
 //! - a geometry closer than the capture's (a smaller clearance, or a tilt whose edge closes
 //!   below it) is run from rest instead, with the same results as without any capture;
-//! - a capture during which a pair closed is not kept.
+//! - a capture during which a pair closed is not kept;
+//! - runs made side by side on two threads (`ModelRunner::run_many`, a fit's grid) give what
+//!   the same runs one after the other give.
 
 mod cli_support;
 mod default_rom;
@@ -91,15 +93,18 @@ fn runs_from_an_open_state_compare_what_runs_from_rest_do() {
         }),
         ..PhysicsSpec::default()
     };
-    for (ext, served) in [
+    let cases = [
         (PhysicsSpec::default(), true),
         (offset(1e-4), true),
         (offset(-5e-5), true),
         (offset(-1e-4), false),
         (tilted, false),
-    ] {
+    ];
+    let mut sequential = Vec::new();
+    for (ext, served) in cases.clone() {
         let (w0, c0) = (warm.cost.rig_seconds, cold.cost.rig_seconds);
         let a = warm.run_spans(&ext, &[span]).unwrap();
+        sequential.push(a.clone());
         let b = cold.run_spans(&ext, &[span]).unwrap();
         assert_eq!(a, b, "{ext:?}");
         assert!(a.iter().all(|s| s.step >= from && s.step <= first + 1));
@@ -116,6 +121,23 @@ fn runs_from_an_open_state_compare_what_runs_from_rest_do() {
         }
     }
     assert!(capture_cost > 0.0);
+
+    // The same runs side by side on two threads (a fit's grid, `ModelRunner::run_many`):
+    // the same results, in order.
+    let mut side_by_side = ModelRunner::new(
+        &r.recording,
+        &steps,
+        TwinModel::of_config(rom, &cfg),
+        &cfg.twin,
+        cfg.rig.beam_length,
+        2,
+    );
+    assert!(side_by_side.capture_open(&closest, 0, from).unwrap());
+    let runs: Vec<(PhysicsSpec, Vec<Span>)> = cases
+        .iter()
+        .map(|(ext, _)| (ext.clone(), vec![span]))
+        .collect();
+    assert_eq!(side_by_side.run_many(&runs).unwrap(), sequential);
 
     // A clearance so small that the probes touch before the capture's step: not kept.
     let mut touching = runner();

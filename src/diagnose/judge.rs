@@ -255,6 +255,33 @@ impl Work<'_> {
         Ok(s)
     }
 
+    /// Runs the model for every `(ext, spans)` of `runs` not run before, side by side on the
+    /// runner's threads ([`ModelRunner::run_many`]), so that the [`Work::scores_spans`] calls
+    /// for them that follow find them made.
+    pub(super) fn prefetch(
+        &mut self,
+        runs: Vec<(PhysicsSpec, Vec<Span>)>,
+    ) -> Result<(), DiagnoseError> {
+        let refinement = self.runner.refinement();
+        let (mut keys, mut todo) = (Vec::new(), Vec::new());
+        for (ext, spans) in runs {
+            let key = (ext.to_json(), spans.clone(), refinement);
+            if self.cache.contains_key(&key) || keys.contains(&key) {
+                continue;
+            }
+            keys.push(key);
+            todo.push((ext, spans));
+        }
+        if todo.len() < 2 {
+            return Ok(());
+        }
+        let out = self.runner.run_many(&todo)?;
+        for (key, s) in keys.into_iter().zip(out) {
+            self.cache.insert(key, s);
+        }
+        Ok(())
+    }
+
     /// The steps of test `test` from `from` through `through` for runs whose contact geometry
     /// is nowhere closer than `closest`'s: from a state of open contact captured at `from`
     /// with `closest` ([`ModelRunner::capture_open`]), or, where a pair closes before `from`
@@ -510,11 +537,45 @@ pub(super) fn grid_then_refine(
     work: &mut Work<'_>,
     grid: Vec<f64>,
     refine: impl Fn(f64) -> Vec<f64>,
+    error: impl FnMut(&mut Work<'_>, f64) -> Result<Option<f64>, DiagnoseError>,
+) -> Result<Vec<(f64, f64)>, DiagnoseError> {
+    search(work, grid, refine, None, error)
+}
+
+/// The model run a point of a search needs: its extensions and the steps scored.
+pub(super) type PointRun<'p> = &'p dyn Fn(&Work<'_>, f64) -> (PhysicsSpec, Vec<Span>);
+
+/// [`grid_then_refine`] whose points' model runs (`plan`: the run a point's `error` asks
+/// [`Work::scores_spans`] for) are made side by side on the runner's threads before each
+/// round is scored ([`Work::prefetch`]).
+pub(super) fn grid_then_refine_side_by_side(
+    work: &mut Work<'_>,
+    grid: Vec<f64>,
+    refine: impl Fn(f64) -> Vec<f64>,
+    plan: PointRun<'_>,
+    error: impl FnMut(&mut Work<'_>, f64) -> Result<Option<f64>, DiagnoseError>,
+) -> Result<Vec<(f64, f64)>, DiagnoseError> {
+    search(work, grid, refine, Some(plan), error)
+}
+
+fn search(
+    work: &mut Work<'_>,
+    grid: Vec<f64>,
+    refine: impl Fn(f64) -> Vec<f64>,
+    plan: Option<PointRun<'_>>,
     mut error: impl FnMut(&mut Work<'_>, f64) -> Result<Option<f64>, DiagnoseError>,
 ) -> Result<Vec<(f64, f64)>, DiagnoseError> {
     let mut tried: Vec<(f64, f64)> = Vec::new();
     let mut grid = grid;
     for round in 0..2 {
+        if let Some(plan) = plan {
+            let runs = grid
+                .iter()
+                .filter(|&&x| !tried.iter().any(|p| p.0 == x))
+                .map(|&x| plan(work, x))
+                .collect();
+            work.prefetch(runs)?;
+        }
         for &x in &grid {
             if tried.iter().any(|p| p.0 == x) {
                 continue;

@@ -332,51 +332,71 @@ impl<'a> ModelRunner<'a> {
         ext: &PhysicsSpec,
         spans: &[Span],
     ) -> Result<Vec<StepScores>, DiagnoseError> {
-        let mut wanted: Vec<Span> = spans.to_vec();
-        wanted.sort_unstable();
-        wanted.dedup_by_key(|r| r.test);
-        // Stretches of consecutive tests (with the state each starts from); the whole
+        let mut all = self.run_many(&[(ext.clone(), spans.to_vec())])?;
+        Ok(all.pop().unwrap_or_default())
+    }
+
+    /// Several [`ModelRunner::run_spans`] at once, their stretches of tests spread over the
+    /// `jobs` threads together (the points of a fit's grid run side by side, where one run of
+    /// a single test would keep one thread busy). Results in the order of `runs`; the contact
+    /// work ([`ModelRunner::contact_work`]) is the last run's.
+    pub fn run_many(
+        &mut self,
+        runs: &[(PhysicsSpec, Vec<Span>)],
+    ) -> Result<Vec<Vec<StepScores>>, DiagnoseError> {
+        let mut wanted_of: Vec<Vec<Span>> = Vec::with_capacity(runs.len());
+        // (run, stretch of consecutive tests, the captured state it starts from); the whole
         // session for wear.
-        let mut groups: Vec<(Vec<Span>, Option<usize>)> = Vec::new();
-        if ext.wear.is_some() {
-            // From the session's start through the last test asked for.
-            let last = wanted.last().map_or(0, |s| s.test);
-            let group = (0..=last)
-                .map(|t| {
-                    wanted
-                        .iter()
-                        .find(|s| s.test == t)
-                        .copied()
-                        .unwrap_or(Span::whole(t))
-                })
-                .collect();
-            groups.push((group, None));
-        } else {
-            for &span in &wanted {
-                let start = self.open_start_for(ext, &span);
-                match groups.last_mut() {
-                    Some((g, None))
-                        if start.is_none()
-                            && g.last().is_some_and(|p| {
-                                p.test + 1 == span.test && p.through.is_none()
-                            }) =>
-                    {
-                        g.push(span)
+        let mut groups: Vec<(usize, Vec<Span>, Option<usize>)> = Vec::new();
+        for (r, (ext, spans)) in runs.iter().enumerate() {
+            let mut wanted: Vec<Span> = spans.clone();
+            wanted.sort_unstable();
+            wanted.dedup_by_key(|s| s.test);
+            let first = groups.len();
+            if ext.wear.is_some() {
+                // From the session's start through the last test asked for.
+                let last = wanted.last().map_or(0, |s| s.test);
+                let group = (0..=last)
+                    .map(|t| {
+                        wanted
+                            .iter()
+                            .find(|s| s.test == t)
+                            .copied()
+                            .unwrap_or(Span::whole(t))
+                    })
+                    .collect();
+                groups.push((r, group, None));
+            } else {
+                for &span in &wanted {
+                    let start = self.open_start_for(ext, &span);
+                    // Only this run's own stretches are extended.
+                    let own = groups.len() > first;
+                    match groups.last_mut() {
+                        Some((_, g, None))
+                            if own
+                                && start.is_none()
+                                && g.last().is_some_and(|p| {
+                                    p.test + 1 == span.test && p.through.is_none()
+                                }) =>
+                        {
+                            g.push(span)
+                        }
+                        _ => groups.push((r, vec![span], start)),
                     }
-                    _ => groups.push((vec![span], start)),
                 }
             }
+            wanted_of.push(wanted);
         }
         let wall = std::time::Instant::now();
-        let model = self.model(ext);
+        let models: Vec<TwinModel<'_>> = runs.iter().map(|(ext, _)| self.model(ext)).collect();
         let mut results: Vec<Result<GroupRun, DiagnoseError>> = Vec::new();
         let this: &ModelRunner<'_> = self;
         for chunk in groups.chunks(this.jobs) {
             let done: Vec<_> = std::thread::scope(|s| {
                 let handles: Vec<_> = chunk
                     .iter()
-                    .map(|(g, start)| {
-                        let model = &model;
+                    .map(|(r, g, start)| {
+                        let model = &models[*r];
                         let start = start.map(|i| &this.open_starts[i]);
                         s.spawn(move || this.run_group(model, g, start))
                     })
@@ -388,23 +408,25 @@ impl<'a> ModelRunner<'a> {
             });
             results.extend(done);
         }
-        let mut out = Vec::new();
-        let mut work = vec![None; self.steps.tests.len()];
-        for r in results {
-            let g = r?;
+        let mut out: Vec<Vec<StepScores>> = vec![Vec::new(); runs.len()];
+        let mut work = vec![vec![None; self.steps.tests.len()]; runs.len()];
+        for ((r, _, _), g) in groups.iter().zip(results) {
+            let g = g?;
             self.cost.runs += 1;
             self.cost.rig_seconds += g.rig_seconds;
-            out.extend(g.scores);
+            out[*r].extend(g.scores);
             for (t, w) in g.work {
-                if let Some(slot) = work.get_mut(t) {
+                if let Some(slot) = work[*r].get_mut(t) {
                     *slot = Some(w);
                 }
             }
         }
-        out.sort_by_key(|s| (s.test_index, s.step));
-        out.retain(|s| wanted.iter().any(|w| w.test == s.test_index));
+        for (o, wanted) in out.iter_mut().zip(&wanted_of) {
+            o.sort_by_key(|s| (s.test_index, s.step));
+            o.retain(|s| wanted.iter().any(|w| w.test == s.test_index));
+        }
         self.cost.wall_seconds += wall.elapsed().as_secs_f64();
-        self.last_contact_work = work;
+        self.last_contact_work = work.pop().unwrap_or_default();
         Ok(out)
     }
 

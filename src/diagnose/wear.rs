@@ -26,8 +26,9 @@ use crate::config::{ClearanceSpec, WearSpec};
 
 use super::clearance::{ClearanceEvidence, TestClearance};
 use super::clearance_fit::test_clearance_by_runs;
-use super::judge::{alternate, grid_then_refine, set_error, Candidate, Steps, Work};
+use super::judge::{alternate, grid_then_refine_side_by_side, set_error, Candidate, Steps, Work};
 use super::outcome::EffectResult;
+use super::rerun::Span;
 use super::{DiagnoseError, DiagnoseProgress};
 
 /// Least-squares line `y = a + k x`: (a, k, standard error of k, NaN with two points); `None`
@@ -213,10 +214,12 @@ pub(super) fn wear_stage(
         .iter()
         .map(|m| m * k0)
         .collect();
-    let tried = grid_then_refine(
+    let train_spans: Vec<Span> = train.iter().map(|&t| Span::whole(t)).collect();
+    let tried = grid_then_refine_side_by_side(
         work,
         grid,
         |best| vec![0.88 * best, 1.12 * best],
+        &|_, k| (with(k, None), train_spans.clone()),
         |work, k| {
             let ext = with(k, None);
             (work.progress)(DiagnoseProgress::Evaluation(format!(

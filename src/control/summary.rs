@@ -115,6 +115,31 @@ pub struct StepSummary {
     pub noise_floor: Vec<NoiseFloor>,
 }
 
+#[cfg(test)]
+impl StepInfo {
+    /// The first record window of a test `t`'s step 0 at `omega` (rad/s), base target
+    /// `base_amp_target` (m), `record_samples` long from the session's first sample, settled,
+    /// threshold 2.5 V, tolerance 1 %: the step of the synthetic windows the unit tests
+    /// summarise.
+    pub(crate) fn synthetic(omega: f64, base_amp_target: f64, record_samples: usize) -> StepInfo {
+        StepInfo {
+            test: "t".into(),
+            step: 0,
+            omega_ratio: 1.0,
+            omega,
+            base_amp_target,
+            drive_amplitude: 0.1,
+            settle_seconds: 1.0,
+            settled: true,
+            record_first_sample: 0,
+            record_samples,
+            contact_threshold_v: 2.5,
+            record_attempt: 1,
+            record_tolerance: Some(0.01),
+        }
+    }
+}
+
 impl StepSummary {
     /// The measured fundamental base amplitude's relative error against the target.
     pub fn base_amp_error(&self) -> f64 {
@@ -380,21 +405,7 @@ mod tests {
                 (0..n).map(|i| (g * signal(&ch.name, i as f64 * dt) / ch.scale).round() as i32),
             );
         }
-        let info = StepInfo {
-            test: "t".into(),
-            step: 0,
-            omega_ratio: 1.0,
-            omega: w,
-            base_amp_target: a_b / (w * w),
-            drive_amplitude: 0.1,
-            settle_seconds: 1.0,
-            settled: true,
-            record_first_sample: 0,
-            record_samples: n,
-            contact_threshold_v: 2.5,
-            record_attempt: 1,
-            record_tolerance: Some(0.01),
-        };
+        let info = StepInfo::synthetic(w, a_b / (w * w), n);
         (layout, info, counts)
     }
 

@@ -780,21 +780,7 @@ fn the_measured_noise_floor_is_laid_on_the_model() {
             (value / ch.scale).round() as i32
         }));
     }
-    let info = StepInfo {
-        test: "t".into(),
-        step: 0,
-        omega_ratio: 1.0,
-        omega: w,
-        base_amp_target: a_b / (w * w),
-        drive_amplitude: 0.1,
-        settle_seconds: 1.0,
-        settled: true,
-        record_first_sample: 0,
-        record_samples: n,
-        contact_threshold_v: 2.5,
-        record_attempt: 1,
-        record_tolerance: None,
-    };
+    let info = StepInfo::synthetic(w, a_b / (w * w), n);
     let measured = summarize(&lay, &info, &counts).unwrap();
     let vib_floor = measured
         .noise_floor

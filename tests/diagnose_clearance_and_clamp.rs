@@ -8,7 +8,7 @@
 //!   in the model and the rig alike and does not improve beyond the null spread
 //!   (BENCHMARKS.md, "Diagnosis"): validation of a clearance on one impact test is fragile;
 //! - a clearance smaller than the plan's (hidden offset -7e-5 m, -10 %), on two up-sweeps
-//!   through the first contact at 2e-5 l and 3e-5 l in 0.005 omega_2 steps, 100 periods
+//!   through the first contact at 3e-5 l and 2e-5 l in 0.005 omega_2 steps, 100 periods
 //!   recorded ([`SMALL_CLEARANCE_PLAN`]): `clearance` accepted, the offset within 20 %, the
 //!   validation error (the other up-sweep's steps around its first contact, at the fit's
 //!   finer twin step) at least 3x lower. A smaller clearance lowers the amplitude at which
@@ -91,9 +91,10 @@ omega_end = 1.02
 steps = 6
 "#;
 
-/// Up through the first contact at 2e-5 l (0.985 -> 1.015 omega_2) and 3e-5 l (0.97 -> 1.01),
-/// in 0.005 steps (7 and 9), settle 60 + record 100 periods: about 55 s of rig time. The
-/// higher level's sweep starts two steps further off: it touches from 0.985 with -10 %.
+/// Up through the first contact at 3e-5 l (0.975 -> 1.01 omega_2) and at 2e-5 l (0.98 ->
+/// 1.015), in 0.005 steps (8 each), settle 60 + record 100 periods (the second test settles
+/// 150: the lower beam's free 1FL transient after the first test's contact must not touch in
+/// its first window): about 60 s of rig time.
 const SMALL_CLEARANCE_PLAN: &str = r#"
 name = "diagnose-small-clearance"
 [defaults]
@@ -102,20 +103,21 @@ settle_periods = 60
 record_periods = 100
 steps_per_period = 1000
 direction = "up"
-omega_start = 0.985
-omega_end = 1.015
-steps = 7
-
-[[test]]
-name = "band-up"
-level = 2e-5
 
 [[test]]
 name = "band-up-higher"
 level = 3e-5
-omega_start = 0.97
+omega_start = 0.975
 omega_end = 1.01
-steps = 9
+steps = 8
+
+[[test]]
+name = "band-up"
+level = 2e-5
+settle_periods = 150
+omega_start = 0.98
+omega_end = 1.015
+steps = 8
 "#;
 
 /// About 90 s of rig time.

@@ -9,7 +9,7 @@ use serde_json::json;
 use crate::config::{ClearanceSpec, PhysicsSpec};
 
 use super::clearance::{ClearanceEvidence, TestClearance};
-use super::judge::{alternate, grid_refined, set_error, Candidate, Steps, Work};
+use super::judge::{alternate, grid_then_refine, set_error, Candidate, Steps, Work};
 use super::rerun::Span;
 use super::{DiagnoseError, DiagnoseProgress};
 
@@ -34,8 +34,8 @@ const STEPS_PAST_FIRST_CONTACT: usize = 2;
 /// falls, how much contact follows it; the later steps, the rest of the band and past it,
 /// carry chaos and the twin's own step rather than the clearance, and cost the most), from
 /// two steps before it (a state of open contact there, captured once, starts every run;
-/// [`Work::open_span`]): a grid of 9 over the bracket, refined twice around the best point
-/// (17 runs of a few steps of the test). `None` without a bracket.
+/// [`Work::open_span`]): a grid of 9 over the bracket, refined once around the best point
+/// (13 runs of a few steps of the test). `None` without a bracket.
 pub(super) fn test_clearance_by_runs(
     work: &mut Work<'_>,
     t: &TestClearance,
@@ -126,16 +126,16 @@ fn fit_in_bracket(
     let closest = with_clearance(work, lo - h);
     let span = work.open_span(&closest, t.test_index, from, through)?;
     let grid: Vec<f64> = (0..9).map(|k| lo + (hi - lo) * k as f64 / 8.0).collect();
-    // NOTE: refined twice: a bracket is 0.5 mm wide, and a grid of 9 refined once resolves
-    // h / 4 (16 um, 2.3 % of the plan's clearance): a quarter of a -6 % offset. Twice
-    // resolves h / 16 (4 um).
-    grid_refined(
+    grid_then_refine(
         work,
         grid,
-        2,
-        |round, best| {
-            let d = h / 2f64.powi(2 * round as i32 - 1);
-            vec![best - d, best - 0.5 * d, best + 0.5 * d, best + d]
+        |best| {
+            vec![
+                best - 0.5 * h,
+                best - 0.25 * h,
+                best + 0.25 * h,
+                best + 0.5 * h,
+            ]
         },
         |work, c| {
             let ext = with_clearance(work, c);

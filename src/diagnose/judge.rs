@@ -602,23 +602,11 @@ pub(super) fn grid_then_refine(
     work: &mut Work<'_>,
     grid: Vec<f64>,
     refine: impl Fn(f64) -> Vec<f64>,
-    error: impl FnMut(&mut Work<'_>, f64) -> Result<Option<f64>, DiagnoseError>,
-) -> Result<Vec<(f64, f64)>, DiagnoseError> {
-    grid_refined(work, grid, 1, |_, best| refine(best), error)
-}
-
-/// [`grid_then_refine`] refined `rounds` times: round `r` (from 1) tries the points
-/// `refine(r, best)` around the best point so far.
-pub(super) fn grid_refined(
-    work: &mut Work<'_>,
-    grid: Vec<f64>,
-    rounds: usize,
-    refine: impl Fn(usize, f64) -> Vec<f64>,
     mut error: impl FnMut(&mut Work<'_>, f64) -> Result<Option<f64>, DiagnoseError>,
 ) -> Result<Vec<(f64, f64)>, DiagnoseError> {
     let mut tried: Vec<(f64, f64)> = Vec::new();
     let mut grid = grid;
-    for round in 0..=rounds {
+    for round in 0..2 {
         for &x in &grid {
             if tried.iter().any(|p| p.0 == x) {
                 continue;
@@ -630,7 +618,9 @@ pub(super) fn grid_refined(
         let Some(&(best, _)) = tried.iter().min_by(|a, b| a.1.total_cmp(&b.1)) else {
             break;
         };
-        grid = refine(round + 1, best);
+        if round == 0 {
+            grid = refine(best);
+        }
     }
     Ok(tried)
 }

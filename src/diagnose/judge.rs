@@ -126,8 +126,8 @@ pub(super) struct Candidate {
     pub(super) steps: Steps,
     /// The one channel the effect acts on (a sensor gain), whose features judge it.
     pub(super) channel: Option<String>,
-    /// Judged only where it was fitted ([`Candidate::judged_where_fitted`]): on these steps
-    /// of its tests, at this twin step refinement.
+    /// Where it was fitted ([`Candidate::judged_where_fitted`]): the steps of its tests and
+    /// the twin step refinement it is judged on when the judging on every step rejects it.
     pub(super) where_fitted: Option<WhereFitted>,
 }
 
@@ -170,9 +170,10 @@ impl Candidate {
         }
     }
 
-    /// Judged on the steps `spans` of its tests at a twin step `refinement` times finer than
-    /// the given one, as it was fitted, instead of on every step at the twin's step with the
-    /// finer step's confirmation ([`Work::judge`]); `what` says what the spans are.
+    /// Judged as well on the steps `spans` of its tests at a twin step `refinement` times
+    /// finer than the given one, as it was fitted, when the judging on every step at the
+    /// twin's step (with the finer step's confirmation) rejects it ([`Work::judge`]); `what`
+    /// says what the spans are.
     pub(super) fn judged_where_fitted(
         mut self,
         spans: Vec<Span>,

@@ -126,6 +126,20 @@ pub(super) struct Candidate {
     pub(super) steps: Steps,
     /// The one channel the effect acts on (a sensor gain), whose features judge it.
     pub(super) channel: Option<String>,
+    /// Where it was fitted ([`Candidate::judged_where_fitted`]): the steps of its tests and
+    /// the twin step refinement it is judged on when the judging on every step rejects it.
+    pub(super) where_fitted: Option<WhereFitted>,
+}
+
+/// The steps and the twin step a candidate was fitted on, where it is judged as well.
+#[derive(Clone, Debug, PartialEq)]
+pub(super) struct WhereFitted {
+    /// The compared steps of the train and validation tests.
+    pub(super) spans: Vec<Span>,
+    /// The twin step's refinement of the fit (and the judging).
+    pub(super) refinement: u32,
+    /// What the spans are, in words (for the reason).
+    pub(super) what: String,
 }
 
 impl Candidate {
@@ -152,7 +166,26 @@ impl Candidate {
             validation: split.1,
             steps,
             channel: None,
+            where_fitted: None,
         }
+    }
+
+    /// Judged as well on the steps `spans` of its tests at a twin step `refinement` times
+    /// finer than the given one, as it was fitted, when the judging on every step at the
+    /// twin's step (with the finer step's confirmation) rejects it ([`Work::judge`]); `what`
+    /// says what the spans are.
+    pub(super) fn judged_where_fitted(
+        mut self,
+        spans: Vec<Span>,
+        refinement: u32,
+        what: impl Into<String>,
+    ) -> Candidate {
+        self.where_fitted = Some(WhereFitted {
+            spans,
+            refinement,
+            what: what.into(),
+        });
+        self
     }
 
     /// Judged on the features of `channel` only (when given): the one channel it acts on.
@@ -305,16 +338,23 @@ impl Work<'_> {
         tests.iter().map(|&t| self.steps.tests[t].clone()).collect()
     }
 
-    /// The errors of the model `ext` on the candidate's tests.
+    /// The errors of the model `ext` on the candidate's tests: on every step of them, or,
+    /// with `where_fitted`, on the steps its fit compared ([`Candidate::judged_where_fitted`]).
     pub(super) fn errors(
         &mut self,
         ext: &PhysicsSpec,
         c: &Candidate,
+        where_fitted: bool,
     ) -> Result<Option<SetError>, DiagnoseError> {
-        let mut all: Vec<usize> = c.train.iter().chain(&c.validation).copied().collect();
-        all.sort_unstable();
-        all.dedup();
-        let s = self.scores(ext, &all)?;
+        let s = match c.where_fitted.as_ref().filter(|_| where_fitted) {
+            Some(w) => self.scores_spans(ext, &w.spans)?,
+            None => {
+                let mut all: Vec<usize> = c.train.iter().chain(&c.validation).copied().collect();
+                all.sort_unstable();
+                all.dedup();
+                self.scores(ext, &all)?
+            }
+        };
         Ok(
             match (
                 set_error_of(&s, &c.train, c.steps, c.channel.as_deref()),
@@ -336,14 +376,35 @@ impl Work<'_> {
     /// excess (on `identify.toml` with nothing hidden, a tilt of -0.012 rad lowered the
     /// validation error 3x at the twin's step). What passes at the finer step as well is
     /// missing physics; what does not is the twin's own discretisation.
+    ///
+    /// A candidate that also names where it was fitted ([`Candidate::judged_where_fitted`])
+    /// and is not accepted so is judged there as well ([`Work::judge_where_fitted`]).
     pub(super) fn judge(&mut self, mut c: Candidate) -> Result<bool, DiagnoseError> {
         self.show(&c, None);
-        let accepted = self.accepted.clone();
-        let before = self.errors(&accepted, &c)?;
-        let after = self.errors(&c.ext, &c)?;
-        let (ok, reason) = self.assess(&c, before, after);
-        if !ok || c.steps != Steps::All {
+        let (ok, before, after, reason) = self.judge_on_whole_tests(&mut c)?;
+        if ok || c.where_fitted.is_none() {
             return Ok(self.record(c, before, after, ok, reason));
+        }
+        c.evidence["on_whole_tests"] = serde_json::json!({
+            "validation_before": before.map(|e| e.validation),
+            "validation_after": after.map(|e| e.validation),
+            "reason": reason,
+        });
+        self.judge_where_fitted(c)
+    }
+
+    /// [`Work::judge`] on every step of the candidate's tests (with the finer step's
+    /// confirmation in the band): whether accepted, the errors before and after, why.
+    fn judge_on_whole_tests(
+        &mut self,
+        c: &mut Candidate,
+    ) -> Result<(bool, Option<SetError>, Option<SetError>, String), DiagnoseError> {
+        let accepted = self.accepted.clone();
+        let before = self.errors(&accepted, c, false)?;
+        let after = self.errors(&c.ext, c, false)?;
+        let (ok, reason) = self.assess(c, before, after);
+        if !ok || c.steps != Steps::All {
+            return Ok((ok, before, after, reason));
         }
         let own = self.runner.refinement();
         self.runner.set_refinement(own * CONFIRM_REFINEMENT);
@@ -356,14 +417,10 @@ impl Work<'_> {
             c.ext.clone(),
         );
         (self.progress)(DiagnoseProgress::Evaluation(line));
+        let (validation, steps, channel) = (c.validation.clone(), c.steps, c.channel.clone());
         let fine = |w: &mut Self, ext: &PhysicsSpec| -> Result<Option<f64>, DiagnoseError> {
-            let s = w.scores(ext, &c.validation)?;
-            Ok(set_error_of(
-                &s,
-                &c.validation,
-                c.steps,
-                c.channel.as_deref(),
-            ))
+            let s = w.scores(ext, &validation)?;
+            Ok(set_error_of(&s, &validation, steps, channel.as_deref()))
         };
         let fb = fine(self, &accepted);
         let fa = fb.as_ref().ok().map(|_| fine(self, &cand_ext));
@@ -380,7 +437,7 @@ impl Work<'_> {
         // which the finer step removes, while the finer twin's chaotic band lands on other
         // attractors than the default one's (a hidden +14 % clearance: 2.37 -> 0.59 at the
         // twin's step, 4.74 -> 2.53 at the 3x finer one).
-        let (ok2, reason2) = self.assess_with(&c, as_set(fb, before), as_set(fa, after), false);
+        let (ok2, reason2) = self.assess_with(c, as_set(fb, before), as_set(fa, after), false);
         c.evidence["finer_twin_step"] = serde_json::json!({
             "refinement": own * CONFIRM_REFINEMENT,
             "validation_before": fb,
@@ -391,7 +448,43 @@ impl Work<'_> {
         } else {
             format!("at the twin's step {reason}, but at a {CONFIRM_REFINEMENT}x finer twin step {reason2}: the twin's own discretisation, not missing physics")
         };
-        Ok(self.record(c, before, after, ok2, reason))
+        Ok((ok2, before, after, reason))
+    }
+
+    /// [`Work::judge`] of a candidate where it was fitted ([`Candidate::judged_where_fitted`]):
+    /// its errors before and after on those steps at that twin step decide, by the regime's
+    /// rule (the fall beyond the null spread and the penalty, and the regime's share). What
+    /// the whole tests said is kept in the evidence (`on_whole_tests`) and the reason.
+    fn judge_where_fitted(&mut self, mut c: Candidate) -> Result<bool, DiagnoseError> {
+        let Some(w) = c.where_fitted.clone() else {
+            return Ok(false);
+        };
+        (self.progress)(DiagnoseProgress::Evaluation(format!(
+            "{} where it was fitted ({}) at a {}x finer twin step",
+            c.effect, w.what, w.refinement
+        )));
+        let accepted = self.accepted.clone();
+        let own = self.runner.refinement();
+        self.runner.set_refinement(own * w.refinement);
+        let fitted_step = self
+            .errors(&accepted, &c, true)
+            .and_then(|b| Ok((b, self.errors(&c.ext, &c, true)?)));
+        self.runner.set_refinement(own);
+        let (before, after) = fitted_step?;
+        let (ok, reason) = self.assess_with(&c, before, after, true);
+        c.evidence["judged_on"] = serde_json::json!({
+            "steps": w.what,
+            "refinement": own * w.refinement,
+        });
+        let whole = c.evidence["on_whole_tests"]["reason"]
+            .as_str()
+            .unwrap_or_default()
+            .to_string();
+        let reason = format!(
+            "on the whole tests {whole}; where it was fitted ({}, at a {}x finer twin step) {reason}",
+            w.what, w.refinement
+        );
+        Ok(self.record(c, before, after, ok, reason))
     }
 
     /// [`Work::judge`] with the errors `before` and `after` computed elsewhere, on what

@@ -137,6 +137,7 @@ fn fit_in_bracket(
                 best + 0.5 * h,
             ]
         },
+        &|work, c| (with_clearance(work, c), vec![span]),
         |work, c| {
             let ext = with_clearance(work, c);
             let s = work.scores_spans(&ext, &[span])?;

@@ -623,52 +623,31 @@ impl Work<'_> {
     }
 }
 
+/// The model run a point of a search needs: its extensions and the steps scored.
+pub(super) type PointRun<'p> = &'p dyn Fn(&Work<'_>, f64) -> (PhysicsSpec, Vec<Span>);
+
 /// A one-parameter search by model runs: the error of every point of `grid`, then of the
 /// points `refine(best)` around the best one (a point tried before is not run again).
-/// Returns every (value, error) tried; `error` gives `None` where nothing was compared.
+/// Returns every (value, error) tried; `error` gives `None` where nothing was compared. The
+/// points' model runs (`plan`: the run a point's `error` asks [`Work::scores_spans`] for) are
+/// made side by side on the runner's threads before each round is scored
+/// ([`Work::prefetch`]).
 pub(super) fn grid_then_refine(
     work: &mut Work<'_>,
     grid: Vec<f64>,
     refine: impl Fn(f64) -> Vec<f64>,
-    error: impl FnMut(&mut Work<'_>, f64) -> Result<Option<f64>, DiagnoseError>,
-) -> Result<Vec<(f64, f64)>, DiagnoseError> {
-    search(work, grid, refine, None, error)
-}
-
-/// The model run a point of a search needs: its extensions and the steps scored.
-pub(super) type PointRun<'p> = &'p dyn Fn(&Work<'_>, f64) -> (PhysicsSpec, Vec<Span>);
-
-/// [`grid_then_refine`] whose points' model runs (`plan`: the run a point's `error` asks
-/// [`Work::scores_spans`] for) are made side by side on the runner's threads before each
-/// round is scored ([`Work::prefetch`]).
-pub(super) fn grid_then_refine_side_by_side(
-    work: &mut Work<'_>,
-    grid: Vec<f64>,
-    refine: impl Fn(f64) -> Vec<f64>,
     plan: PointRun<'_>,
-    error: impl FnMut(&mut Work<'_>, f64) -> Result<Option<f64>, DiagnoseError>,
-) -> Result<Vec<(f64, f64)>, DiagnoseError> {
-    search(work, grid, refine, Some(plan), error)
-}
-
-fn search(
-    work: &mut Work<'_>,
-    grid: Vec<f64>,
-    refine: impl Fn(f64) -> Vec<f64>,
-    plan: Option<PointRun<'_>>,
     mut error: impl FnMut(&mut Work<'_>, f64) -> Result<Option<f64>, DiagnoseError>,
 ) -> Result<Vec<(f64, f64)>, DiagnoseError> {
     let mut tried: Vec<(f64, f64)> = Vec::new();
     let mut grid = grid;
     for round in 0..2 {
-        if let Some(plan) = plan {
-            let runs = grid
-                .iter()
-                .filter(|&&x| !tried.iter().any(|p| p.0 == x))
-                .map(|&x| plan(work, x))
-                .collect();
-            work.prefetch(runs)?;
-        }
+        let runs = grid
+            .iter()
+            .filter(|&&x| !tried.iter().any(|p| p.0 == x))
+            .map(|&x| plan(work, x))
+            .collect();
+        work.prefetch(runs)?;
         for &x in &grid {
             if tried.iter().any(|p| p.0 == x) {
                 continue;

@@ -33,9 +33,7 @@ use crate::rom::Rom;
 
 use super::clearance::{ClearanceEvidence, TestClearance};
 use super::clearance_fit::test_clearance_by_runs;
-use super::judge::{
-    alternate, grid_then_refine_side_by_side, set_error, set_error_of, Candidate, Steps, Work,
-};
+use super::judge::{alternate, grid_then_refine, set_error, set_error_of, Candidate, Steps, Work};
 use super::rerun::Span;
 use super::{DiagnoseError, DiagnoseProgress};
 
@@ -162,7 +160,7 @@ pub(super) fn tilt_stage(
         let through = work.steps.past_contact(ti, 2, false);
         train_spans.push(work.open_span(&closest, ti, from, through)?);
     }
-    let tried = grid_then_refine_side_by_side(
+    let tried = grid_then_refine(
         work,
         grid,
         |best| vec![0.9 * best, 1.1 * best],

@@ -26,7 +26,7 @@ use crate::config::{ClearanceSpec, WearSpec};
 
 use super::clearance::{ClearanceEvidence, TestClearance};
 use super::clearance_fit::test_clearance_by_runs;
-use super::judge::{alternate, grid_then_refine_side_by_side, set_error, Candidate, Steps, Work};
+use super::judge::{alternate, grid_then_refine, set_error, Candidate, Steps, Work};
 use super::outcome::EffectResult;
 use super::rerun::Span;
 use super::{DiagnoseError, DiagnoseProgress};
@@ -215,7 +215,7 @@ pub(super) fn wear_stage(
         .map(|m| m * k0)
         .collect();
     let train_spans: Vec<Span> = train.iter().map(|&t| Span::whole(t)).collect();
-    let tried = grid_then_refine_side_by_side(
+    let tried = grid_then_refine(
         work,
         grid,
         |best| vec![0.88 * best, 1.12 * best],

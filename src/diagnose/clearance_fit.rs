@@ -80,11 +80,7 @@ pub(super) fn test_clearance_by_runs(
 /// the test's last step).
 fn evidence_steps(work: &Work<'_>, ti: usize) -> (usize, Option<usize>) {
     let through = work.steps.past_contact(ti, STEPS_PAST_FIRST_CONTACT, true);
-    let from = work
-        .steps
-        .first_contact(ti)
-        .map_or(0, |f| f.saturating_sub(2));
-    (from, through)
+    (work.steps.before_first_contact(ti, 2), through)
 }
 
 /// The spans of tests `tests` that carry their clearance ([`evidence_steps`]) for runs of the
@@ -138,11 +134,7 @@ fn fit_in_bracket(
             ]
         },
         &|work, c| (with_clearance(work, c), vec![span]),
-        |work, c| {
-            let ext = with_clearance(work, c);
-            let s = work.scores_spans(&ext, &[span])?;
-            Ok(set_error(&s, &[t.test_index], Steps::All))
-        },
+        |_, _, s| set_error(s, &[t.test_index], Steps::All),
     )
 }
 

@@ -628,16 +628,16 @@ pub(super) type PointRun<'p> = &'p dyn Fn(&Work<'_>, f64) -> (PhysicsSpec, Vec<S
 
 /// A one-parameter search by model runs: the error of every point of `grid`, then of the
 /// points `refine(best)` around the best one (a point tried before is not run again).
-/// Returns every (value, error) tried; `error` gives `None` where nothing was compared. The
-/// points' model runs (`plan`: the run a point's `error` asks [`Work::scores_spans`] for) are
-/// made side by side on the runner's threads before each round is scored
-/// ([`Work::prefetch`]).
+/// Returns every (value, error) tried. A point's model run is `plan`'s (its extensions and
+/// the steps scored); the points' runs are made side by side on the runner's threads before
+/// each round ([`Work::prefetch`]), and `error` turns a point's scores into its error
+/// (`None` where nothing was compared).
 pub(super) fn grid_then_refine(
     work: &mut Work<'_>,
     grid: Vec<f64>,
     refine: impl Fn(f64) -> Vec<f64>,
     plan: PointRun<'_>,
-    mut error: impl FnMut(&mut Work<'_>, f64) -> Result<Option<f64>, DiagnoseError>,
+    mut error: impl FnMut(&mut Work<'_>, f64, &[StepScores]) -> Option<f64>,
 ) -> Result<Vec<(f64, f64)>, DiagnoseError> {
     let mut tried: Vec<(f64, f64)> = Vec::new();
     let mut grid = grid;
@@ -652,7 +652,9 @@ pub(super) fn grid_then_refine(
             if tried.iter().any(|p| p.0 == x) {
                 continue;
             }
-            if let Some(e) = error(work, x)? {
+            let (ext, spans) = plan(work, x);
+            let s = work.scores_spans(&ext, &spans)?;
+            if let Some(e) = error(work, x, &s) {
                 tried.push((x, e));
             }
         }

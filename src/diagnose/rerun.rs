@@ -144,6 +144,14 @@ impl SessionSteps {
             .map(|s| s.info.step)
     }
 
+    /// The step `before` steps before the first measured contact step of test `ti` (where a
+    /// fit of the contact's geometry starts comparing: the steps before are the same for every
+    /// geometry it tries), the first step when that is earlier, or the test has no contact.
+    pub fn before_first_contact(&self, ti: usize, before: usize) -> usize {
+        self.first_contact(ti)
+            .map_or(0, |f| f.saturating_sub(before))
+    }
+
     /// The step `past` steps after the first (`first`) or last measured contact step of test
     /// `ti`, to cut a run there; `None` (the whole test) when the test has no contact or that
     /// step is its last or beyond.

@@ -153,10 +153,7 @@ pub(super) fn tilt_stage(
     }
     let mut train_spans: Vec<Span> = Vec::new();
     for &ti in &train {
-        let from = work
-            .steps
-            .first_contact(ti)
-            .map_or(0, |f| f.saturating_sub(2));
+        let from = work.steps.before_first_contact(ti, 2);
         let through = work.steps.past_contact(ti, 2, false);
         train_spans.push(work.open_span(&closest, ti, from, through)?);
     }
@@ -165,12 +162,11 @@ pub(super) fn tilt_stage(
         grid,
         |best| vec![0.9 * best, 1.1 * best],
         &|_, angle| (with(angle), train_spans.clone()),
-        |work, angle| {
+        |work, angle, s| {
             (work.progress)(DiagnoseProgress::Evaluation(format!(
                 "tilt {angle:.3e} rad about y on the train tests"
             )));
-            let s = work.scores_spans(&with(angle), &train_spans)?;
-            Ok(set_error(&s, &train, Steps::All))
+            set_error(s, &train, Steps::All)
         },
     )?;
     let Some(&(angle, train_error)) = tried.iter().min_by(|a, b| a.1.total_cmp(&b.1)) else {

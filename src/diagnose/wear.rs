@@ -220,13 +220,11 @@ pub(super) fn wear_stage(
         grid,
         |best| vec![0.88 * best, 1.12 * best],
         &|_, k| (with(k, None), train_spans.clone()),
-        |work, k| {
-            let ext = with(k, None);
+        |work, k, s| {
             (work.progress)(DiagnoseProgress::Evaluation(format!(
                 "wear coefficient {k:.3e} m/J over the whole session"
             )));
-            let s = work.scores(&ext, &train)?;
-            Ok(set_error(&s, &train, Steps::All))
+            set_error(s, &train, Steps::All)
         },
     )?;
     let Some(&(k, train_error)) = tried.iter().min_by(|a, b| a.1.total_cmp(&b.1)) else {

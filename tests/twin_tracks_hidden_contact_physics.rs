@@ -1,18 +1,20 @@
 //! Issue 14, "What must hold", first point, for the contact effects: a session of the simulated
 //! rig with a clearance offset, wear or a tilted protrusion hidden in `[truth.variants]`, and a
 //! twin that declares the same physics with the same parameters in `[model]`, tracks the rig as
-//! closely as the nominal twin tracks the nominal rig on the same plan and noise seed (the
-//! null case), while the nominal twin on the same recording does not (it scores above the twin
-//! with the physics by more than one over the plan). Two parameter values per
-//! effect. The test fails if the twin ignores the declared physics (tried: then the "twin with
+//! closely as the nominal twin tracks the nominal rig on the same plan (the null case, on
+//! three noise seeds: its spread), while the nominal twin on the same recording does not (it
+//! scores above the twin with the physics by more than one over the plan). Two parameter
+//! values per effect. The test fails if the twin ignores the declared physics (tried: then the "twin with
 //! the physics" is the nominal twin, whose scores fail the null comparison).
 //!
 //! The impact band is chaotic and the twin's own discretisation scores there (BENCHMARKS.md,
 //! "Why the nominal twin over-counts contact", "The comparison's spread"): on this plan a right
 //! model scores 3-10 on a grazing step and up to ~56 on a step right after contact, where the
 //! lower beam's free response from the last impacts has not died out. So the comparison is with
-//! the null case on the same plan and seed: per step against the null's largest score, and over
-//! the plan in the median of the per-step scores (one chaotic step must not decide it). Both
+//! the null case on the same plan: per step against the null's largest score, and over the plan
+//! in the median of the per-step scores (one chaotic step must not decide it), each bound the
+//! largest of the null case's three noise seeds (one seed is one draw of a chaotic band: the
+//! medians of two seeds differ by up to 2-3, BENCHMARKS.md). Both
 //! twins run at 13 steps per DAQ sample (the simulated rig's own step) instead of the default
 //! 5, which cuts the twin's contact fraction in the band from about 2x the measured one to
 //! about 1.3x. Scores and margins: BENCHMARKS.md, "The contact effects tracked (issue 14)".
@@ -56,6 +58,10 @@ omega_end = 1.03
 /// took longer than 2 s of wall time once and aborted the session).
 const COMMON: &str = "[twin]\nsteps_per_sample = 13\n[safety]\ndaq_timeout_s = 30.0\n";
 
+/// The null case's noise seeds (`[daq] noise_seed`; 1 is the default, which the effect cases
+/// use).
+const NULL_SEEDS: [u64; 3] = [1, 2, 3];
+
 /// The median of the per-step largest scores.
 fn median(scores: &[f64]) -> f64 {
     let mut s = scores.to_vec();
@@ -71,11 +77,25 @@ fn median(scores: &[f64]) -> f64 {
 #[test]
 fn a_twin_with_the_hidden_contact_physics_tracks_the_rig_and_the_nominal_twin_does_not() {
     let dir = tempfile::tempdir().unwrap();
-    let null_case = Case::new(dir.path(), "null", COMMON, "");
-    null_case.record(PLAN, false);
-    let null = max_scores(&null_case.replay(&null_case.nominal, "nominal-twin"));
-    let (null_max, null_median) = (null.iter().copied().fold(0.0, f64::max), median(&null));
-    println!("null case: {null:.2?}, median {null_median:.2}");
+    // The null case's spread: nothing hidden, the nominal twin, three noise seeds (the effect
+    // cases below run on the default seed, 1). The bounds are the largest score and the largest
+    // median over the seeds.
+    let (mut null_max, mut null_median) = (0.0f64, 0.0f64);
+    for seed in NULL_SEEDS {
+        let null_case = Case::new(
+            dir.path(),
+            &format!("null-seed{seed}"),
+            COMMON,
+            &format!("[daq]\nnoise_seed = {seed}\n"),
+        );
+        null_case.record(PLAN, false);
+        let null = max_scores(&null_case.replay(&null_case.nominal, "nominal-twin"));
+        let m = median(&null);
+        println!("null case, noise seed {seed}: {null:.2?}, median {m:.2}");
+        null_max = null.iter().copied().fold(null_max, f64::max);
+        null_median = null_median.max(m);
+    }
+    println!("null case bounds: largest score {null_max:.2}, largest median {null_median:.2}");
 
     let cases: [(&str, &str); 6] = [
         ("clearance +2e-4 m", "[{t}.clearance]\noffset = 2.0e-4\n"),
@@ -108,7 +128,7 @@ fn a_twin_with_the_hidden_contact_physics_tracks_the_rig_and_the_nominal_twin_do
              {nominal:.2?} ({n:.2})"
         );
         // As close as the null case: no step above the null's largest score on this plan plus
-        // one spread, and over the plan within the null's median plus one.
+        // one spread, and over the plan within the null's largest median plus one.
         for (k, &s) in matched.iter().enumerate() {
             if s > null_max + 1.0 {
                 failures.push(format!(
@@ -120,7 +140,7 @@ fn a_twin_with_the_hidden_contact_physics_tracks_the_rig_and_the_nominal_twin_do
         if m > null_median + 1.0 {
             failures.push(format!(
                 "{name}: the twin with the physics scores {m:.2} over the plan, the null case \
-                 {null_median:.2}"
+                 at most {null_median:.2}"
             ));
         }
         // The nominal twin does not: on the same recording it is further from the rig than the

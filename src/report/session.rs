@@ -11,9 +11,9 @@ use std::path::{Path, PathBuf};
 
 use crate::control::summary::SummaryError;
 use crate::control::{window_signals, StepInfo};
-use crate::log::{log_time_ns, LogReadError, SessionRead};
+use crate::log::{log_time_ns, stream_session, LogReadError, SessionRead};
 use crate::plan::Direction;
-use crate::session::replay::{replay_whole, window_counts, ReplayError};
+use crate::session::replay::{replay, window_counts, Recording, ReplayError};
 use crate::session::topics::{
     TwinStepMessage, SESSION_METADATA, TOPIC_TWIN_BLOCKS, TOPIC_TWIN_STEPS,
 };
@@ -85,6 +85,18 @@ fn test_curve(t: &TestSummary, source: Source, steps: &[(f64, &StepMetrics)]) ->
     TestCurve::from_steps(&t.name, t.level, direction, source, steps)
 }
 
+/// The log times (ns) of the twin blocks (`/twin/blocks`) that can hold samples of the record
+/// window of `info` (samples `dt` s apart): a block's log time is the rig time of its first
+/// sample, so blocks starting up to a second before the window (far longer than any block)
+/// through its last sample.
+fn twin_block_times(info: &StepInfo, dt: f64) -> (u64, u64) {
+    let from = info.record_first_sample;
+    (
+        log_time_ns((from as f64 * dt - 1.0).max(0.0)),
+        log_time_ns(info.record_end_time(dt)),
+    )
+}
+
 /// The twin's logged prediction (`/twin/blocks`) over the record window of `info` (samples `dt`
 /// s apart): `None` when the log has no twin output there (a session without `--twin`, or
 /// blocks the twin skipped). Only the blocks around the window are decoded.
@@ -95,10 +107,7 @@ fn twin_window(
 ) -> Result<Option<TwinTrace>, SessionReportError> {
     let topic = TOPIC_TWIN_BLOCKS;
     let (from, n) = (info.record_first_sample, info.record_samples);
-    // Log time = rig time of a block's first sample: blocks starting up to a second before the
-    // window (far longer than any block) down to its last sample.
-    let t0 = log_time_ns((from as f64 * dt - 1.0).max(0.0));
-    let t1 = log_time_ns(info.record_end_time(dt));
+    let (t0, t1) = twin_block_times(info, dt);
     let blocks = session
         .messages_on(topic)
         .filter(|m| m.log_time >= t0 && m.log_time <= t1)
@@ -116,14 +125,50 @@ fn twin_window(
     Ok(TwinTrace::cut(&blocks, from, n))
 }
 
+/// The record window nearest Omega = omega_2 of each test of `rec`, in session order.
+fn nearest_windows(rec: &Recording) -> Vec<StepInfo> {
+    let mut nearest: Vec<StepInfo> = Vec::new();
+    for info in rec.record_windows() {
+        match nearest.iter_mut().find(|n| n.test == info.test) {
+            Some(n) if (info.omega_ratio - 1.0).abs() < (n.omega_ratio - 1.0).abs() => {
+                *n = info.clone()
+            }
+            Some(_) => {}
+            None => nearest.push(info.clone()),
+        }
+    }
+    nearest
+}
+
 /// Draws the figures of the session log `file` into `out` (created); returns the figures
 /// written and the replayed summary (which the caller writes as `summary.json`).
+///
+/// The log is streamed, never held whole: the replay's two passes, then one more that keeps
+/// only the twin's per-step messages and the twin blocks around the windows drawn.
 pub fn session_figures(
     file: &Path,
     out: &Path,
 ) -> Result<(Vec<PathBuf>, SessionSummary), SessionReportError> {
-    let (session, r) = replay_whole(file)?;
+    let r = replay(file)?;
     let rec = &r.recording;
+    let nearest = nearest_windows(rec);
+    let dt = rec.layout.dt();
+    let spans: Vec<(u64, u64)> = nearest.iter().map(|i| twin_block_times(i, dt)).collect();
+    let mut kept = Vec::new();
+    let mut session = stream_session(file, |m| {
+        let keep = match &*m.topic {
+            TOPIC_TWIN_STEPS => true,
+            TOPIC_TWIN_BLOCKS => spans
+                .iter()
+                .any(|&(t0, t1)| m.log_time >= t0 && m.log_time <= t1),
+            _ => false,
+        };
+        if keep {
+            kept.push(m.clone());
+        }
+        Ok::<(), SessionReportError>(())
+    })?;
+    session.messages = kept;
     std::fs::create_dir_all(out).map_err(|source| SessionReportError::Io {
         path: out.display().to_string(),
         source,
@@ -181,16 +226,6 @@ pub fn session_figures(
     }
 
     // The step nearest Omega = omega_2 of each test.
-    let mut nearest: Vec<StepInfo> = Vec::new();
-    for info in rec.record_windows() {
-        match nearest.iter_mut().find(|n| n.test == info.test) {
-            Some(n) if (info.omega_ratio - 1.0).abs() < (n.omega_ratio - 1.0).abs() => {
-                *n = info.clone()
-            }
-            Some(_) => {}
-            None => nearest.push(info.clone()),
-        }
-    }
     let mut histories = Vec::new();
     for info in &nearest {
         let Some(counts) = window_counts(rec, info) else {

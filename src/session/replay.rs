@@ -16,7 +16,7 @@ use std::path::Path;
 
 use crate::config::RigConfig;
 use crate::control::{summarize, EventKind, SessionEvent, StepInfo};
-use crate::log::{read_session, stream_session, LogReadError, LoggedMessage, SessionRead};
+use crate::log::{stream_session, LogReadError, LoggedMessage, SessionRead};
 use crate::rig::channels::platform_accelerometers;
 use crate::rig::{DaqBlock, DaqLayout};
 use crate::rom::Rom;
@@ -604,15 +604,6 @@ pub fn replay(path: &Path) -> Result<Replay, ReplayError> {
 pub fn replay_read(session: SessionRead) -> Result<Replay, ReplayError> {
     let (rec, steps) = recording_and_steps(&session)?;
     replay_of(&session, rec, steps)
-}
-
-/// Reads the session log at `path` whole ([`read_session`]) and replays it (the small-file
-/// path, for tools that need every message as well).
-pub fn replay_whole(path: &Path) -> Result<(SessionRead, Replay), ReplayError> {
-    let session = read_session(path)?;
-    let (rec, steps) = recording_and_steps(&session)?;
-    let replay = replay_of(&session, rec, steps)?;
-    Ok((session, replay))
 }
 
 fn replay_of(

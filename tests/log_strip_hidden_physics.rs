@@ -42,7 +42,7 @@ half_slip_tip_amplitude = 1.5e-4
 offset = 2.0e-5
 
 [truth.variants.wear]
-coefficient = 1.0e-6
+coefficient = 2.5e-8
 
 [truth.variants.tilt]
 angle = 2.0e-3

@@ -187,7 +187,7 @@ fn clearance() -> ClearanceEvidence {
             lower_bound_omega_ratio: c.map(|_| 0.96),
             first_contact_omega_ratio: c.map(|_| 0.97),
             impact_free_windows: 7,
-            accumulated_contact_work_j: None,
+            accumulated_contact_impulse_ns: None,
             note: String::new(),
         }
     };
@@ -404,7 +404,7 @@ fn missing_data_leaves_figures_out() {
 
 #[test]
 fn single_and_extreme_values_draw() {
-    // One step with an infinite score, one fit per mode, one clearance against contact work,
+    // One step with an infinite score, one fit per mode, one clearance against contact impulse,
     // a threshold below 1: degenerate ranges are widened, nothing panics.
     let mut d = full();
     d.threshold = 0.5;
@@ -418,7 +418,7 @@ fn single_and_extreme_values_draw() {
     }
     if let Some(c) = &mut d.clearance {
         c.tests.retain(|t| t.test_index == 2);
-        c.tests[0].accumulated_contact_work_j = Some(12.5);
+        c.tests[0].accumulated_contact_impulse_ns = Some(12.5);
     }
     let dir = out_dir("report_diagnosis_figures_degenerate");
     let written = draw_diagnosis(&d, &dir).unwrap();
@@ -427,5 +427,8 @@ fn single_and_extreme_values_draw() {
         assert_png(p);
     }
     let svg = dir.join("evidence-clearance.svg");
-    assert_svg(&svg, &["contact work accumulated before the test (J)"]);
+    assert_svg(
+        &svg,
+        &["normal contact impulse accumulated before the test (N s)"],
+    );
 }

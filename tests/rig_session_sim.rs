@@ -169,7 +169,7 @@ fn a_session_records_its_truth_variants() {
     let variants = "[truth.variants]\n\
                     sensor_gains = [{ channel = \"lower_mid\", gain = 1.02 }]\n\
                     [truth.variants.wear]\n\
-                    coefficient = 1e-7\n\
+                    coefficient = 2.5e-9\n\
                     [truth.variants.tilt]\n\
                     angle = 1e-3\n\
                     axis = [1.0, 0.0]\n";

@@ -54,7 +54,7 @@ sliders = 32
 beams = ["upper"]
 
 [truth.variants.wear]
-coefficient = 2.0e-5
+coefficient = 5.0e-7
 max_growth = 3.0e-5
 
 [truth.variants.tilt]

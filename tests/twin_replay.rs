@@ -317,7 +317,7 @@ sliders = 16
 beams = ["upper"]
 
 [model.wear]
-coefficient = 2.0e-5
+coefficient = 5.0e-7
 max_growth = 3.0e-5
 
 [model.tilt]

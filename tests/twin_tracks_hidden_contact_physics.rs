@@ -103,12 +103,12 @@ fn a_twin_with_the_hidden_contact_physics_tracks_the_rig_and_the_nominal_twin_do
         ("tilt 0.1 rad", "[{t}.tilt]\nangle = 0.1\n"),
         ("tilt -0.09 rad", "[{t}.tilt]\nangle = -0.09\n"),
         (
-            "wear 0.05 m/J, cap 2e-4 m",
-            "[{t}.wear]\ncoefficient = 0.05\nmax_growth = 2.0e-4\n",
+            "wear 1.2e-3 m/(N s), cap 2e-4 m",
+            "[{t}.wear]\ncoefficient = 1.2e-3\nmax_growth = 2.0e-4\n",
         ),
         (
-            "wear 5e-3 m/J, cap 3e-4 m",
-            "[{t}.wear]\ncoefficient = 5.0e-3\nmax_growth = 3.0e-4\n",
+            "wear 1.2e-4 m/(N s), cap 3e-4 m",
+            "[{t}.wear]\ncoefficient = 1.2e-4\nmax_growth = 3.0e-4\n",
         ),
     ];
     let mut failures = Vec::new();

@@ -9,7 +9,7 @@
 //!   mode of each listed beam: amplitude-dependent softening and damping.
 //! - `clearance`: the clearance per test (the plan's value plus an offset, or an absolute value
 //!   per test).
-//! - `wear`: the clearance grows with the contact's dissipated work (Archard-like), carried
+//! - `wear`: the clearance grows with the accumulated normal contact impulse, carried
 //!   across the tests of a session.
 //! - `tilt`: the protrusion's contact face is tilted about an axis in the contact plane,
 //!   giving every pair its own initial gap.
@@ -184,15 +184,16 @@ pub struct ClampFrictionSpec {
     pub beams: Vec<Beam>,
 }
 
-/// `[truth.variants.wear]`: the clearance grows with the work the contact has dissipated
-/// (impacts and friction), Archard-like: `clearance = nominal + min(coefficient * W,
-/// max_growth)`, `W` the dissipated contact work since the rig started (J, see `physics::wear`).
-/// The nominal clearance is the one set at start or by a test (a plan's clearance); the
-/// growth stays across tests.
+/// `[truth.variants.wear]`: the clearance grows with the normal contact impulse the beams have
+/// exchanged: `clearance = nominal + min(coefficient * P, max_growth)`, `P` the accumulated
+/// normal contact impulse since the rig started (N s: the time integral of the total normal
+/// contact force, see `physics::wear`; it converges with the integrator's step, where the
+/// dissipated contact work of the first version did not). The nominal clearance is the one set
+/// at start or by a test (a plan's clearance); the growth stays across tests.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct WearSpec {
-    /// Clearance growth per dissipated contact work, m/J (>= 0). Required.
+    /// Clearance growth per accumulated normal contact impulse, m/(N s) (>= 0). Required.
     pub coefficient: f64,
     /// Largest clearance growth, m (> 0). Default: none (unbounded).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -434,7 +435,7 @@ impl PhysicsSpec {
                 return Err(bad(
                     &key("coefficient"),
                     w.coefficient,
-                    "a clearance growth per dissipated work >= 0 (m/J)",
+                    "a clearance growth per normal contact impulse >= 0 (m/(N s))",
                 ));
             }
             if let Some(cap) = w.max_growth {

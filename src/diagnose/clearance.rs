@@ -22,8 +22,9 @@
 //! relative offset at the contact, if any, is
 //! added. A test without contact gives a lower bound only; a test in contact from its first
 //! window gives none. Across tests, [`clearance_trend`] fits the clearances against any
-//! abscissa: the session order here, the accumulated contact work once a model supplies it
-//! ([`TestClearance::accumulated_contact_work_j`] is the hook).
+//! abscissa: the session order here, the accumulated normal contact impulse once a model
+//! supplies it
+//! ([`TestClearance::accumulated_contact_impulse_ns`] is the hook).
 
 use serde::Serialize;
 
@@ -108,9 +109,9 @@ pub struct TestClearance {
     pub first_contact_omega_ratio: Option<f64>,
     /// Impact-free windows before the first contact.
     pub impact_free_windows: usize,
-    /// Contact work the model accumulated before the test, J: not measured, filled in by a
-    /// model run (the abscissa of the wear trend). None here.
-    pub accumulated_contact_work_j: Option<f64>,
+    /// Normal contact impulse the model accumulated before the test, N s: not measured,
+    /// filled in by a model run (the abscissa of the wear trend). None here.
+    pub accumulated_contact_impulse_ns: Option<f64>,
     /// What limits the estimate, in words (empty for a bracketed test).
     pub note: String,
 }
@@ -118,7 +119,7 @@ pub struct TestClearance {
 /// A trend of the clearance over the tests.
 #[derive(Clone, Debug, PartialEq, Serialize, schemars::JsonSchema)]
 pub struct ClearanceTrend {
-    /// What the abscissa is (`session order`, `accumulated contact work, J`, ...).
+    /// What the abscissa is (`session order`, `accumulated normal contact impulse, N s`, ...).
     pub against: String,
     /// Clearance at abscissa 0, m.
     pub intercept_m: f64,
@@ -196,7 +197,7 @@ pub fn clearance_per_test_of(
             lower_bound_omega_ratio: lower.map(|w| w.omega_ratio),
             first_contact_omega_ratio: upper.map(|w| w.omega_ratio),
             impact_free_windows: before.len(),
-            accumulated_contact_work_j: None,
+            accumulated_contact_impulse_ns: None,
             note,
         });
     }
@@ -210,8 +211,8 @@ pub fn clearance_per_test_of(
 }
 
 /// The least-squares line of the bracketed clearances of `tests` against `x` (one abscissa
-/// per test, e.g. the session order or the accumulated contact work), each clearance weighted
-/// by its inverse squared uncertainty.
+/// per test, e.g. the session order or the accumulated normal contact impulse), each clearance
+/// weighted by its inverse squared uncertainty.
 ///
 /// Errors: `x` not one per test, fewer than two bracketed tests with distinct abscissae.
 pub fn clearance_trend(
@@ -301,7 +302,7 @@ mod tests {
             lower_bound_omega_ratio: None,
             first_contact_omega_ratio: None,
             impact_free_windows: 3,
-            accumulated_contact_work_j: None,
+            accumulated_contact_impulse_ns: None,
             note: String::new(),
         }
     }

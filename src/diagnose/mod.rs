@@ -11,8 +11,8 @@
 //!   levels (the clamp's friction);
 //! - [`clearance`]: the clearance per test from the relative tip displacement before the
 //!   first impact (reference section 4, Table 2);
-//! - [`wear`]: the clearance per test against the model's accumulated contact work, and
-//!   `[model.wear]` fitted by whole-session model runs; `tilt`: a tilted contact face
+//! - [`wear`]: the clearance per test against the model's accumulated normal contact
+//!   impulse, and `[model.wear]` fitted by whole-session model runs; `tilt`: a tilted contact face
 //!   against a smaller clearance (both stages of [`pipeline`]).
 //!
 //! Every estimator works on [`evidence::SessionEvidence`], the fundamental complex amplitudes

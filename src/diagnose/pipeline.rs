@@ -17,7 +17,7 @@
 //!      the amplitude; the slopes fix the ratio of the joint's stiffness share to its slip
 //!      amplitude, model runs over a few stiffness shares fix the rest;
 //!    - `wear` ([`super::wear`]): the clearance per test ([`super::clearance`], refined by
-//!      model runs, `clearance_fit`) growing with the model's contact work;
+//!      model runs, `clearance_fit`) growing with the model's normal contact impulse;
 //!    - `clearance` (`clearance_fit`): as an offset to the plan's when the tests
 //!      agree; `tilt` (`tilt`): a tilted face against that offset.
 //! 3. **Select**: each candidate is fitted on some tests (`train`) and judged on others
@@ -253,7 +253,7 @@ pub fn diagnose(
     let before_contact = work.accepted.clone();
     work.stage(
         "wear",
-        "identify: the clearance per test against the contact work before it (wear)",
+        "identify: the clearance per test against the normal contact impulse before it (wear)",
     );
     let worn = super::wear::wear_stage(&mut work, &mut ce)?;
     if worn {

@@ -252,9 +252,9 @@ pub struct ModelRunner<'a> {
     jobs: usize,
     /// What the runs cost so far.
     pub cost: RunCost,
-    /// Per test of the session: the dissipated contact work at its start in the last run, J
-    /// (`None`: not run, or no wear in the model).
-    last_contact_work: Vec<Option<f64>>,
+    /// Per test of the session: the normal contact impulse accumulated at its start in the
+    /// last run, N s (`None`: not run, or no wear in the model).
+    last_contact_impulse: Vec<Option<f64>>,
     /// States of open contact that can start runs ([`ModelRunner::capture_open`]).
     open_starts: Vec<OpenStart>,
     /// Every capture tried: (test, step, extensions and refinement) and whether it was kept.
@@ -265,8 +265,9 @@ pub struct ModelRunner<'a> {
 struct GroupRun {
     scores: Vec<StepScores>,
     rig_seconds: f64,
-    /// (test index, dissipated contact work at its start, J), with wear in the model.
-    work: Vec<(usize, f64)>,
+    /// (test index, accumulated normal contact impulse at its start, N s), with wear in the
+    /// model.
+    impulse: Vec<(usize, f64)>,
 }
 
 impl<'a> ModelRunner<'a> {
@@ -294,7 +295,7 @@ impl<'a> ModelRunner<'a> {
             beam_length,
             jobs: jobs.max(1),
             cost: RunCost::default(),
-            last_contact_work: Vec::new(),
+            last_contact_impulse: Vec::new(),
             open_starts: Vec::new(),
             captures: std::collections::HashMap::new(),
         }
@@ -347,7 +348,7 @@ impl<'a> ModelRunner<'a> {
     /// Several [`ModelRunner::run_spans`] at once, their stretches of tests spread over the
     /// `jobs` threads together (the points of a fit's grid run side by side, where one run of
     /// a single test would keep one thread busy). Results in the order of `runs`; the contact
-    /// work ([`ModelRunner::contact_work`]) is the last run's.
+    /// impulse ([`ModelRunner::contact_impulse`]) is the last run's.
     pub fn run_many(
         &mut self,
         runs: &[(PhysicsSpec, Vec<Span>)],
@@ -417,15 +418,15 @@ impl<'a> ModelRunner<'a> {
             results.extend(done);
         }
         let mut out: Vec<Vec<StepScores>> = vec![Vec::new(); runs.len()];
-        let mut work = vec![vec![None; self.steps.tests.len()]; runs.len()];
+        let mut impulse = vec![vec![None; self.steps.tests.len()]; runs.len()];
         for ((r, _, _), g) in groups.iter().zip(results) {
             let g = g?;
             self.cost.runs += 1;
             self.cost.rig_seconds += g.rig_seconds;
             out[*r].extend(g.scores);
-            for (t, w) in g.work {
-                if let Some(slot) = work[*r].get_mut(t) {
-                    *slot = Some(w);
+            for (t, p) in g.impulse {
+                if let Some(slot) = impulse[*r].get_mut(t) {
+                    *slot = Some(p);
                 }
             }
         }
@@ -434,7 +435,7 @@ impl<'a> ModelRunner<'a> {
             o.retain(|s| wanted.iter().any(|w| w.test == s.test_index));
         }
         self.cost.wall_seconds += wall.elapsed().as_secs_f64();
-        self.last_contact_work = work.pop().unwrap_or_default();
+        self.last_contact_impulse = impulse.pop().unwrap_or_default();
         Ok(out)
     }
 
@@ -593,13 +594,13 @@ impl<'a> ModelRunner<'a> {
         Ok((twin, start, clearances))
     }
 
-    /// The model's dissipated contact work `W` (J, `physics::wear`) at the start of every
-    /// test up to test `through` (index), over the session run from its start with extensions
-    /// `ext` (wear on, with a zero coefficient when `ext` has none: `W` is counted whatever the
-    /// coefficient; the clearances stay `ext`'s) to the end of test `through`'s first step.
-    /// The contact work of a test before its first impact is its start's: the clearance
-    /// measured there has seen exactly this `W`.
-    pub fn contact_work(
+    /// The model's accumulated normal contact impulse `P` (N s, `physics::wear`) at the start
+    /// of every test up to test `through` (index), over the session run from its start with
+    /// extensions `ext` (wear on, with a zero coefficient when `ext` has none: `P` is counted
+    /// whatever the coefficient; the clearances stay `ext`'s) to the end of test `through`'s
+    /// first step. The impulse of a test before its first impact is its start's: the
+    /// clearance measured there has seen exactly this `P`.
+    pub fn contact_impulse(
         &mut self,
         ext: &PhysicsSpec,
         through: usize,
@@ -617,7 +618,7 @@ impl<'a> ModelRunner<'a> {
             through: Some(0),
         }];
         self.run_spans(&ext, &spans)?;
-        Ok(self.last_contact_work.clone())
+        Ok(self.last_contact_impulse.clone())
     }
 
     /// One stretch of consecutive tests (the steps `group` names), from rest at its lead-in
@@ -632,7 +633,7 @@ impl<'a> ModelRunner<'a> {
         let empty = GroupRun {
             scores: Vec::new(),
             rig_seconds: 0.0,
-            work: Vec::new(),
+            impulse: Vec::new(),
         };
         let Some(first) = group.first().map(|s| s.test) else {
             return Ok(empty);
@@ -647,14 +648,14 @@ impl<'a> ModelRunner<'a> {
         let Some(last) = windows.last() else {
             return Ok(empty);
         };
-        // The first step start of each test of the group: where its contact work is read.
+        // The first step start of each test of the group: where its contact impulse is read.
         let mut test_starts: VecDeque<(usize, u64)> = VecDeque::new();
         for &(t, _, sample) in &self.steps.starts {
             if group.contains(&t) && test_starts.iter().all(|x| x.0 != t) {
                 test_starts.push_back((t, sample));
             }
         }
-        let mut work = Vec::new();
+        let mut impulse = Vec::new();
         let end = last.info.record_end_sample();
         let (mut twin, start, mut clearances) = match start {
             None => self.twin_at(model, self.steps.lead_in(first))?,
@@ -692,9 +693,9 @@ impl<'a> ModelRunner<'a> {
                 // NOTE: read at the block holding the test's first sample (blocks are a few
                 // ms; no contact happens across a test's start, the sweep starts off the band).
                 if let Some(w) = twin.state().and_then(|s| s.effects.wear) {
-                    work.push((t, w.work));
+                    impulse.push((t, w.impulse));
                 } else if model.extensions.wear.is_some() {
-                    work.push((t, 0.0));
+                    impulse.push((t, 0.0));
                 }
             }
             let tb = twin.push_block(&b)?;
@@ -727,7 +728,7 @@ impl<'a> ModelRunner<'a> {
         Ok(GroupRun {
             scores,
             rig_seconds,
-            work,
+            impulse,
         })
     }
 }

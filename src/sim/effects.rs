@@ -1,5 +1,6 @@
 //! The physics effects that act while a driven ROM is integrated ([`Effects`]): the clamp
-//! joints (a modal load evaluated before each step), wear (the clearance after each step) and
+//! joints (a modal load evaluated before each step), wear (the clearance after each step, from
+//! the step's normal contact impulse) and
 //! the nominal clearance they grow on, with the ROM prepared for them ([`prepare`]: modal
 //! corrections, tilt gap offsets). One composition for the simulated rig's truth (its hidden
 //! `[truth.variants]`) and the model (its declared `[model]`): both step the same code.
@@ -65,8 +66,8 @@ pub struct EffectsState {
     Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize, schemars::JsonSchema,
 )]
 pub struct WearState {
-    /// `W`: the running maximum of the dissipated contact work, J.
-    pub work: f64,
+    /// `P`: the accumulated normal contact impulse, N s (`physics::wear`).
+    pub impulse: f64,
     /// Clearance growth, m.
     pub growth: f64,
 }
@@ -180,13 +181,13 @@ impl Effects {
         }
     }
 
-    /// After a step of `rom`: wear moves the clearance by the work the contact dissipated.
+    /// After a step of `rom`: wear moves the clearance by the step's normal contact impulse.
     #[inline]
     pub fn after_step<const N: usize>(&mut self, rom: &mut DrivenRom<N>) {
         if let Some(w) = &mut self.wear {
-            let energy = &rom.last().energy;
-            // Cumulative contact work on the modes and boundary energy after the step, J.
-            if let Some(growth) = w.update(energy.accounts.contact_work, energy.boundary) {
+            // The step's normal impulse: its integrated normal force (N) times the step, N s.
+            let impulse = rom.last().contact.normal_force * rom.dt();
+            if let Some(growth) = w.update(impulse) {
                 // Finite: the nominal clearance is finite and the growth is capped or finite.
                 let _ = rom.set_clearance(self.nominal_clearance + growth);
             }
@@ -217,10 +218,10 @@ impl Effects {
         self.nominal_clearance
     }
 
-    /// Wear: the dissipated contact work `W` (J) and the clearance growth (m) so far; `None`
-    /// when the effect is off.
+    /// Wear: the accumulated normal contact impulse `P` (N s) and the clearance growth (m) so
+    /// far; `None` when the effect is off.
     pub fn wear(&self) -> Option<(f64, f64)> {
-        self.wear.as_ref().map(|w| (w.work(), w.growth()))
+        self.wear.as_ref().map(|w| (w.impulse(), w.growth()))
     }
 
     /// What evolves in the effects (the joints' sliders, the wear so far) and the nominal
@@ -229,7 +230,7 @@ impl Effects {
         EffectsState {
             joint: self.joint.as_ref().map(ClampJoint::state),
             wear: self.wear.as_ref().map(|w| WearState {
-                work: w.work(),
+                impulse: w.impulse(),
                 growth: w.growth(),
             }),
             nominal_clearance: self.nominal_clearance,
@@ -261,7 +262,7 @@ impl Effects {
             }
         }
         if let (Some(w), Some(s)) = (&mut next.wear, &state.wear) {
-            if !w.set_state(s.work, s.growth) {
+            if !w.set_state(s.impulse, s.growth) {
                 return mismatch("the wear state is negative or not finite");
             }
         }

@@ -685,7 +685,7 @@ fn a_restored_state_continues_bit_for_bit_and_another_model_is_refused() {
     let lay = layout();
     let a = sine(5.0, 50.0);
     let blocks: Vec<DaqBlock> = (0..80).map(|s| block(&lay, s, &a)).collect();
-    // Wear acting: the clearance moves with the contact work, so the effects' state matters.
+    // Wear acting: the clearance moves with the contact impulse, so the effects' state matters.
     let extensions = crate::config::PhysicsSpec {
         wear: Some(crate::config::physics::WearSpec {
             coefficient: 1e-3,

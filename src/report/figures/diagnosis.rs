@@ -6,7 +6,7 @@
 //! - `evidence-linear`: natural frequency and damping ratio of 1FU and 1FL against the tip
 //!   amplitude at resonance, per test (the clamp friction's signature);
 //! - `evidence-clearance`: the clearance bracket per test against the session order or the
-//!   accumulated contact work (wear): with the wear stage's clearances refined by model runs
+//!   accumulated normal contact impulse (wear): with the wear stage's clearances refined by model runs
 //!   (measured) and the fitted wear's clearance (model);
 //! - `evidence-sensors`: measured over model RMS per motion channel on the impact-free steps
 //!   (a sensitivity error is flat in frequency);
@@ -734,8 +734,8 @@ fn evidence_linear(d: &Diagnosis) -> Option<Panels> {
     })
 }
 
-/// The clearance bracket per test against the session order (or the accumulated contact work
-/// when every test with an estimate has it), with the plan's clearance.
+/// The clearance bracket per test against the session order (or the accumulated normal
+/// contact impulse when every test with an estimate has it), with the plan's clearance.
 fn evidence_clearance(d: &Diagnosis) -> Option<Panels> {
     let cl = d.clearance.as_ref()?;
     let est: Vec<_> = (cl.tests.iter())
@@ -744,11 +744,11 @@ fn evidence_clearance(d: &Diagnosis) -> Option<Panels> {
     if est.is_empty() {
         return None;
     }
-    let by_work = est
+    let by_impulse = est
         .iter()
-        .all(|t| t.accumulated_contact_work_j.is_some_and(f64::is_finite));
-    let at = |t: &TestClearance| match by_work {
-        true => t.accumulated_contact_work_j.unwrap_or(f64::NAN),
+        .all(|t| t.accumulated_contact_impulse_ns.is_some_and(f64::is_finite));
+    let at = |t: &TestClearance| match by_impulse {
+        true => t.accumulated_contact_impulse_ns.unwrap_or(f64::NAN),
         false => t.test_index as f64,
     };
     let mm = |v: Option<f64>| v.map_or(f64::NAN, |v| 1e3 * v);
@@ -765,7 +765,7 @@ fn evidence_clearance(d: &Diagnosis) -> Option<Panels> {
     let (x0, x1) = finite_range(&xs)?;
     let (x0, x1) = padded(x0, x1, 0.06);
     let trend = (cl.trend.as_ref())
-        .filter(|t| t.against.contains("work") == by_work)
+        .filter(|t| t.against.contains("impulse") == by_impulse)
         .filter(|t| t.intercept_m.is_finite() && t.slope_m.is_finite());
     let trend_pts: Vec<(f64, f64)> = trend
         .map(|t| {
@@ -778,8 +778,8 @@ fn evidence_clearance(d: &Diagnosis) -> Option<Panels> {
         .flat_map(|t| [mm(t.clearance_m), mm(t.lower_bound_m), mm(t.upper_bound_m)])
         .chain(plan.iter().chain(&trend_pts).map(|p| p.1))
         .collect();
-    let x_desc = match by_work {
-        true => "contact work accumulated before the test (J)",
+    let x_desc = match by_impulse {
+        true => "normal contact impulse accumulated before the test (N s)",
         false => "test (session order)",
     };
     let mut p = Panel::over(
@@ -789,7 +789,7 @@ fn evidence_clearance(d: &Diagnosis) -> Option<Panels> {
         &ys,
     )?;
     p.x = (x0, x1);
-    if !by_work {
+    if !by_impulse {
         let n = cl.tests.iter().map(|t| t.test_index + 1).max().unwrap_or(0);
         p.x_names = (0..n)
             .map(|i| {
@@ -833,13 +833,13 @@ fn evidence_clearance(d: &Diagnosis) -> Option<Panels> {
         LineKind::Solid,
     ));
     // The wear stage: each test's clearance refined by model runs within its bracket
-    // (measured) and the fitted model's clearance `plan + offset + k W` (model).
+    // (measured) and the fitted model's clearance `plan + offset + k P` (model).
     let wear = d.effects.iter().find(|e| e.effect == "wear");
-    if let (true, Some(w)) = (by_work, wear) {
+    if let (true, Some(w)) = (by_impulse, wear) {
         let pts: Vec<(f64, f64)> = (w.evidence["points"].as_array().into_iter().flatten())
             .filter_map(|q| {
                 Some((
-                    q["contact_work_j"].as_f64()?,
+                    q["contact_impulse_ns"].as_f64()?,
                     1e3 * q["clearance_m"].as_f64()?,
                 ))
             })
@@ -864,7 +864,7 @@ fn evidence_clearance(d: &Diagnosis) -> Option<Panels> {
             p.series.push(line(model, BLACK, LineKind::Dashed, width()));
             legend.push(entry(
                 format!(
-                    "model: wear {} m/J ({})",
+                    "model: wear {} m/(N s) ({})",
                     sig(k),
                     if w.accepted { "accepted" } else { "rejected" }
                 ),
@@ -880,7 +880,7 @@ fn evidence_clearance(d: &Diagnosis) -> Option<Panels> {
             format!(
                 "trend: {} mm per {}",
                 sig(1e3 * t.slope_m),
-                if by_work { "J" } else { "test" }
+                if by_impulse { "N s" } else { "test" }
             ),
             GREY,
             LineKind::Dashed,

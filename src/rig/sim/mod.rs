@@ -186,8 +186,8 @@ pub struct TruthSnapshot {
     pub clearance: f64,
     /// Wear variant: clearance growth so far, m (0 when off).
     pub clearance_growth: f64,
-    /// Wear variant: dissipated contact work that drove it, J (0 when off).
-    pub wear_work: f64,
+    /// Wear variant: accumulated normal contact impulse that drove it, N s (0 when off).
+    pub wear_impulse: f64,
     /// Clamp-friction variant: energy dissipated in the clamping joints, J (0 when off).
     pub joint_dissipation: f64,
     /// Contact solves that stopped at the sweep limit or diverged.
@@ -424,7 +424,7 @@ impl SimRig {
             closed_pairs: self.truth.closed_pairs(),
             clearance: self.truth.clearance(),
             clearance_growth: self.truth.wear().map_or(0.0, |w| w.1),
-            wear_work: self.truth.wear().map_or(0.0, |w| w.0),
+            wear_impulse: self.truth.wear().map_or(0.0, |w| w.0),
             joint_dissipation: self.truth.joint_dissipation().unwrap_or(0.0),
             solver_failures: self.truth.solver_failures(),
             failed: self.truth.failure().is_some(),

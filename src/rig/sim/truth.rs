@@ -23,7 +23,7 @@
 // corrections change the truth ROM before anything is computed from it; the clamp joint's
 // modal load `f_load` (see `physics::iwan`) is evaluated at `eta^j` before the step and enters
 // both the modal step and `F_i` above, so the base sees the modal acceleration the integrator
-// applies. Wear moves the clearance after a step (from that step's dissipated contact work); a
+// applies. Wear moves the clearance after a step (from that step's normal contact impulse); a
 // tilt sets per-pair gap offsets once. With every variant off the step does exactly what it
 // did without them.
 
@@ -327,8 +327,8 @@ impl Truth {
         Ok(self.effects.set_clearance(&mut self.rom, clearance_m)?)
     }
 
-    /// Wear (variant): the dissipated contact work `W` (J) and the clearance growth (m) so
-    /// far; `None` when the variant is off.
+    /// Wear (variant): the accumulated normal contact impulse `P` (N s) and the clearance
+    /// growth (m) so far; `None` when the variant is off.
     pub fn wear(&self) -> Option<(f64, f64)> {
         self.effects.wear()
     }

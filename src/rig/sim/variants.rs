@@ -6,7 +6,7 @@
 //! - `modes`: the truth ROM's natural frequencies and damping ratios differ from the nominal.
 //! - `clamp_friction`: an Iwan element on the first bending mode of each beam.
 //! - `clearance`: each test's clearance differs from the plan's.
-//! - `wear`: the clearance grows with the contact's dissipated work.
+//! - `wear`: the clearance grows with the accumulated normal contact impulse.
 //! - `tilt`: every pair gets its own initial gap.
 //! - `sensor_gains`: per-channel sensitivity errors applied before the ADC while the DAQ
 //!   layout keeps the nominal sensitivity.

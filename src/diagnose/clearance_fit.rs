@@ -23,7 +23,7 @@ pub(super) struct RunClearance {
 }
 
 /// How many times finer than the twin's own step the runs that fit a test's clearance are.
-pub(super) const FIT_REFINEMENT: u32 = 3;
+const FIT_REFINEMENT: u32 = 3;
 
 /// How many steps past a test's first measured contact the runs that fit its clearance go.
 const STEPS_PAST_FIRST_CONTACT: usize = 2;

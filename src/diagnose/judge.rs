@@ -393,14 +393,6 @@ impl Work<'_> {
         self.judge_where_fitted(c)
     }
 
-    /// Judges candidate `c` where it was fitted only ([`Candidate::judged_where_fitted`]; the
-    /// whole tests' errors, if any, are the caller's, in `c.evidence["on_whole_tests"]`).
-    /// Returns whether accepted.
-    pub(super) fn judge_where_fitted_first(&mut self, c: Candidate) -> Result<bool, DiagnoseError> {
-        self.show(&c, None);
-        self.judge_where_fitted(c)
-    }
-
     /// [`Work::judge`] on every step of the candidate's tests (with the finer step's
     /// confirmation in the band): whether accepted, the errors before and after, why.
     fn judge_on_whole_tests(

@@ -17,21 +17,14 @@
 //! `clearance_fit::test_clearance_by_runs`): `sin(angle) x_edge = c_model - c_measured`, for
 //! either edge; a grid of model runs of the train tests (their steps from two before the first
 //! measured contact to two past the last, started from a state of open contact) over both
-//! signs and 0.6-1.5 times that angle, refined once (0.9-1.1 times the best), fits it, at the
-//! clearance fit's 3x finer twin step: at the twin's own step its contact excess chose the
-//! other edge and a 21 % larger angle for a hidden 0.02 rad; at the finer step the minimum is
-//! at the hidden angle and edge (BENCHMARKS.md, "A hidden tilt").
+//! signs and 0.6-1.5 times that angle, refined once, fits it.
 //!
 //! Selection: the tilt is judged by the pipeline's rule against the model without the
-//! clearance offset (the two compete for the same evidence), where it was fitted: on the train
-//! and validation tests' contact steps at the fit's finer twin step (the whole tests' errors at
-//! the twin's step are kept in the evidence: there even the hidden tilt leaves an error near
-//! 2.5, set by the steps before the first contact and the twin's own contact excess). Where
-//! the clearance offset was accepted too, the offset's model is run on the same steps at the
-//! same twin step: the one with the lower validation error there stays in the model if it is
-//! lower by more than the impact band's null spread; otherwise both are reported as equal
-//! alternatives of each other (the clearance, with one parameter and first identified, stays
-//! in the model): the session cannot tell them apart, and the diagnosis says so.
+//! clearance offset (the two compete for the same evidence). Where the clearance offset was
+//! accepted too, the one with the lower validation error stays in the model if it is lower by
+//! more than the impact band's null spread; otherwise both are reported as equal alternatives
+//! of each other (the clearance, with one parameter and first identified, stays in the model):
+//! the session cannot tell them apart, and the diagnosis says so.
 
 use serde_json::json;
 
@@ -39,7 +32,7 @@ use crate::config::{PhysicsSpec, TiltSpec};
 use crate::rom::Rom;
 
 use super::clearance::{ClearanceEvidence, TestClearance};
-use super::clearance_fit::{test_clearance_by_runs, FIT_REFINEMENT};
+use super::clearance_fit::test_clearance_by_runs;
 use super::judge::{alternate, grid_then_refine, set_error, set_error_of, Candidate, Steps, Work};
 use super::rerun::Span;
 use super::{DiagnoseError, DiagnoseProgress};
@@ -66,51 +59,6 @@ fn edges(rom: &Rom) -> (f64, f64) {
         .fold((0.0f64, 0.0f64), |(t, c), p| {
             (t.max(p[0] - cx), c.max(cx - p[0]))
         })
-}
-
-/// The steps of tests `tests` that carry a tilt: from two before the first measured contact to
-/// two past the last, from a state of open contact captured with `closest` where one can be
-/// ([`Work::open_span`]), at the runner's refinement in force.
-fn contact_spans(
-    work: &mut Work<'_>,
-    tests: &[usize],
-    closest: &PhysicsSpec,
-) -> Result<Vec<Span>, DiagnoseError> {
-    let mut spans = Vec::new();
-    for &ti in tests {
-        let from = work.steps.before_first_contact(ti, 2);
-        let through = work.steps.past_contact(ti, 2, false);
-        spans.push(work.open_span(closest, ti, from, through)?);
-    }
-    Ok(spans)
-}
-
-/// What [`fit_angle`] gives: (angle, train error) of every run, and the spans run.
-type AngleFit = (Vec<(f64, f64)>, Vec<Span>);
-
-/// The angle's grid search on the train tests' contact steps ([`contact_spans`]), refined
-/// once around the best point: (angle, train error) of every run, and the spans run.
-fn fit_angle(
-    work: &mut Work<'_>,
-    train: &[usize],
-    closest: &PhysicsSpec,
-    grid: Vec<f64>,
-    with: &dyn Fn(f64) -> PhysicsSpec,
-) -> Result<AngleFit, DiagnoseError> {
-    let spans = contact_spans(work, train, closest)?;
-    let tried = grid_then_refine(
-        work,
-        grid,
-        |best| vec![0.9 * best, 0.95 * best, 1.05 * best, 1.1 * best],
-        &|_, angle| (with(angle), spans.clone()),
-        |work, angle, s| {
-            (work.progress)(DiagnoseProgress::Evaluation(format!(
-                "tilt {angle:.3e} rad about y on the train tests at a {FIT_REFINEMENT}x finer twin step"
-            )));
-            set_error(s, train, Steps::All)
-        },
-    )?;
-    Ok((tried, spans))
 }
 
 /// Stage 5: tilt (module docs). `base` is the model before the clearance stage (without its
@@ -195,7 +143,7 @@ pub(super) fn tilt_stage(
     let widest = grid.iter().fold(0.0f64, |m, a| m.max(a.abs())) * 1.1;
     let closing_max = widest.sin() * tip_edge.max(clamp_edge);
     let mut closest = base.clone();
-    for &ti in train.iter().chain(&validation) {
+    for &ti in &train {
         let name = &work.steps.tests[ti];
         let plan = bracketed
             .iter()
@@ -203,22 +151,30 @@ pub(super) fn tilt_stage(
             .map_or(0.0, |b| b.plan_clearance_m);
         closest = closest.with_test_clearance(name, base.test_clearance(name, plan) - closing_max);
     }
-    // NOTE: the fit runs at the clearance fit's finer twin step (FIT_REFINEMENT): at its own
-    // step the twin over-counts contact in the band (BENCHMARKS.md, "Why the nominal twin
-    // over-counts contact"), and the fit there chose the wrong edge and a 21 % larger angle
-    // for a hidden 0.02 rad (BENCHMARKS.md, "A hidden tilt"); at the finer step the objective
-    // has its minimum at the hidden angle and sign.
-    let own = work.runner.refinement();
-    work.runner.set_refinement(own * FIT_REFINEMENT);
-    let tried = fit_angle(work, &train, &closest, grid, &with);
-    work.runner.set_refinement(own);
-    let (tried, train_spans) = tried?;
+    let mut train_spans: Vec<Span> = Vec::new();
+    for &ti in &train {
+        let from = work.steps.before_first_contact(ti, 2);
+        let through = work.steps.past_contact(ti, 2, false);
+        train_spans.push(work.open_span(&closest, ti, from, through)?);
+    }
+    let tried = grid_then_refine(
+        work,
+        grid,
+        |best| vec![0.9 * best, 1.1 * best],
+        &|_, angle| (with(angle), train_spans.clone()),
+        |work, angle, s| {
+            (work.progress)(DiagnoseProgress::Evaluation(format!(
+                "tilt {angle:.3e} rad about y on the train tests"
+            )));
+            set_error(s, &train, Steps::All)
+        },
+    )?;
     let Some(&(angle, train_error)) = tried.iter().min_by(|a, b| a.1.total_cmp(&b.1)) else {
         work.accepted = after_clearance;
         return Ok(());
     };
     (work.progress)(DiagnoseProgress::Note(format!(
-        "tilt: {angle:.3e} rad about y by {} runs of the train tests' contact steps at a {FIT_REFINEMENT}x finer twin step (error {train_error:.3}; the edge closes {closing:.2e} m early)",
+        "tilt: {angle:.3e} rad about y by {} runs of the train tests' contact steps (error {train_error:.3}; the edge closes {closing:.2e} m early)",
         tried.len()
     )));
     // The contact channel's statistics on the validation tests, before and with the tilt and
@@ -240,14 +196,6 @@ pub(super) fn tilt_stage(
             "with_tilt": contact_rms(&s_tilt),
             "with_clearance_stage": contact_rms(&s_clear),
         },
-        "on_whole_tests": {
-            "validation_before": set_error(&s_base, &validation, Steps::All),
-            "validation_after": set_error(&s_tilt, &validation, Steps::All),
-            "reason": format!(
-                "at the twin's own step (not judged there: its contact excess and the band's chaos set a floor near 2 that the hidden tilt itself does not go below; clearance stage's model {:.3})",
-                set_error(&s_clear, &validation, Steps::All).unwrap_or(f64::NAN)
-            ),
-        },
         "angles_tried": tried.iter().map(|(a, e)| json!({"angle": a, "train_error": e})).collect::<Vec<_>>(),
     });
     let cand = Candidate::new(
@@ -256,31 +204,10 @@ pub(super) fn tilt_stage(
         json!({"angle": angle, "axis": AXIS}),
         1,
         evidence,
-        (train.clone(), validation.clone()),
+        (train, validation),
         Steps::All,
     );
-    // NOTE: judged where it was fitted: the train and validation tests' contact steps at the
-    // fit's finer twin step, from a state of open contact captured with the closest geometry
-    // tried. On the whole tests at the twin's own step even the hidden tilt leaves an error
-    // near 2.5 (0.02 rad: 4.33 -> 2.48): the steps before the first contact (the same for
-    // every geometry) and the twin's contact excess hold the error up (BENCHMARKS.md, "A
-    // hidden tilt"). The whole tests' errors stay in the evidence (`on_whole_tests`).
-    let mut judged_spans = train_spans;
-    work.runner.set_refinement(own * FIT_REFINEMENT);
-    let more = contact_spans(work, &validation, &closest).and_then(|v| {
-        judged_spans.extend(v);
-        // The clearance stage's model on the same steps: the tilt's competitor, compared
-        // where the tilt is judged.
-        work.scores_spans(&after_clearance, &judged_spans)
-    });
-    work.runner.set_refinement(own);
-    let c_where = set_error(&more?, &validation, Steps::All);
-    let cand = cand.judged_where_fitted(
-        judged_spans,
-        FIT_REFINEMENT,
-        "each test's steps from two before its first measured contact to two past its last",
-    );
-    let tilt_ok = work.judge_where_fitted_first(cand)?;
+    let tilt_ok = work.judge(cand)?;
     // The clearance offset judged before, if it was accepted.
     let Some(ci) = work
         .effects
@@ -290,9 +217,10 @@ pub(super) fn tilt_stage(
         return Ok(());
     };
     let ti = work.effects.len() - 1;
-    let (Some(c_after), Some(t_after)) =
-        (c_where, work.effects[ti].error_after.map(|e| e.validation))
-    else {
+    let (Some(c_after), Some(t_after)) = (
+        work.effects[ci].error_after.map(|e| e.validation),
+        work.effects[ti].error_after.map(|e| e.validation),
+    ) else {
         work.accepted = after_clearance;
         return Ok(());
     };
@@ -307,12 +235,12 @@ pub(super) fn tilt_stage(
         // the offset (the model is `base` with the tilt, as judged).
         let c = &mut work.effects[ci];
         c.accepted = false;
-        c.reason = format!("replaced by the tilt, which predicts the validation tests' contact steps better at the finer twin step ({t_after:.3} against {c_after:.3}, beyond the null spread {null})");
+        c.reason = format!("replaced by the tilt, which predicts the validation tests better ({t_after:.3} against {c_after:.3}, beyond the null spread {null})");
         c.alternatives.push(format!(
             "tilt: {angle:.3e} rad about y (better on validation)"
         ));
         work.effects[ti].alternatives.push(format!(
-            "clearance {c_param}: the same first contact, worse on the validation tests' contact steps ({c_after:.3})"
+            "clearance {c_param}: the same first contact, worse on validation ({c_after:.3})"
         ));
     } else {
         // Equal: the session cannot tell them apart. The clearance (one parameter, first
@@ -320,7 +248,7 @@ pub(super) fn tilt_stage(
         work.accepted = after_clearance;
         let t = &mut work.effects[ti];
         t.accepted = false;
-        t.reason = format!("an equal alternative of the clearance offset: both lower the validation error beyond the null spread, to {t_after:.3} (tilt) and {c_after:.3} (clearance) on the validation tests' contact steps at the finer twin step, within the impact band's null spread {null} of each other; the channels cannot tell a tilted face from a smaller clearance here, the clearance stays in the model");
+        t.reason = format!("an equal alternative of the clearance offset: both lower the validation error beyond the null spread, to {t_after:.3} (tilt) and {c_after:.3} (clearance), within the impact band's null spread {null} of each other; the channels cannot tell a tilted face from a smaller clearance here, the clearance stays in the model");
         t.alternatives.push(format!(
             "clearance {c_param} (equal: validation {c_after:.3})"
         ));

@@ -382,15 +382,15 @@ impl Work<'_> {
     pub(super) fn judge(&mut self, mut c: Candidate) -> Result<bool, DiagnoseError> {
         self.show(&c, None);
         let (ok, before, after, reason) = self.judge_on_whole_tests(&mut c)?;
-        if ok || c.where_fitted.is_none() {
+        let Some(w) = c.where_fitted.clone().filter(|_| !ok) else {
             return Ok(self.record(c, before, after, ok, reason));
-        }
+        };
         c.evidence["on_whole_tests"] = serde_json::json!({
             "validation_before": before.map(|e| e.validation),
             "validation_after": after.map(|e| e.validation),
             "reason": reason,
         });
-        self.judge_where_fitted(c)
+        self.judge_where_fitted(c, &w, &reason)
     }
 
     /// [`Work::judge`] on every step of the candidate's tests (with the finer step's
@@ -455,10 +455,14 @@ impl Work<'_> {
     /// its errors before and after on those steps at that twin step decide, by the regime's
     /// rule (the fall beyond the null spread and the penalty, and the regime's share). What
     /// the whole tests said is kept in the evidence (`on_whole_tests`) and the reason.
-    fn judge_where_fitted(&mut self, mut c: Candidate) -> Result<bool, DiagnoseError> {
-        let Some(w) = c.where_fitted.clone() else {
-            return Ok(false);
-        };
+    ///
+    /// `w` is the candidate's `where_fitted`, `whole` why the whole tests rejected it.
+    fn judge_where_fitted(
+        &mut self,
+        mut c: Candidate,
+        w: &WhereFitted,
+        whole: &str,
+    ) -> Result<bool, DiagnoseError> {
         (self.progress)(DiagnoseProgress::Evaluation(format!(
             "{} where it was fitted ({}) at a {}x finer twin step",
             c.effect, w.what, w.refinement
@@ -476,10 +480,6 @@ impl Work<'_> {
             "steps": w.what,
             "refinement": own * w.refinement,
         });
-        let whole = c.evidence["on_whole_tests"]["reason"]
-            .as_str()
-            .unwrap_or_default()
-            .to_string();
         let reason = format!(
             "on the whole tests {whole}; where it was fitted ({}, at a {}x finer twin step) {reason}",
             w.what, w.refinement

@@ -64,6 +64,14 @@ fn line(points: &[(f64, f64)]) -> Option<(f64, f64, f64)> {
     Some((a, k, se))
 }
 
+/// Each test's accumulated normal contact impulse at its start (`impulse`, per test index, N s;
+/// from [`super::rerun::ModelRunner::contact_impulse`]) into the clearance evidence.
+fn record_impulses(ce: &mut ClearanceEvidence, impulse: &[Option<f64>]) {
+    for t in &mut ce.tests {
+        t.accumulated_contact_impulse_ns = impulse.get(t.test_index).copied().flatten();
+    }
+}
+
 /// What the wear stage measured, for the evidence figure.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct WearPoint {
@@ -106,9 +114,7 @@ pub(super) fn wear_stage(
         .max()
         .unwrap_or(0);
     let impulse = work.runner.contact_impulse(&accepted, last)?;
-    for t in &mut ce.tests {
-        t.accumulated_contact_impulse_ns = impulse.get(t.test_index).copied().flatten();
-    }
+    record_impulses(ce, &impulse);
     let bracketed: Vec<TestClearance> = ce
         .tests
         .iter()
@@ -249,9 +255,7 @@ pub(super) fn wear_stage(
             "wear coefficient {k:.3e} m/(N s): the model's impulse with it gives the train tests' slope {next:.3e} m/(N s)"
         )));
         points = moved;
-        for t in &mut ce.tests {
-            t.accumulated_contact_impulse_ns = impulse.get(t.test_index).copied().flatten();
-        }
+        record_impulses(ce, &impulse);
         let settled = (next / k - 1.0).abs() < 0.02;
         k = next;
         rounds.push(k);

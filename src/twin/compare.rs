@@ -127,7 +127,6 @@ fn score(
         .collect()
 }
 
-/// The largest score (NaN scores, from broken windows, count as the largest).
 /// The seed of the noise laid on the model's channel `channel` over the record window of
 /// `info`: the window's place in the session and the channel, nothing of the run.
 fn observation_seed(info: &StepInfo, channel: &str) -> u64 {
@@ -140,6 +139,7 @@ fn observation_seed(info: &StepInfo, channel: &str) -> u64 {
         .wrapping_add(k + 1)
 }
 
+/// The largest score (NaN scores, from broken windows, count as the largest).
 fn max_score(features: &[FeatureComparison]) -> Option<f64> {
     features.iter().map(|f| f.score).reduce(|a, b| {
         if a.is_nan() || b.is_nan() {

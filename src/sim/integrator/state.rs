@@ -87,6 +87,22 @@ pub struct State {
     pub(super) step: u64,
     pub(super) accounts: EnergyAccounts,
     pub(super) counters: SolverCounters,
+    #[serde(skip)]
+    #[schemars(skip)]
+    pub(super) verified: Verified,
+}
+
+/// Whether the integrator itself produced a state by a finite step, so that its next step needs
+/// only the size checks and not the scan for non-finite values (`Integrator::check_state`).
+/// Not part of the state's value: every state compares equal in it, it is not serialised (a
+/// state read back is checked in full), and anything else that changes the state clears it.
+#[derive(Clone, Copy, Debug, Default)]
+pub(super) struct Verified(pub(super) bool);
+
+impl PartialEq for Verified {
+    fn eq(&self, _: &Verified) -> bool {
+        true
+    }
 }
 
 impl State {
@@ -109,6 +125,7 @@ impl State {
             step: 0,
             accounts: EnergyAccounts::default(),
             counters: SolverCounters::default(),
+            verified: Verified(false),
         }
     }
 
@@ -161,6 +178,7 @@ impl State {
     // excite every mode.
     pub fn perturb_velocities(&mut self, seed: u64, relative: f64) {
         use rand::{Rng, SeedableRng};
+        self.verified = Verified(false);
         let norm = self.eta_dot.iter().map(|v| v * v).sum::<f64>().sqrt();
         if norm == 0.0 || !norm.is_finite() {
             return;

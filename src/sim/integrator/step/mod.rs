@@ -97,6 +97,8 @@ impl Integrator {
         let boundary = update::boundary(md, ws, contact.any_closed);
         let energy = update::record(md, ws, st, a_base, t0, &contact, &sums, &boundary, sink);
         update::commit(ws, st, &contact);
-        Ok(energy.kinetic.is_finite() && energy.potential.is_finite())
+        let finite = energy.kinetic.is_finite() && energy.potential.is_finite();
+        update::verify(ws, st, finite, &energy);
+        Ok(finite)
     }
 }

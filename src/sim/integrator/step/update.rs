@@ -8,6 +8,7 @@ use super::super::super::energy::{Energy, EnergyAccounts};
 use super::super::super::output::{ContactSummary, StepOutput, StepSink};
 use super::super::kernels::{axpy, dot, Lanes4};
 use super::super::model::{Model, Workspace};
+use super::super::state::Verified;
 use super::super::{Coupling, State};
 use super::contact::ContactOutcome;
 
@@ -249,4 +250,19 @@ pub(super) fn commit(ws: &mut Workspace, st: &mut State, contact: &ContactOutcom
         std::mem::swap(&mut st.g_lambda, &mut ws.g_lambda_new);
     }
     st.step += 1;
+}
+
+/// Marks the committed state as produced by a finite step ([`Verified`]), so the next step
+/// skips the scan for non-finite values. The step's modal state is finite when its kinetic and
+/// potential energies are (every entry enters them squared, and `0 * inf` is NaN); the forces
+/// are finite on the solved pairs (the others keep the step's start state's, which was checked
+/// or verified before the step, or are cleared); the boundary displacement is a sum of finite
+/// forces times `G_res` rows, finite with the closed pairs' boundary energy.
+#[inline(always)]
+pub(super) fn verify(ws: &Workspace, st: &mut State, finite: bool, energy: &Energy) {
+    let forces_finite = ws
+        .cand
+        .iter()
+        .all(|&k| st.lambda[3 * k..3 * k + 3].iter().all(|l| l.is_finite()));
+    st.verified = Verified(finite && forces_finite && energy.boundary.is_finite());
 }

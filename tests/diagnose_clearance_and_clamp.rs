@@ -206,6 +206,7 @@ omega_end = 1.015
 /// error falls at least 3x.
 fn assert_clamp(c: &serde_json::Value, share: f64, slip: f64, beams: serde_json::Value) {
     let p = &c["parameters"];
+    println!("clamp_friction for share {share}, half-slip {slip} m: {p}");
     assert_eq!(p["beams"], beams, "{c:#}");
     let ratio =
         p["stiffness_fraction"].as_f64().unwrap() / p["half_slip_tip_amplitude"].as_f64().unwrap();

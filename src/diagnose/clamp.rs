@@ -9,8 +9,8 @@ use std::f64::consts::PI;
 
 use std::cell::RefCell;
 
-use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
-use nalgebra::{storage::Owned, DMatrix, DVector, Dyn};
+use levenberg_marquardt::LevenbergMarquardt;
+use nalgebra::DVector;
 use serde_json::json;
 
 use crate::config::{Beam, ClampFrictionSpec};
@@ -19,6 +19,7 @@ use crate::signal::features::CONTACT_CHANNEL;
 use super::judge::{set_error, Candidate, Steps, Work};
 use super::linear::{AmplitudeDependence, LinearEvidence, ModeFit};
 use super::outcome::{Regime, StepScores};
+use super::runfit::{RunProblem, RunResiduals};
 use super::{DiagnoseError, DiagnoseProgress};
 
 /// The clamp's share per slip amplitude tried on the fitted tests, relative to the slopes'.
@@ -51,7 +52,6 @@ struct ClampFit<'w, 'a, 's> {
     train: &'s [usize],
     /// The grid's best share and ratio (1/m).
     start: (f64, f64),
-    x: DVector<f64>,
     runs: RefCell<Vec<Run>>,
     failed: RefCell<Option<DiagnoseError>>,
 }
@@ -102,22 +102,25 @@ fn clamp_lm(
     train: &[usize],
     start: (f64, f64),
 ) -> Result<Vec<Run>, DiagnoseError> {
-    let fit = ClampFit {
-        work: RefCell::new(work),
-        spec,
-        train,
-        start,
+    let fit = RunProblem {
+        runs: ClampFit {
+            work: RefCell::new(work),
+            spec,
+            train,
+            start,
+            runs: RefCell::new(Vec::new()),
+            failed: RefCell::new(None),
+        },
         x: DVector::zeros(2),
-        runs: RefCell::new(Vec::new()),
-        failed: RefCell::new(None),
+        step: CLAMP_FIT_STEP,
     };
     let (fit, _) = LevenbergMarquardt::new()
         .with_patience(CLAMP_FIT_PATIENCE)
         .minimize(fit);
-    if let Some(e) = fit.failed.into_inner() {
+    if let Some(e) = fit.runs.failed.into_inner() {
         return Err(e);
     }
-    Ok(fit.runs.into_inner())
+    Ok(fit.runs.runs.into_inner())
 }
 
 impl ClampFit<'_, '_, '_> {
@@ -125,7 +128,9 @@ impl ClampFit<'_, '_, '_> {
     fn point(&self, x: &DVector<f64>) -> (f64, f64) {
         (self.start.0 * x[0].exp(), self.start.1 * x[1].exp())
     }
+}
 
+impl RunResiduals for ClampFit<'_, '_, '_> {
     /// The signed scores at `x`; `None` (the error kept) when a run fails, or outside
     /// `0 < share < 1`.
     fn residuals_at(&self, x: &DVector<f64>) -> Option<DVector<f64>> {
@@ -152,39 +157,6 @@ impl ClampFit<'_, '_, '_> {
             self.runs.borrow_mut().push(Run::of(sf, r, &v));
         }
         ok.then(|| DVector::from_vec(v))
-    }
-}
-
-impl LeastSquaresProblem<f64, Dyn, Dyn> for ClampFit<'_, '_, '_> {
-    type ResidualStorage = Owned<f64, Dyn>;
-    type JacobianStorage = Owned<f64, Dyn, Dyn>;
-    type ParameterStorage = Owned<f64, Dyn>;
-
-    fn set_params(&mut self, x: &DVector<f64>) {
-        self.x.copy_from(x);
-    }
-
-    fn params(&self) -> DVector<f64> {
-        self.x.clone()
-    }
-
-    fn residuals(&self) -> Option<DVector<f64>> {
-        self.residuals_at(&self.x)
-    }
-
-    fn jacobian(&self) -> Option<DMatrix<f64>> {
-        let r0 = self.residuals_at(&self.x)?;
-        let mut j = DMatrix::zeros(r0.len(), 2);
-        for k in 0..2 {
-            let mut x = self.x.clone();
-            x[k] += CLAMP_FIT_STEP;
-            let r = self.residuals_at(&x)?;
-            if r.len() != r0.len() {
-                return None;
-            }
-            j.set_column(k, &((r - &r0) / CLAMP_FIT_STEP));
-        }
-        Some(j)
     }
 }
 

@@ -34,6 +34,7 @@ mod modes;
 pub mod outcome;
 pub mod pipeline;
 pub mod rerun;
+mod runfit;
 pub mod sensors;
 mod tilt;
 pub mod wear;

@@ -17,7 +17,7 @@ use std::cell::RefCell;
 use std::f64::consts::PI;
 
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
-use nalgebra::{storage::Owned, DMatrix, DVector, Dyn};
+use nalgebra::DVector;
 use serde_json::json;
 
 use crate::config::{ModalCorrectionSpec, PhysicsSpec};
@@ -28,6 +28,7 @@ use crate::signal::features::CONTACT_CHANNEL;
 use super::judge::{Candidate, DiagnoseProgress, Steps, Work};
 use super::linear::{LinearEvidence, ModeFit};
 use super::outcome::Regime;
+use super::runfit::{RunProblem, RunResiduals};
 use super::DiagnoseError;
 
 /// The model's natural frequency (Hz) and damping ratio of mode `label` under `ext`.
@@ -108,7 +109,6 @@ struct RunFit<'w, 'a> {
     test: usize,
     /// The starting frequency (Hz) and damping ratio.
     start: (f64, f64),
-    x: DVector<f64>,
     failed: RefCell<Option<DiagnoseError>>,
 }
 
@@ -124,7 +124,9 @@ impl RunFit<'_, '_> {
         let (f, z) = self.start;
         (f + x[0] * z * f, z * x[1].exp())
     }
+}
 
+impl RunResiduals for RunFit<'_, '_> {
     /// The signed scores of the test's impact-free motion features with the mode at `x`;
     /// `None` (the error kept) when a run fails.
     fn residuals_at(&self, x: &DVector<f64>) -> Option<DVector<f64>> {
@@ -152,39 +154,6 @@ impl RunFit<'_, '_> {
     }
 }
 
-impl LeastSquaresProblem<f64, Dyn, Dyn> for RunFit<'_, '_> {
-    type ResidualStorage = Owned<f64, Dyn>;
-    type JacobianStorage = Owned<f64, Dyn, Dyn>;
-    type ParameterStorage = Owned<f64, Dyn>;
-
-    fn set_params(&mut self, x: &DVector<f64>) {
-        self.x.copy_from(x);
-    }
-
-    fn params(&self) -> DVector<f64> {
-        self.x.clone()
-    }
-
-    fn residuals(&self) -> Option<DVector<f64>> {
-        self.residuals_at(&self.x)
-    }
-
-    fn jacobian(&self) -> Option<DMatrix<f64>> {
-        let r0 = self.residuals_at(&self.x)?;
-        let mut j = DMatrix::zeros(r0.len(), 2);
-        for k in 0..2 {
-            let mut x = self.x.clone();
-            x[k] += RUN_FIT_STEP;
-            let r = self.residuals_at(&x)?;
-            if r.len() != r0.len() {
-                return None;
-            }
-            j.set_column(k, &((r - &r0) / RUN_FIT_STEP));
-        }
-        Some(j)
-    }
-}
-
 /// Mode `mode`'s frequency (Hz) and damping ratio refined from `start` by model runs on test
 /// `test` ([`RunFit`]), with the test's error (RMS score) before and after; `None` when the
 /// fit does not lower the error.
@@ -195,16 +164,19 @@ fn refine_by_runs(
     start: (f64, f64),
 ) -> Result<Option<RefinedMode>, DiagnoseError> {
     let rms = |r: &DVector<f64>| (r.norm_squared() / r.len() as f64).sqrt();
-    let problem = RunFit {
-        work: RefCell::new(work),
-        mode,
-        test,
-        start,
+    let problem = RunProblem {
+        runs: RunFit {
+            work: RefCell::new(work),
+            mode,
+            test,
+            start,
+            failed: RefCell::new(None),
+        },
         x: DVector::zeros(2),
-        failed: RefCell::new(None),
+        step: RUN_FIT_STEP,
     };
     let Some(before) = problem.residuals() else {
-        return match problem.failed.into_inner() {
+        return match problem.runs.failed.into_inner() {
             Some(e) => Err(e),
             None => Ok(None),
         };
@@ -212,14 +184,14 @@ fn refine_by_runs(
     let (problem, _) = LevenbergMarquardt::new()
         .with_patience(RUN_FIT_PATIENCE)
         .minimize(problem);
-    if let Some(e) = problem.failed.borrow_mut().take() {
+    if let Some(e) = problem.runs.failed.borrow_mut().take() {
         return Err(e);
     }
     let x = problem.params();
     let Some(after) = problem.residuals() else {
         return Ok(None);
     };
-    let (frequency_hz, damping_ratio) = problem.point(&x);
+    let (frequency_hz, damping_ratio) = problem.runs.point(&x);
     Ok(
         (rms(&after) < rms(&before) && damping_ratio > 0.0).then_some(RefinedMode {
             frequency_hz,

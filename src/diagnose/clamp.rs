@@ -14,12 +14,10 @@ use nalgebra::DVector;
 use serde_json::json;
 
 use crate::config::{Beam, ClampFrictionSpec};
-use crate::signal::features::CONTACT_CHANNEL;
 
 use super::judge::{set_error, Candidate, Steps, Work};
 use super::linear::{AmplitudeDependence, LinearEvidence, ModeFit};
-use super::outcome::{Regime, StepScores};
-use super::runfit::{RunProblem, RunResiduals};
+use super::runfit::{signed_scores, RunProblem, RunResiduals};
 use super::{DiagnoseError, DiagnoseProgress};
 
 /// The clamp's share per slip amplitude tried on the fitted tests, relative to the slopes'.
@@ -82,17 +80,6 @@ impl Run {
     fn ssr(&self) -> f64 {
         self.rms * self.rms * self.n as f64
     }
-}
-
-/// The signed scores of every motion feature of the impact-free steps of `tests`.
-fn signed_scores(scores: &[StepScores], tests: &[usize]) -> Vec<f64> {
-    scores
-        .iter()
-        .filter(|s| tests.contains(&s.test_index) && s.regime != Regime::Impacts)
-        .flat_map(|s| s.features.iter())
-        .filter(|c| c.channel != CONTACT_CHANNEL)
-        .map(|c| c.score.copysign(c.model - c.measured))
-        .collect()
 }
 
 /// [`ClampFit`] from `start` (share, ratio): every run it made.

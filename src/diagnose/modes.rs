@@ -23,12 +23,9 @@ use serde_json::json;
 use crate::config::{ModalCorrectionSpec, PhysicsSpec};
 use crate::rom::Rom;
 
-use crate::signal::features::CONTACT_CHANNEL;
-
 use super::judge::{Candidate, DiagnoseProgress, Steps, Work};
 use super::linear::{LinearEvidence, ModeFit};
-use super::outcome::Regime;
-use super::runfit::{RunProblem, RunResiduals};
+use super::runfit::{signed_scores, RunProblem, RunResiduals};
 use super::DiagnoseError;
 
 /// The model's natural frequency (Hz) and damping ratio of mode `label` under `ext`.
@@ -143,13 +140,7 @@ impl RunResiduals for RunFit<'_, '_> {
                 return None;
             }
         };
-        let r: Vec<f64> = scores
-            .iter()
-            .filter(|s| s.test_index == self.test && s.regime != Regime::Impacts)
-            .flat_map(|s| s.features.iter())
-            .filter(|c| c.channel != CONTACT_CHANNEL)
-            .map(|c| c.score.copysign(c.model - c.measured))
-            .collect();
+        let r = signed_scores(&scores, &[self.test]);
         (!r.is_empty() && r.iter().all(|v| v.is_finite())).then(|| DVector::from_vec(r))
     }
 }

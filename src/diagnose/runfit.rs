@@ -5,6 +5,22 @@
 use levenberg_marquardt::LeastSquaresProblem;
 use nalgebra::{storage::Owned, DMatrix, DVector, Dyn};
 
+use crate::signal::features::CONTACT_CHANNEL;
+
+use super::outcome::{Regime, StepScores};
+
+/// The residuals of a fit by model runs: the signed scores (model above measured positive) of
+/// every motion feature of the impact-free steps of `tests`.
+pub(super) fn signed_scores(scores: &[StepScores], tests: &[usize]) -> Vec<f64> {
+    scores
+        .iter()
+        .filter(|s| tests.contains(&s.test_index) && s.regime != Regime::Impacts)
+        .flat_map(|s| s.features.iter())
+        .filter(|c| c.channel != CONTACT_CHANNEL)
+        .map(|c| c.score.copysign(c.model - c.measured))
+        .collect()
+}
+
 /// Residuals at scaled parameters, one model run each; `None` when the run fails or the
 /// parameters are outside the model's range (the implementor keeps why).
 pub(super) trait RunResiduals {

@@ -165,13 +165,16 @@ impl Predictor {
         // NOTE: in held contact (at least half the pairs candidates in the previous step, whose
         // candidates `out.cand` still holds) the bound proves few pairs open, and its pass over
         // the low modes is pure cost (about 5 % of the simulated rig's time with the probes
-        // touching, issue 16): the gaps are then formed exactly for every pair, as the bound's
-        // fallback does. The same candidates and the same bits either way; the choice only
-        // saves time.
-        if out.p_all.is_none() && 2 * n_cand_prev >= n {
+        // touching, issue 16): the gaps are then formed exactly for every pair, as in exact
+        // mode. The same candidates and the same bits either way; the choice only saves time.
+        if out.p_all.is_some() || 2 * n_cand_prev >= n {
+            let mut p_all = out.p_all;
             for k in 0..n {
                 let row = &self.phi_n[k * m..(k + 1) * m];
                 let p = g0.at(k) + dot(row, x_p);
+                if let Some(all) = p_all.as_deref_mut() {
+                    all[k] = p;
+                }
                 if lambda_prev[3 * k] > 0.0 {
                     out.cand.push(k);
                     out.p_cand.push(p);
@@ -180,22 +183,6 @@ impl Predictor {
                 let rn = r_prev.map_or(0.0, |r| r[3 * k]);
                 let q = g0.at(k) + dot(row, x_q) - kappa * rn;
                 if candidate(p, q) {
-                    out.cand.push(k);
-                    out.p_cand.push(p);
-                }
-            }
-            return;
-        }
-        if let Some(p_all) = out.p_all {
-            // Exact mode: both gaps of every pair.
-            for k in 0..n {
-                let row = &self.phi_n[k * m..(k + 1) * m];
-                let p = g0.at(k) + dot(row, x_p);
-                p_all[k] = p;
-                let closed_prev = lambda_prev[3 * k] > 0.0;
-                let rn = r_prev.map_or(0.0, |r| r[3 * k]);
-                let q = g0.at(k) + dot(row, x_q) - kappa * rn;
-                if closed_prev || candidate(p, q) {
                     out.cand.push(k);
                     out.p_cand.push(p);
                 }

@@ -109,6 +109,45 @@ fn replay_with_the_twin_compares_every_step_deterministically() {
         );
     }
 
+    // The discretisation member ([twin.discretisation], on by default with the ensemble): run
+    // in every window with contact, measured or modelled, and nowhere else; its difference
+    // only widens the model spreads.
+    let off = default_rig_with(dir.path(), "[twin.discretisation]\nenabled = false\n");
+    let without = json(&replay("off.json", &["--config", off.to_str().unwrap()]));
+    let mut with_member = 0;
+    for (st, bare) in steps
+        .iter()
+        .zip(without["tests"][0]["steps"].as_array().unwrap())
+    {
+        let contact = st["contact_fraction"].as_f64().unwrap() > 0.0
+            || st["twin"]["contact_fraction"].as_f64().unwrap() > 0.0;
+        let member = st["twin"]["discretisation_member"] == true;
+        assert_eq!(member, contact, "{}", st["omega_ratio"]);
+        assert!(bare["twin"]["discretisation_member"].is_null(), "{bare}");
+        with_member += usize::from(member);
+        for (f, g) in st["twin"]["features"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .zip(bare["twin"]["features"].as_array().unwrap())
+        {
+            assert_eq!(
+                (&f["channel"], &f["feature"]),
+                (&g["channel"], &g["feature"])
+            );
+            assert_eq!(f["model"], g["model"], "the twin's own values do not move");
+            let (a, b) = (
+                f["model_spread"].as_f64().unwrap_or(0.0),
+                g["model_spread"].as_f64().unwrap_or(0.0),
+            );
+            assert!(a >= b, "{f} against {g}");
+        }
+    }
+    assert!(
+        with_member >= 1,
+        "no step with contact: the member was not exercised"
+    );
+
     // A changed model (the twin's time step) changes the twin's output.
     let cfg = default_rig_with(dir.path(), "[twin]\nsteps_per_reference_period = 2000\n");
     let c = replay("c.json", &["--config", cfg.to_str().unwrap()]);

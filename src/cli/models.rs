@@ -62,15 +62,27 @@ pub(crate) fn cached_rom(
 /// `[truth] cutoff_ratio` x f(1FU) (more than the twin's), on the `[contact] nodes` patch
 /// (the model's `[reduction] contact_nodes`, if any, is the twin's only).
 pub(crate) fn truth_rom(cfg: &RigConfig, rebuild: bool, quiet: bool) -> anyhow::Result<Rom> {
-    let mut truth_cfg = cfg.clone();
-    truth_cfg.reduction = crate::config::ReductionSpec {
-        cutoff_ratio: Some(cfg.truth.cutoff_ratio),
+    finer_rom(cfg, cfg.truth.cutoff_ratio, rebuild, quiet)
+}
+
+/// The rig description's structure with modes up to `cutoff_ratio` x f(1FU), on the
+/// `[contact] nodes` patch: the simulated rig's truth ROM, and the twin comparison's
+/// discretisation member's (`[twin.discretisation]`); one cache entry for equal ratios.
+pub(crate) fn finer_rom(
+    cfg: &RigConfig,
+    cutoff_ratio: f64,
+    rebuild: bool,
+    quiet: bool,
+) -> anyhow::Result<Rom> {
+    let mut finer = cfg.clone();
+    finer.reduction = crate::config::ReductionSpec {
+        cutoff_ratio: Some(cutoff_ratio),
         cutoff_hz: None,
         modes: None,
         contact_nodes: None,
     };
-    let (truth, _, _) = cached_rom(&truth_cfg, rebuild, quiet)?;
-    Ok(truth)
+    let (rom, _, _) = cached_rom(&finer, rebuild, quiet)?;
+    Ok(rom)
 }
 
 /// Says before anything runs on `rom` that its impacts will be slow, when it keeps too few

@@ -8,8 +8,10 @@ use std::path::PathBuf;
 
 use crate::session::replay::{twin_model_source, TwinModelChoice, TwinRom};
 use crate::session::twin_replay::{
-    replay_twin, replay_twin_steps, EnsembleOptions, StepSelection, TwinLogCopy, TwinSink,
+    replay_twin, replay_twin_steps, DiscretisationMember, EnsembleOptions, StepSelection,
+    TwinLogCopy, TwinSink,
 };
+use crate::twin::{TwinModel, TwinSpec};
 
 use super::models;
 use super::paths::Files;
@@ -129,6 +131,36 @@ pub(crate) fn run(a: ReplayArgs) -> anyhow::Result<()> {
             "twin model extensions: {}",
             super::extensions_line(&twin_model.extensions)
         );
+        // The comparison's discretisation member: with an ensemble and a rig description to
+        // build its finer ROM from.
+        let d = &spec.discretisation;
+        let finer = match &model.rom {
+            TwinRom::Description(cfg) if d.enabled && ensemble.members > 0 => {
+                Some(models::finer_rom(cfg, d.cutoff_ratio, a.rebuild, true)?)
+            }
+            TwinRom::File(_) if d.enabled && ensemble.members > 0 => {
+                println!("note: no discretisation member with --rom (it is built from a rig description); the model spreads are the ensemble's");
+                None
+            }
+            _ => None,
+        };
+        let member = finer.as_ref().map(|f| DiscretisationMember {
+            model: TwinModel {
+                rom: f,
+                ..twin_model.clone()
+            },
+            spec: TwinSpec {
+                steps_per_sample: Some(d.steps_per_sample),
+                ..spec.clone()
+            },
+        });
+        if let Some(m) = &member {
+            println!(
+                "discretisation member: {} modes at {} steps per sample, in the windows with contact",
+                m.model.rom.n_modes(),
+                d.steps_per_sample
+            );
+        }
         let mut copy = match &a.out {
             Some(out) => Some(
                 TwinLogCopy::create(out, &a.file, &source, r.recording.layout.dt())
@@ -149,6 +181,7 @@ pub(crate) fn run(a: ReplayArgs) -> anyhow::Result<()> {
                 rom.meta.beam_length,
                 select,
                 ensemble,
+                member.as_ref(),
                 sink,
             ),
             None => replay_twin(
@@ -158,6 +191,7 @@ pub(crate) fn run(a: ReplayArgs) -> anyhow::Result<()> {
                 &spec,
                 rom.meta.beam_length,
                 ensemble,
+                member.as_ref(),
                 sink,
             ),
         }

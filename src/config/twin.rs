@@ -60,6 +60,41 @@ pub struct TwinSpec {
     pub ensemble_perturbation: f64,
     /// Resolution of the comparison's scores: the floor of the combined spread.
     pub tolerance: ComparisonTolerance,
+    /// The comparison's discretisation member (`[twin.discretisation]`).
+    pub discretisation: DiscretisationSpec,
+}
+
+/// `[twin.discretisation]`: a run of a finer model beside the ensemble (`rigtwin replay
+/// --twin` with an ensemble; the live twin runs none) in every record window with contact,
+/// measured or modelled: the rig description's structure with more modes and a finer step
+/// than the twin's, on the `[contact] nodes` patch, from rest at the start of the step before
+/// (its lead-in), with the clearance and wear the twin had there. Each feature's model spread
+/// gains `|twin - member|` in quadrature: in the impact band the twin's own modal truncation
+/// and step move its response more than chaos does (BENCHMARKS.md, "The comparison's
+/// spread"), and a right model must not score as a mismatch there. Off contact the two agree
+/// and nothing is run.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DiscretisationSpec {
+    /// Whether the member runs. Default true.
+    pub enabled: bool,
+    /// The member's ROM keeps the modes up to this multiple of f(1FU) (> 0). Default 400 (the
+    /// simulated rig's own resolution, `[truth] cutoff_ratio`'s default; its ROM is then the
+    /// same cache entry).
+    pub cutoff_ratio: f64,
+    /// The member's steps per DAQ sample (>= 1; below the open stability limit of its ROM).
+    /// Default 13 (7.5 us at 10240 Hz).
+    pub steps_per_sample: u32,
+}
+
+impl Default for DiscretisationSpec {
+    fn default() -> Self {
+        DiscretisationSpec {
+            enabled: true,
+            cutoff_ratio: 400.0,
+            steps_per_sample: 13,
+        }
+    }
 }
 
 /// `[twin.tolerance]`: the resolution below which measurement and model are not told apart,
@@ -116,6 +151,7 @@ impl Default for TwinSpec {
             ensemble_members: 4,
             ensemble_perturbation: 1e-3,
             tolerance: ComparisonTolerance::default(),
+            discretisation: DiscretisationSpec::default(),
         }
     }
 }
@@ -166,6 +202,21 @@ impl TwinSpec {
                 "twin.ensemble_perturbation",
                 e,
                 "a relative perturbation in (0, 0.1]",
+            ));
+        }
+        let d = &self.discretisation;
+        if !(d.cutoff_ratio.is_finite() && d.cutoff_ratio > 0.0) {
+            return Err(SpecError::new(
+                "twin.discretisation.cutoff_ratio",
+                d.cutoff_ratio,
+                "a finite multiple of f(1FU) > 0",
+            ));
+        }
+        if d.steps_per_sample == 0 {
+            return Err(SpecError::new(
+                "twin.discretisation.steps_per_sample",
+                0,
+                "at least 1 step per DAQ sample",
             ));
         }
         let t = &self.tolerance;
@@ -269,6 +320,26 @@ mod tests {
                     ..TwinSpec::default()
                 },
                 "twin.throttle = NaN",
+            ),
+            (
+                TwinSpec {
+                    discretisation: DiscretisationSpec {
+                        cutoff_ratio: 0.0,
+                        ..DiscretisationSpec::default()
+                    },
+                    ..TwinSpec::default()
+                },
+                "twin.discretisation.cutoff_ratio = 0",
+            ),
+            (
+                TwinSpec {
+                    discretisation: DiscretisationSpec {
+                        steps_per_sample: 0,
+                        ..DiscretisationSpec::default()
+                    },
+                    ..TwinSpec::default()
+                },
+                "twin.discretisation.steps_per_sample = 0",
             ),
         ] {
             let msg = spec.validate().unwrap_err().to_string();

@@ -111,6 +111,7 @@ fn whole_session(
         &spec,
         input.cfg.rig.beam_length,
         EnsembleOptions::NONE,
+        None,
         &mut (),
     )?;
     Ok(steps

@@ -155,7 +155,18 @@ impl EnsembleOptions {
     }
 }
 
-/// The ensemble's runner: one twin per thread, the recording, the clearances from the start.
+/// The comparison's discretisation member (`[twin.discretisation]`): a finer model than the
+/// twin's (more modes, a finer step; the same extensions and contact observation), run beside
+/// the ensemble in every record window with contact.
+pub struct DiscretisationMember<'a> {
+    /// The finer model.
+    pub model: TwinModel<'a>,
+    /// Its settings: the twin's with the member's steps per sample.
+    pub spec: TwinSpec,
+}
+
+/// The ensemble's runner: one twin per thread, the recording, the clearances from the start,
+/// and the discretisation member's twin, if any.
 struct Ensemble<'r> {
     rec: &'r Recording,
     schedule: ClearanceSchedule,
@@ -163,6 +174,7 @@ struct Ensemble<'r> {
     tolerance: ComparisonTolerance,
     options: EnsembleOptions,
     twins: Vec<Twin>,
+    fine: Option<Twin>,
 }
 
 impl<'r> Ensemble<'r> {
@@ -172,6 +184,7 @@ impl<'r> Ensemble<'r> {
         spec: &TwinSpec,
         schedule: &ClearanceSchedule,
         options: EnsembleOptions,
+        member: Option<&DiscretisationMember<'_>>,
     ) -> Result<Ensemble<'r>, TwinReplayError> {
         let threads = if options.members == 0 {
             0
@@ -181,6 +194,15 @@ impl<'r> Ensemble<'r> {
         let twins = (0..threads)
             .map(|_| Twin::new(model, spec, &rec.layout, schedule.first().unwrap_or(0.0)))
             .collect::<Result<Vec<_>, _>>()?;
+        let fine = match member {
+            Some(m) if threads > 0 => Some(Twin::new(
+                &m.model,
+                &m.spec,
+                &rec.layout,
+                schedule.first().unwrap_or(0.0),
+            )?),
+            _ => None,
+        };
         let observation = match twins.first() {
             Some(t) => t.observation().clone(),
             None => Observation::nominal(&model.circuit, model.contact_threshold_v),
@@ -192,20 +214,30 @@ impl<'r> Ensemble<'r> {
             tolerance: spec.tolerance,
             options,
             twins,
+            fine,
         })
     }
 
     /// `c` (the twin's comparison over the record window of `info`) with the model spread of
-    /// the ensemble started from `state`.
+    /// the ensemble started from `state`, and, in a window with contact (measured or
+    /// modelled), the discretisation member's difference, the member run from rest at
+    /// `lead_in` (the twin's state at the start of the step before; `None`: the recording's
+    /// start).
     fn apply(
         &mut self,
         info: &StepInfo,
         state: &TwinState,
+        lead_in: Option<&TwinState>,
         c: TwinComparison,
     ) -> Result<TwinComparison, TwinReplayError> {
         if self.twins.is_empty() {
             return Ok(c);
         }
+        let measured_contact = c.metrics.contact_fraction - c.contact_fraction_error;
+        let fine = self
+            .fine
+            .as_mut()
+            .filter(|_| c.metrics.contact_fraction > 0.0 || measured_contact > 0.0);
         let mut channels: Vec<&str> = Vec::new();
         for f in &c.features {
             if f.channel != CONTACT_CHANNEL && !channels.contains(&f.channel.as_str()) {
@@ -222,38 +254,55 @@ impl<'r> Ensemble<'r> {
             self.options.perturbation,
         );
         let (channels, noise) = (&channels, c.observation_noise.as_slice());
-        let runs: Vec<Result<Vec<MemberRun>, TwinReplayError>> = std::thread::scope(|scope| {
-            let handles: Vec<_> = self
-                .twins
-                .iter_mut()
-                .enumerate()
-                .map(|(j, twin)| {
+        let (runs, fine): (Vec<Result<Vec<MemberRun>, TwinReplayError>>, _) =
+            std::thread::scope(|scope| {
+                let fine = fine.map(|twin| {
                     scope.spawn(move || {
-                        (1..=members)
-                            .skip(j)
-                            .step_by(threads)
-                            .map(|m| {
-                                let s = state.perturbed(
-                                    &info.test,
-                                    info.step,
-                                    info.record_attempt,
-                                    m,
-                                    relative,
-                                );
-                                let f = run_member(
-                                    twin, rec, schedule, &s, info, o, tolerance, channels, noise,
-                                )?;
-                                Ok((m, f))
-                            })
-                            .collect()
+                        let Some(start) = lead_in_start(twin, rec, schedule, lead_in)? else {
+                            return Ok(None);
+                        };
+                        run_window(twin, rec, start, info, o, tolerance, channels, noise)
                     })
-                })
-                .collect();
-            handles
-                .into_iter()
-                .map(|h| h.join().expect("an ensemble thread panicked"))
-                .collect()
-        });
+                });
+                let handles: Vec<_> = self
+                    .twins
+                    .iter_mut()
+                    .enumerate()
+                    .map(|(j, twin)| {
+                        scope.spawn(move || {
+                            (1..=members)
+                                .skip(j)
+                                .step_by(threads)
+                                .map(|m| {
+                                    let s = state.perturbed(
+                                        &info.test,
+                                        info.step,
+                                        info.record_attempt,
+                                        m,
+                                        relative,
+                                    );
+                                    let f = run_member(
+                                        twin, rec, schedule, &s, info, o, tolerance, channels,
+                                        noise,
+                                    )?;
+                                    Ok((m, f))
+                                })
+                                .collect()
+                        })
+                    })
+                    .collect();
+                let runs = handles
+                    .into_iter()
+                    .map(|h| h.join().expect("an ensemble thread panicked"))
+                    .collect();
+                let fine: Result<Option<Vec<Feature>>, TwinReplayError> = match fine {
+                    Some(h) => h
+                        .join()
+                        .expect("the discretisation member's thread panicked"),
+                    None => Ok(None),
+                };
+                (runs, fine)
+            });
         let mut all = Vec::with_capacity(members);
         for r in runs {
             all.extend(r?);
@@ -261,7 +310,11 @@ impl<'r> Ensemble<'r> {
         // Member order, whatever thread ran it: the result does not depend on `jobs`.
         all.sort_by_key(|(m, _)| *m);
         let features: Vec<Vec<Feature>> = all.into_iter().filter_map(|(_, f)| f).collect();
-        Ok(c.with_ensemble(&features, &self.tolerance))
+        let c = c.with_ensemble(&features, &self.tolerance);
+        Ok(match fine? {
+            Some(f) => c.with_discretisation(&f, &self.tolerance),
+            None => c,
+        })
     }
 }
 
@@ -294,6 +347,66 @@ fn run_member(
     twin.set_state(state)?;
     let mut clearances = schedule.clone();
     while clearances.next_due(state.next_sample).is_some() {}
+    run_window(
+        twin,
+        rec,
+        (start, clearances),
+        info,
+        o,
+        tolerance,
+        channels,
+        noise,
+    )
+}
+
+/// Puts the discretisation member's `twin` at rest at the start of the step whose state the
+/// twin had at `lead_in` (`None`: the recording's first block), with the clearance and wear
+/// of that state: (the block index there, the clearances still due), or `None` if the
+/// recording does not hold that block.
+fn lead_in_start(
+    twin: &mut Twin,
+    rec: &Recording,
+    schedule: &ClearanceSchedule,
+    lead_in: Option<&TwinState>,
+) -> Result<Option<(usize, ClearanceSchedule)>, TwinReplayError> {
+    let mut clearances = schedule.clone();
+    let from = match lead_in {
+        Some(s) => {
+            twin.reset_keeping_geometry(s)?;
+            // The clearances due up to the state are in it.
+            while clearances.next_due(s.next_sample).is_some() {}
+            s.next_sample
+        }
+        None => {
+            let Some(first) = rec.blocks.first() else {
+                return Ok(None);
+            };
+            twin.reset();
+            twin.set_clearance(schedule.first().unwrap_or(0.0))?;
+            first.first_sample
+        }
+    };
+    let start = rec.blocks.partition_point(|b| b.first_sample < from);
+    Ok(
+        (rec.blocks.get(start).map(|b| b.first_sample) == Some(from))
+            .then_some((start, clearances)),
+    )
+}
+
+/// Runs `twin` (ready at block `start`, with the clearances still due) through the end of
+/// the record window of `info`: its features over the window with the measurement's noise
+/// floor `noise` laid on its channels (`None` if the twin missed part of the window).
+#[allow(clippy::too_many_arguments)]
+fn run_window(
+    twin: &mut Twin,
+    rec: &Recording,
+    (start, mut clearances): (usize, ClearanceSchedule),
+    info: &StepInfo,
+    o: &Observation,
+    tolerance: ComparisonTolerance,
+    channels: &[&str],
+    noise: &[NoiseFloor],
+) -> Result<Option<Vec<Feature>>, TwinReplayError> {
     let mut out = TwinWindows::new(o, tolerance);
     for b in rec.base_blocks(start) {
         if b.first_sample >= info.record_end_sample() {
@@ -354,6 +467,7 @@ pub fn replay_twin(
     spec: &TwinSpec,
     beam_length: f64,
     ensemble: EnsembleOptions,
+    member: Option<&DiscretisationMember<'_>>,
     sink: &mut dyn TwinSink,
 ) -> Result<TwinReplayStats, TwinReplayError> {
     if !rec.gaps.is_empty() {
@@ -381,7 +495,7 @@ pub fn replay_twin(
     let o = twin.observation();
     let mut out = TwinWindows::new(o, spec.tolerance);
     let mut stats = TwinReplayStats::default();
-    let mut members = Ensemble::new(rec, model, spec, &clearances, ensemble)?;
+    let mut members = Ensemble::new(rec, model, spec, &clearances, ensemble, member)?;
     let mut starts: HashMap<(String, usize), TwinState> = HashMap::new();
     let mut take = |done: Vec<Completed>,
                     starts: &HashMap<(String, usize), TwinState>,
@@ -391,7 +505,10 @@ pub fn replay_twin(
         for (info, c) in done {
             let c = match c {
                 Some(Ok(c)) => match starts.get(&(info.test.clone(), info.step)) {
-                    Some(state) => Some(members.apply(&info, state, c)?),
+                    Some(state) => {
+                        let lead_in = lead_in(starts.values(), state);
+                        Some(members.apply(&info, state, lead_in, c)?)
+                    }
                     None => Some(c),
                 },
                 Some(Err(source)) => {
@@ -542,6 +659,7 @@ pub fn replay_twin_steps(
     beam_length: f64,
     select: &StepSelection,
     ensemble: EnsembleOptions,
+    member: Option<&DiscretisationMember<'_>>,
     sink: &mut dyn TwinSink,
 ) -> Result<TwinReplayStats, TwinReplayError> {
     let unmatched = select.unmatched(rec);
@@ -574,7 +692,7 @@ pub fn replay_twin_steps(
     )?;
     let dt = rec.layout.dt();
     let o = twin.observation().clone();
-    let mut members = Ensemble::new(rec, model, spec, &first_schedule, ensemble)?;
+    let mut members = Ensemble::new(rec, model, spec, &first_schedule, ensemble, member)?;
     let mut stats = TwinReplayStats::default();
     let mut rig_seconds = 0.0;
     let mut results = Vec::new();
@@ -631,7 +749,10 @@ pub fn replay_twin_steps(
         }
         let c = match out.compare(info, measured, dt) {
             Some(Ok(c)) => match logged {
-                Some(m) => Some(members.apply(info, &m.state, c)?),
+                Some(m) => {
+                    let lead_in = lead_in(rec.twin_states.iter().map(|m| &m.state), &m.state);
+                    Some(members.apply(info, &m.state, lead_in, c)?)
+                }
                 None => Some(c),
             },
             Some(Err(source)) => {
@@ -649,6 +770,17 @@ pub fn replay_twin_steps(
     stats.steps_compared = summary.attach_twin(results);
     stats.wall_per_rig_second = wall.elapsed().as_secs_f64() / rig_seconds.max(f64::MIN_POSITIVE);
     Ok(stats)
+}
+
+/// The latest of `states` before `state` (the twin's state at the start of the step before):
+/// the discretisation member's lead-in.
+fn lead_in<'s>(
+    states: impl Iterator<Item = &'s TwinState>,
+    state: &TwinState,
+) -> Option<&'s TwinState> {
+    states
+        .filter(|s| s.next_sample < state.next_sample)
+        .max_by_key(|s| s.next_sample)
 }
 
 /// The sample of the `step_start` event of the step of `info`.

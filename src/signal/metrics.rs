@@ -44,7 +44,14 @@ pub struct MetricsParams {
 /// Metrics of one step. Velocities are normalised by `Omega q` (the reference's
 /// `u_tip / (Omega q_base)`), so the linear response at resonance is the dynamic amplification.
 #[derive(
-    Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize, schemars::JsonSchema,
+    Debug,
+    Clone,
+    Copy,
+    Default,
+    PartialEq,
+    serde::Serialize,
+    serde::Deserialize,
+    schemars::JsonSchema,
 )]
 pub struct StepMetrics {
     /// RMS of the upper tip velocity over the window / (Omega q).

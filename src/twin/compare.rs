@@ -64,6 +64,10 @@ pub struct TwinComparison {
     /// taken ([`crate::signal::noise`]); empty when the measurement has none.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub observation_noise: Vec<NoiseFloor>,
+    /// Whether the model spreads carry the discretisation member's difference
+    /// ([`TwinComparison::with_discretisation`], `[twin.discretisation]`).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub discretisation_member: bool,
 }
 
 /// One compared feature of one channel: the measurement and the model, each with its spread
@@ -193,6 +197,64 @@ impl TwinComparison {
         self.features = score(&measured, &model, tolerance);
         self.max_score = max_score(&self.features);
         self.ensemble_members = members.len();
+        self
+    }
+
+    /// A comparison of the features `measured` and `model` alone (every other field zero):
+    /// for tests of the scores.
+    #[cfg(test)]
+    pub(crate) fn synthetic(
+        measured: &[Feature],
+        model: &[Feature],
+        tolerance: &ComparisonTolerance,
+    ) -> TwinComparison {
+        let features = score(measured, model, tolerance);
+        TwinComparison {
+            metrics: StepMetrics::default(),
+            rms_error_upper: 0.0,
+            rms_error_lower: 0.0,
+            contact_fraction_error: 0.0,
+            impacts_per_period_error: 0.0,
+            spectrum_distance_db: None,
+            max_score: max_score(&features),
+            features,
+            ensemble_members: 0,
+            observation_noise: Vec::new(),
+            discretisation_member: false,
+        }
+    }
+
+    /// The comparison with the discretisation member's features `member` (a finer model's run
+    /// over the same window, `[twin.discretisation]`): each feature's model spread gains
+    /// `|model - member|` in quadrature, and the scores are recomputed with the floor
+    /// `tolerance`. A feature the member lacks keeps its spread.
+    pub fn with_discretisation(
+        mut self,
+        member: &[Feature],
+        tolerance: &ComparisonTolerance,
+    ) -> TwinComparison {
+        let (mut measured, mut model) = (Vec::new(), Vec::new());
+        for f in &self.features {
+            let d = member
+                .iter()
+                .find(|m| m.channel == f.channel && m.feature == f.feature)
+                .map_or(0.0, |m| (m.value - f.model).abs());
+            measured.push(Feature {
+                channel: f.channel.clone(),
+                feature: f.feature.clone(),
+                value: f.measured,
+                spread: f.measured_spread,
+            });
+            model.push(Feature {
+                channel: f.channel.clone(),
+                feature: f.feature.clone(),
+                value: f.model,
+                spread: Some(f.model_spread.unwrap_or(0.0).hypot(d)),
+            });
+        }
+        self.features = score(&measured, &model, tolerance);
+        self.max_score = max_score(&self.features);
+        self.discretisation_member = true;
         self
     }
 }
@@ -530,5 +592,6 @@ fn compare(twin: StepMetrics, measured: &StepMetrics) -> TwinComparison {
         max_score: None,
         ensemble_members: 0,
         observation_noise: Vec::new(),
+        discretisation_member: false,
     }
 }

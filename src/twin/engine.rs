@@ -376,6 +376,23 @@ impl Twin {
         self.set_state(&own)
     }
 
+    /// Resets the twin to rest, keeping of `state` (a state of a twin with the same
+    /// extensions, possibly of another ROM or step: e.g. the comparison's discretisation
+    /// member started from the twin's state) what the contact has made of the geometry: the
+    /// clearance and the wear so far. The clamp joints' sliders start unslipped, as the beams
+    /// are at rest. Fails, leaving the twin at rest with its own clearance, when the state's
+    /// effects do not fit (other extensions).
+    pub fn reset_keeping_geometry(&mut self, state: &TwinState) -> Result<(), TwinError> {
+        self.reset();
+        let mut effects = self.effects.state();
+        effects.nominal_clearance = state.effects.nominal_clearance;
+        effects.wear = state.effects.wear;
+        self.effects
+            .set_state(&mut self.rom, &effects)
+            .map_err(StateError::from)?;
+        Ok(())
+    }
+
     /// Runs the twin over one DAQ block (see the module docs). Fails, leaving the twin as it
     /// was, on a block that does not fit the layout or starts before the end of the last one.
     pub fn push_block(&mut self, block: &DaqBlock) -> Result<TwinBlock, TwinError> {

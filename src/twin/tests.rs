@@ -743,6 +743,96 @@ fn a_restored_state_continues_bit_for_bit_and_another_model_is_refused() {
     assert!(err.contains("contact_voltage"), "{err}");
 }
 
+/// The discretisation member starts at rest with the clearance and wear the twin had
+/// (`Twin::reset_keeping_geometry`), on a ROM of another size; a state of other extensions is
+/// refused.
+#[test]
+fn a_finer_member_starts_at_rest_with_the_twins_clearance_and_wear() {
+    let rom = stub_rom(&[50.0, 400.0], 0.01, 0.5, 2e-4);
+    let finer = stub_rom(&[50.0, 400.0, 900.0], 0.01, 0.5, 2e-4);
+    let lay = layout();
+    let a = sine(5.0, 50.0);
+    let blocks: Vec<DaqBlock> = (0..60).map(|s| block(&lay, s, &a)).collect();
+    let extensions = crate::config::PhysicsSpec {
+        wear: Some(crate::config::physics::WearSpec {
+            coefficient: 1e-3,
+            max_growth: Some(2e-5),
+        }),
+        ..Default::default()
+    };
+    let model = TwinModel::nominal(&rom).with_extensions(extensions.clone());
+    let mut twin = Twin::new(&model, &TwinSpec::default(), &lay, 2e-4).unwrap();
+    for b in &blocks {
+        twin.push_block(b).unwrap();
+    }
+    twin.set_clearance(2.5e-4).unwrap();
+    let state = twin.state().unwrap();
+    assert!(twin.clearance() > 2.5e-4, "wear did not act");
+    let fine_model = TwinModel::nominal(&finer).with_extensions(extensions);
+    let fine_spec = TwinSpec {
+        steps_per_sample: Some(13),
+        ..TwinSpec::default()
+    };
+    let mut fine = Twin::new(&fine_model, &fine_spec, &lay, 2e-4).unwrap();
+    fine.push_block(&blocks[0]).unwrap();
+    fine.reset_keeping_geometry(&state).unwrap();
+    assert_eq!(fine.clearance().to_bits(), twin.clearance().to_bits());
+    assert_eq!(fine.next_sample(), None, "at rest, ready for any block");
+    // At rest: its first block from there is a run from rest.
+    let mut fresh = Twin::new(&fine_model, &fine_spec, &lay, 2e-4).unwrap();
+    fresh.reset_keeping_geometry(&state).unwrap();
+    let (x, y) = (
+        fine.push_block(&blocks[7]).unwrap(),
+        fresh.push_block(&blocks[7]).unwrap(),
+    );
+    assert_eq!(bits(&[x]), bits(&[y]));
+    // Other extensions (no wear): refused.
+    let mut other = Twin::new(&TwinModel::nominal(&finer), &fine_spec, &lay, 2e-4).unwrap();
+    let err = other
+        .reset_keeping_geometry(&state)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("wear"), "{err}");
+}
+
+/// The discretisation member's difference enters each model spread in quadrature and the
+/// scores follow; a feature the member lacks keeps its spread.
+#[test]
+fn the_discretisation_member_widens_the_model_spread_in_quadrature() {
+    use crate::signal::Feature;
+    let tol = crate::twin::ComparisonTolerance {
+        relative: 0.0,
+        contact_fraction: 0.0,
+        impacts_per_period: 0.0,
+    };
+    let f = |channel: &str, feature: &str, value: f64, spread: f64| Feature {
+        channel: channel.into(),
+        feature: feature.into(),
+        value,
+        spread: Some(spread),
+    };
+    let c = crate::twin::TwinComparison::synthetic(
+        &[
+            f("upper_tip", "rms", 10.0, 0.3),
+            f("contact", "contact_fraction", 0.004, 0.0003),
+        ],
+        &[
+            f("upper_tip", "rms", 12.0, 0.4),
+            f("contact", "contact_fraction", 0.008, 0.0004),
+        ],
+        &tol,
+    );
+    assert!((c.features[0].score - 2.0 / 0.5).abs() < 1e-12);
+    let d = c.with_discretisation(&[f("upper_tip", "rms", 10.8, 0.2)], &tol);
+    assert!(d.discretisation_member);
+    // |12 - 10.8| = 1.2 joins the model's 0.4: sqrt(0.16 + 1.44) = 1.265.
+    let s = d.features[0].model_spread.unwrap();
+    assert!((s - 1.6f64.sqrt()).abs() < 1e-12, "{s}");
+    assert!((d.features[0].score - 2.0 / (0.09f64 + 1.6).sqrt()).abs() < 1e-12);
+    assert_eq!(d.features[1].model_spread, Some(0.0004));
+    assert_eq!(d.max_score, Some(d.features[1].score));
+}
+
 /// Like with like for noise: the vibrometer reads the upper tip with white noise 3 % of its
 /// amplitude, which raises the measured per-period amplitudes by about 4 % (the module docs of
 /// `crate::signal::noise`); a model that is the rig exactly scores that as a mismatch unless

@@ -8,7 +8,7 @@
 //! `/twin/blocks` and `/twin/steps`, and a `twin_replay` metadata record naming the model;
 //! `rigtwin report NEW.mcap` draws the re-run twin beside the measurement.
 
-use std::collections::{HashMap, VecDeque};
+use std::collections::{HashMap, HashSet, VecDeque};
 use std::path::Path;
 
 use serde::{Deserialize, Serialize};
@@ -220,24 +220,24 @@ impl<'r> Ensemble<'r> {
 
     /// `c` (the twin's comparison over the record window of `info`) with the model spread of
     /// the ensemble started from `state`, and, in a window with contact (measured or
-    /// modelled), the discretisation member's difference, the member run from rest at
-    /// `lead_in` (the twin's state at the start of the step before; `None`: the recording's
-    /// start).
+    /// modelled) or right after one (`after_contact`: the measured window before had contact;
+    /// the response there still carries the state the contact left), the discretisation
+    /// member's difference, the member run from rest at `lead_in` (the twin's state at the
+    /// start of the step before; `None`: the recording's start).
     fn apply(
         &mut self,
         info: &StepInfo,
-        state: &TwinState,
-        lead_in: Option<&TwinState>,
+        (state, lead_in): (&TwinState, Option<&TwinState>),
+        after_contact: bool,
         c: TwinComparison,
     ) -> Result<TwinComparison, TwinReplayError> {
         if self.twins.is_empty() {
             return Ok(c);
         }
         let measured_contact = c.metrics.contact_fraction - c.contact_fraction_error;
-        let fine = self
-            .fine
-            .as_mut()
-            .filter(|_| c.metrics.contact_fraction > 0.0 || measured_contact > 0.0);
+        let fine = self.fine.as_mut().filter(|_| {
+            after_contact || c.metrics.contact_fraction > 0.0 || measured_contact > 0.0
+        });
         let mut channels: Vec<&str> = Vec::new();
         for f in &c.features {
             if f.channel != CONTACT_CHANNEL && !channels.contains(&f.channel.as_str()) {
@@ -496,6 +496,7 @@ pub fn replay_twin(
     let mut out = TwinWindows::new(o, spec.tolerance);
     let mut stats = TwinReplayStats::default();
     let mut members = Ensemble::new(rec, model, spec, &clearances, ensemble, member)?;
+    let after_contact = after_contact(rec, summary);
     let mut starts: HashMap<(String, usize), TwinState> = HashMap::new();
     let mut take = |done: Vec<Completed>,
                     starts: &HashMap<(String, usize), TwinState>,
@@ -507,7 +508,8 @@ pub fn replay_twin(
                 Some(Ok(c)) => match starts.get(&(info.test.clone(), info.step)) {
                     Some(state) => {
                         let lead_in = lead_in(starts.values(), state);
-                        Some(members.apply(&info, state, lead_in, c)?)
+                        let after = after_contact.contains(&(info.test.clone(), info.step));
+                        Some(members.apply(&info, (state, lead_in), after, c)?)
                     }
                     None => Some(c),
                 },
@@ -693,6 +695,7 @@ pub fn replay_twin_steps(
     let dt = rec.layout.dt();
     let o = twin.observation().clone();
     let mut members = Ensemble::new(rec, model, spec, &first_schedule, ensemble, member)?;
+    let after_contact = after_contact(rec, summary);
     let mut stats = TwinReplayStats::default();
     let mut rig_seconds = 0.0;
     let mut results = Vec::new();
@@ -751,7 +754,8 @@ pub fn replay_twin_steps(
             Some(Ok(c)) => match logged {
                 Some(m) => {
                     let lead_in = lead_in(rec.twin_states.iter().map(|m| &m.state), &m.state);
-                    Some(members.apply(info, &m.state, lead_in, c)?)
+                    let after = after_contact.contains(&(info.test.clone(), info.step));
+                    Some(members.apply(info, (&m.state, lead_in), after, c)?)
                 }
                 None => Some(c),
             },
@@ -770,6 +774,20 @@ pub fn replay_twin_steps(
     stats.steps_compared = summary.attach_twin(results);
     stats.wall_per_rig_second = wall.elapsed().as_secs_f64() / rig_seconds.max(f64::MIN_POSITIVE);
     Ok(stats)
+}
+
+/// The record windows (test, step) whose measured window before (in the recording's order)
+/// had contact.
+fn after_contact(rec: &Recording, summary: &SessionSummary) -> HashSet<(String, usize)> {
+    let mut out = HashSet::new();
+    let mut before = false;
+    for (info, s) in rec.record_windows().zip(summary.steps()) {
+        if before {
+            out.insert((info.test.clone(), info.step));
+        }
+        before = s.measured.metrics.contact_fraction > 0.0;
+    }
+    out
 }
 
 /// The latest of `states` before `state` (the twin's state at the start of the step before):

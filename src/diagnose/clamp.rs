@@ -17,6 +17,7 @@ use crate::config::{Beam, ClampFrictionSpec};
 
 use super::judge::{set_error, Candidate, Steps, Work};
 use super::linear::{AmplitudeDependence, LinearEvidence, ModeFit};
+use super::rerun::Span;
 use super::runfit::{signed_scores, RunProblem, RunResiduals};
 use super::{DiagnoseError, DiagnoseProgress};
 
@@ -48,6 +49,8 @@ struct ClampFit<'w, 'a, 's> {
     work: RefCell<&'w mut Work<'a>>,
     spec: &'s dyn Fn(f64, f64) -> ClampFrictionSpec,
     train: &'s [usize],
+    /// The train tests' steps run ([`super::rerun::SessionSteps::before_contact`]).
+    spans: &'s [Span],
     /// The grid's best share and ratio (1/m).
     start: (f64, f64),
     runs: RefCell<Vec<Run>>,
@@ -86,7 +89,7 @@ impl Run {
 fn clamp_lm(
     work: &mut Work<'_>,
     spec: &dyn Fn(f64, f64) -> ClampFrictionSpec,
-    train: &[usize],
+    (train, spans): (&[usize], &[Span]),
     start: (f64, f64),
 ) -> Result<Vec<Run>, DiagnoseError> {
     let fit = RunProblem {
@@ -94,6 +97,7 @@ fn clamp_lm(
             work: RefCell::new(work),
             spec,
             train,
+            spans,
             start,
             runs: RefCell::new(Vec::new()),
             failed: RefCell::new(None),
@@ -131,7 +135,7 @@ impl RunResiduals for ClampFit<'_, '_, '_> {
         let mut work = self.work.borrow_mut();
         let mut ext = work.accepted.clone();
         ext.clamp_friction = Some((self.spec)(sf, r));
-        let scores = match work.scores(&ext, self.train) {
+        let scores = match work.scores_spans(&ext, self.spans) {
             Ok(s) => s,
             Err(e) => {
                 *self.failed.borrow_mut() = Some(e);
@@ -272,18 +276,39 @@ pub(super) fn clamp_stage(work: &mut Work<'_>, lin: &LinearEvidence) -> Result<(
         sliders: 64,
         beams: beams.clone(),
     };
+    // NOTE: every run stops before each test's first measured contact: the clamp is fitted on
+    // impact-free steps, and a band test's contact and the steps past it (chaotic, and the
+    // slowest to run) made most of a run's cost (an identify.toml session: 134 runs, 21,700 s
+    // of rig time, 30 min) for steps the fit does not score or whose state the contact set.
+    let before_contact = |tests: &[usize]| -> Vec<Span> {
+        tests
+            .iter()
+            .filter_map(|&t| work.steps.before_contact(t))
+            .collect()
+    };
+    let (fitted_spans, train_spans) = (before_contact(&fitted), before_contact(&train));
     let line = format!(
-        "clamp_friction: {} model runs (share per slip amplitude 0.7-1.3 x {rho:.0} /m on {}; stiffness share 0.035-0.56 on {}), then Levenberg-Marquardt on both",
+        "clamp_friction: {} model runs (share per slip amplitude 0.7-1.3 x {rho:.0} /m on {}; stiffness share 0.035-0.56 on {}; each up to the test's first contact), then Levenberg-Marquardt on both",
         RATIO_GRID.len() + SHARE_GRID.len(),
         work.names(&fitted).join(", "),
         work.names(&train).join(", ")
     );
     (work.progress)(DiagnoseProgress::Evaluation(line));
+    let with_joint = |work: &Work<'_>, sf: f64, r: f64| {
+        let mut ext = work.accepted.clone();
+        ext.clamp_friction = Some(spec(sf, r));
+        ext
+    };
+    // Each grid's points side by side on the runner's threads.
+    let ratio_exts: Vec<_> = RATIO_GRID
+        .iter()
+        .map(|m| (with_joint(work, RATIO_SHARE, rho * m), fitted_spans.clone()))
+        .collect();
+    work.prefetch(ratio_exts)?;
     let mut ratio_runs: Vec<(f64, f64, f64)> = Vec::new();
     for m in RATIO_GRID {
-        let mut ext = work.accepted.clone();
-        ext.clamp_friction = Some(spec(RATIO_SHARE, rho * m));
-        let s = work.scores(&ext, &fitted)?;
+        let ext = with_joint(work, RATIO_SHARE, rho * m);
+        let s = work.scores_spans(&ext, &fitted_spans)?;
         if let Some(e) = set_error(&s, &fitted, Steps::ImpactFree) {
             ratio_runs.push((RATIO_SHARE, rho * m, e));
         }
@@ -291,13 +316,17 @@ pub(super) fn clamp_stage(work: &mut Work<'_>, lin: &LinearEvidence) -> Result<(
     let Some(&(_, r1, _)) = ratio_runs.iter().min_by(|a, b| a.2.total_cmp(&b.2)) else {
         return Ok(());
     };
-    // The share on its grid at a ratio `r`: (share, ratio, RMS signed score, features).
-    let scan = |work: &mut Work<'_>, r: f64| -> Result<Vec<Run>, DiagnoseError> {
+    // The shares `shares` at a ratio `r`: (share, ratio, RMS signed score, features).
+    let scan = |work: &mut Work<'_>, shares: &[f64], r: f64| -> Result<Vec<Run>, DiagnoseError> {
+        let exts = shares
+            .iter()
+            .map(|&sf| (with_joint(work, sf, r), train_spans.clone()))
+            .collect();
+        work.prefetch(exts)?;
         let mut v = Vec::new();
-        for sf in SHARE_GRID {
-            let mut ext = work.accepted.clone();
-            ext.clamp_friction = Some(spec(sf, r));
-            let s = work.scores(&ext, &train)?;
+        for &sf in shares {
+            let ext = with_joint(work, sf, r);
+            let s = work.scores_spans(&ext, &train_spans)?;
             let res = signed_scores(&s, &train);
             if !res.is_empty() && res.iter().all(|x| x.is_finite()) {
                 v.push(Run::of(sf, r, &res));
@@ -306,7 +335,7 @@ pub(super) fn clamp_stage(work: &mut Work<'_>, lin: &LinearEvidence) -> Result<(
         Ok(v)
     };
     let best = |v: &[Run]| v.iter().copied().min_by(|a, b| a.rms.total_cmp(&b.rms));
-    let mut tried = scan(work, r1)?;
+    let mut tried = scan(work, &SHARE_GRID, r1)?;
     let share_scan: Vec<serde_json::Value> = tried
         .iter()
         .map(|t| json!({"stiffness_fraction": t.share, "train_error": t.rms}))
@@ -314,25 +343,41 @@ pub(super) fn clamp_stage(work: &mut Work<'_>, lin: &LinearEvidence) -> Result<(
     let Some(start) = best(&tried) else {
         return Ok(());
     };
-    tried.extend(clamp_lm(work, &spec, &train, (start.share, start.ratio))?);
+    tried.extend(clamp_lm(
+        work,
+        &spec,
+        (&train, &train_spans),
+        (start.share, start.ratio),
+    )?);
     // The share again at the fitted ratio: at the first scan's ratio the share's valley can be
     // flat (a hidden 0.15: errors 1.08-1.09 for shares 0.1-0.28, the fit went on to 0.27).
-    // A better share there starts a second fit.
+    // A better share there starts a second fit. The grid's shares within a factor 2 of the
+    // fitted one (the first scan already ruled out the rest at a ratio close to this one).
     let Some(first) = best(&tried) else {
         return Ok(());
     };
-    let rescan = scan(work, first.ratio)?;
+    let near: Vec<f64> = SHARE_GRID
+        .iter()
+        .copied()
+        .filter(|s| (s / first.share).ln().abs() <= 2f64.ln() + 1e-9)
+        .collect();
+    let rescan = scan(work, &near, first.ratio)?;
     tried.extend(rescan.iter().copied());
     if let Some(b) = best(&rescan).filter(|b| (b.share / first.share - 1.0).abs() > 0.1) {
-        tried.extend(clamp_lm(work, &spec, &train, (b.share, b.ratio))?);
+        tried.extend(clamp_lm(
+            work,
+            &spec,
+            (&train, &train_spans),
+            (b.share, b.ratio),
+        )?);
     }
     let Some(fitted_run) = best(&tried) else {
         return Ok(());
     };
     let (sf, r, e) = (fitted_run.share, fitted_run.ratio, fitted_run.rms);
     // The shares the session cannot tell from the fitted one: those of the scan at the fitted
-    // ratio whose sum of squared scores is within 1 of the best's (the scores are in units of
-    // the comparison's spread).
+    // ratio (within a factor 2 of the first fit's share) whose sum of squared scores is within
+    // 1 of the best's (the scores are in units of the comparison's spread).
     let within: Vec<f64> = rescan
         .iter()
         .filter(|x| x.ssr() - fitted_run.ssr() <= 1.0)

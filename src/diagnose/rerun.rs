@@ -152,6 +152,21 @@ impl SessionSteps {
             .map_or(0, |f| f.saturating_sub(before))
     }
 
+    /// Test `ti`'s steps before its first measured contact: the whole test without contact,
+    /// `None` when its first step has contact. A run over them stops before the contact (the
+    /// slowest part to run, and chaotic) and compares what the linear model and the clamp see.
+    pub fn before_contact(&self, ti: usize) -> Option<Span> {
+        match self.first_contact(ti) {
+            None => Some(Span::whole(ti)),
+            Some(0) => None,
+            Some(f) => Some(Span {
+                test: ti,
+                from: 0,
+                through: Some(f - 1),
+            }),
+        }
+    }
+
     /// The step `past` steps after the first (`first`) or last measured contact step of test
     /// `ti`, to cut a run there; `None` (the whole test) when the test has no contact or that
     /// step is its last or beyond.

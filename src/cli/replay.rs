@@ -154,6 +154,10 @@ pub(crate) fn run(a: ReplayArgs) -> anyhow::Result<()> {
                 ..spec.clone()
             },
         });
+        let ensemble = EnsembleOptions {
+            discretisation: member.as_ref(),
+            ..ensemble
+        };
         if let Some(m) = &member {
             println!(
                 "discretisation member: {} modes at {} steps per sample, in the windows with contact",
@@ -181,7 +185,6 @@ pub(crate) fn run(a: ReplayArgs) -> anyhow::Result<()> {
                 rom.meta.beam_length,
                 select,
                 ensemble,
-                member.as_ref(),
                 sink,
             ),
             None => replay_twin(
@@ -191,7 +194,6 @@ pub(crate) fn run(a: ReplayArgs) -> anyhow::Result<()> {
                 &spec,
                 rom.meta.beam_length,
                 ensemble,
-                member.as_ref(),
                 sink,
             ),
         }

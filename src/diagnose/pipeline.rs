@@ -111,7 +111,6 @@ fn whole_session(
         &spec,
         input.cfg.rig.beam_length,
         EnsembleOptions::NONE,
-        None,
         &mut (),
     )?;
     Ok(steps

@@ -127,30 +127,34 @@ pub struct TwinReplayStats {
 /// `perturbation` of their norm ([`TwinState::perturbed`]), through the end of the step's
 /// record window, on `jobs` threads. A step that starts with the recording (from rest) gets
 /// no ensemble.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct EnsembleOptions {
+#[derive(Clone, Copy)]
+pub struct EnsembleOptions<'a> {
     /// Members besides the twin's own run (0: none).
     pub members: usize,
     /// Relative size of a member's perturbation.
     pub perturbation: f64,
     /// Threads (>= 1).
     pub jobs: usize,
+    /// The discretisation member run beside the members (none without members).
+    pub discretisation: Option<&'a DiscretisationMember<'a>>,
 }
 
-impl EnsembleOptions {
+impl<'a> EnsembleOptions<'a> {
     /// No ensemble.
-    pub const NONE: EnsembleOptions = EnsembleOptions {
+    pub const NONE: EnsembleOptions<'static> = EnsembleOptions {
         members: 0,
         perturbation: 1e-3,
         jobs: 1,
+        discretisation: None,
     };
 
-    /// The ensemble of `[twin]` (`spec`) on `jobs` threads.
-    pub fn of(spec: &TwinSpec, jobs: usize) -> EnsembleOptions {
+    /// The ensemble of `[twin]` (`spec`) on `jobs` threads, without a discretisation member.
+    pub fn of(spec: &TwinSpec, jobs: usize) -> EnsembleOptions<'a> {
         EnsembleOptions {
             members: spec.ensemble_members,
             perturbation: spec.ensemble_perturbation,
             jobs: jobs.max(1),
+            discretisation: None,
         }
     }
 }
@@ -172,7 +176,7 @@ struct Ensemble<'r> {
     schedule: ClearanceSchedule,
     observation: Observation,
     tolerance: ComparisonTolerance,
-    options: EnsembleOptions,
+    options: EnsembleOptions<'r>,
     twins: Vec<Twin>,
     fine: Option<Twin>,
 }
@@ -183,8 +187,7 @@ impl<'r> Ensemble<'r> {
         model: &TwinModel<'_>,
         spec: &TwinSpec,
         schedule: &ClearanceSchedule,
-        options: EnsembleOptions,
-        member: Option<&DiscretisationMember<'_>>,
+        options: EnsembleOptions<'r>,
     ) -> Result<Ensemble<'r>, TwinReplayError> {
         let threads = if options.members == 0 {
             0
@@ -194,7 +197,7 @@ impl<'r> Ensemble<'r> {
         let twins = (0..threads)
             .map(|_| Twin::new(model, spec, &rec.layout, schedule.first().unwrap_or(0.0)))
             .collect::<Result<Vec<_>, _>>()?;
-        let fine = match member {
+        let fine = match options.discretisation {
             Some(m) if threads > 0 => Some(Twin::new(
                 &m.model,
                 &m.spec,
@@ -466,8 +469,7 @@ pub fn replay_twin(
     model: &TwinModel<'_>,
     spec: &TwinSpec,
     beam_length: f64,
-    ensemble: EnsembleOptions,
-    member: Option<&DiscretisationMember<'_>>,
+    ensemble: EnsembleOptions<'_>,
     sink: &mut dyn TwinSink,
 ) -> Result<TwinReplayStats, TwinReplayError> {
     if !rec.gaps.is_empty() {
@@ -495,7 +497,7 @@ pub fn replay_twin(
     let o = twin.observation();
     let mut out = TwinWindows::new(o, spec.tolerance);
     let mut stats = TwinReplayStats::default();
-    let mut members = Ensemble::new(rec, model, spec, &clearances, ensemble, member)?;
+    let mut members = Ensemble::new(rec, model, spec, &clearances, ensemble)?;
     let after_contact = after_contact(rec, summary);
     let mut starts: HashMap<(String, usize), TwinState> = HashMap::new();
     let mut take = |done: Vec<Completed>,
@@ -660,8 +662,7 @@ pub fn replay_twin_steps(
     spec: &TwinSpec,
     beam_length: f64,
     select: &StepSelection,
-    ensemble: EnsembleOptions,
-    member: Option<&DiscretisationMember<'_>>,
+    ensemble: EnsembleOptions<'_>,
     sink: &mut dyn TwinSink,
 ) -> Result<TwinReplayStats, TwinReplayError> {
     let unmatched = select.unmatched(rec);
@@ -694,7 +695,7 @@ pub fn replay_twin_steps(
     )?;
     let dt = rec.layout.dt();
     let o = twin.observation().clone();
-    let mut members = Ensemble::new(rec, model, spec, &first_schedule, ensemble, member)?;
+    let mut members = Ensemble::new(rec, model, spec, &first_schedule, ensemble)?;
     let after_contact = after_contact(rec, summary);
     let mut stats = TwinReplayStats::default();
     let mut rig_seconds = 0.0;

@@ -256,7 +256,13 @@ impl<'r> Ensemble<'r> {
             self.tolerance,
             self.options.perturbation,
         );
-        let (channels, noise) = (&channels, c.observation_noise.as_slice());
+        let window = &Window {
+            info,
+            observation: o,
+            tolerance,
+            channels: &channels,
+            noise: c.observation_noise.as_slice(),
+        };
         let (runs, fine): (Vec<Result<Vec<MemberRun>, TwinReplayError>>, _) =
             std::thread::scope(|scope| {
                 let fine = fine.map(|twin| {
@@ -264,7 +270,7 @@ impl<'r> Ensemble<'r> {
                         let Some(start) = lead_in_start(twin, rec, schedule, lead_in)? else {
                             return Ok(None);
                         };
-                        run_window(twin, rec, start, info, o, tolerance, channels, noise)
+                        run_window(twin, rec, start, window)
                     })
                 });
                 let handles: Vec<_> = self
@@ -284,10 +290,7 @@ impl<'r> Ensemble<'r> {
                                         m,
                                         relative,
                                     );
-                                    let f = run_member(
-                                        twin, rec, schedule, &s, info, o, tolerance, channels,
-                                        noise,
-                                    )?;
+                                    let f = run_member(twin, rec, schedule, &s, window)?;
                                     Ok((m, f))
                                 })
                                 .collect()
@@ -325,41 +328,39 @@ impl<'r> Ensemble<'r> {
 /// does not hold the block its state starts at).
 type MemberRun = (usize, Option<Vec<Feature>>);
 
-/// One run of `twin` from `state` through the end of the record window of `info`: its
-/// features over the window, the measurement's noise floor `noise` laid on its channels
+/// The record window an ensemble run is compared over: the step, how the model is observed,
+/// the compared beam channels and the measurement's noise floor laid on them.
+struct Window<'a> {
+    info: &'a StepInfo,
+    observation: &'a Observation,
+    tolerance: ComparisonTolerance,
+    channels: &'a [&'a str],
+    noise: &'a [NoiseFloor],
+}
+
+/// The index of the block of `rec` that starts at sample `sample`, if it holds one.
+fn block_at(rec: &Recording, sample: u64) -> Option<usize> {
+    let k = rec.blocks.partition_point(|b| b.first_sample < sample);
+    (rec.blocks.get(k).map(|b| b.first_sample) == Some(sample)).then_some(k)
+}
+
+/// One run of `twin` from `state` through the end of `window`: its features over the window
 /// (`None` if the recording does not hold the state's block).
-#[allow(clippy::too_many_arguments)]
 fn run_member(
     twin: &mut Twin,
     rec: &Recording,
     schedule: &ClearanceSchedule,
     state: &TwinState,
-    info: &StepInfo,
-    o: &Observation,
-    tolerance: ComparisonTolerance,
-    channels: &[&str],
-    noise: &[NoiseFloor],
+    window: &Window<'_>,
 ) -> Result<Option<Vec<Feature>>, TwinReplayError> {
-    let start = rec
-        .blocks
-        .partition_point(|b| b.first_sample < state.next_sample);
-    if rec.blocks.get(start).map(|b| b.first_sample) != Some(state.next_sample) {
+    let Some(start) = block_at(rec, state.next_sample) else {
         return Ok(None);
-    }
+    };
     twin.reset();
     twin.set_state(state)?;
     let mut clearances = schedule.clone();
     while clearances.next_due(state.next_sample).is_some() {}
-    run_window(
-        twin,
-        rec,
-        (start, clearances),
-        info,
-        o,
-        tolerance,
-        channels,
-        noise,
-    )
+    run_window(twin, rec, (start, clearances), window)
 }
 
 /// Puts the discretisation member's `twin` at rest at the start of the step whose state the
@@ -389,28 +390,26 @@ fn lead_in_start(
             first.first_sample
         }
     };
-    let start = rec.blocks.partition_point(|b| b.first_sample < from);
-    Ok(
-        (rec.blocks.get(start).map(|b| b.first_sample) == Some(from))
-            .then_some((start, clearances)),
-    )
+    Ok(block_at(rec, from).map(|start| (start, clearances)))
 }
 
 /// Runs `twin` (ready at block `start`, with the clearances still due) through the end of
-/// the record window of `info`: its features over the window with the measurement's noise
-/// floor `noise` laid on its channels (`None` if the twin missed part of the window).
-#[allow(clippy::too_many_arguments)]
+/// `window`: its features over the window with the measurement's noise floor laid on its
+/// channels (`None` if the twin missed part of the window).
 fn run_window(
     twin: &mut Twin,
     rec: &Recording,
     (start, mut clearances): (usize, ClearanceSchedule),
-    info: &StepInfo,
-    o: &Observation,
-    tolerance: ComparisonTolerance,
-    channels: &[&str],
-    noise: &[NoiseFloor],
+    window: &Window<'_>,
 ) -> Result<Option<Vec<Feature>>, TwinReplayError> {
-    let mut out = TwinWindows::new(o, tolerance);
+    let Window {
+        info,
+        observation,
+        tolerance,
+        channels,
+        noise,
+    } = *window;
+    let mut out = TwinWindows::new(observation, tolerance);
     for b in rec.base_blocks(start) {
         if b.first_sample >= info.record_end_sample() {
             break;

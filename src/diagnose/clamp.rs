@@ -277,9 +277,10 @@ pub(super) fn clamp_stage(work: &mut Work<'_>, lin: &LinearEvidence) -> Result<(
         beams: beams.clone(),
     };
     // NOTE: every run stops before each test's first measured contact: the clamp is fitted on
-    // impact-free steps, and a band test's contact and the steps past it (chaotic, and the
-    // slowest to run) made most of a run's cost (an identify.toml session: 134 runs, 21,700 s
-    // of rig time, 30 min) for steps the fit does not score or whose state the contact set.
+    // impact-free steps, and a band test's contact and the steps past it are chaotic, slow to
+    // run, and carry a state the contact set. The saving depends on how much contact the
+    // band tests have: on an identify.toml session with a hidden clamp (8 impact steps) the
+    // rig time of the stage fell only from 21,700 s to 20,700 s (BENCHMARKS.md).
     let before_contact = |tests: &[usize]| -> Vec<Span> {
         tests
             .iter()

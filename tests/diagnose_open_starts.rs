@@ -73,11 +73,7 @@ fn runs_from_an_open_state_compare_what_runs_from_rest_do() {
         "first contact at step {first}: too early for the test"
     );
     let from = first - 2;
-    let span = Span {
-        test: 0,
-        from,
-        through: Some(first + 1),
-    };
+    let span = Span::of_test(0, from, Some(first + 1));
 
     // Captured with a clearance 5e-5 m smaller than the plan's; run with the plan's and a
     // larger one (no closer), and with smaller ones (closer: from rest).

@@ -327,11 +327,7 @@ impl Work<'_> {
         through: Option<usize>,
     ) -> Result<Span, DiagnoseError> {
         let open = from > 0 && self.runner.capture_open(closest, test, from)?;
-        Ok(Span {
-            test,
-            from: if open { from } else { 0 },
-            through,
-        })
+        Ok(Span::of_test(test, if open { from } else { 0 }, through))
     }
 
     pub(super) fn names(&self, tests: &[usize]) -> Vec<String> {

@@ -159,12 +159,39 @@ impl SessionSteps {
         match self.first_contact(ti) {
             None => Some(Span::whole(ti)),
             Some(0) => None,
-            Some(f) => Some(Span {
-                test: ti,
-                from: 0,
-                through: Some(f - 1),
-            }),
+            Some(f) => Some(Span::of_test(ti, 0, Some(f - 1))),
         }
+    }
+
+    /// [`SessionSteps::before_contact`] cut to the steps near test `ti`'s resonance: from the
+    /// first to the last step whose measured response (both tips' RMS velocities over the
+    /// base's, summed) rises above the span's smallest by at least `fraction` of the largest
+    /// rise, run from rest at the step before ([`LeadIn::Span`]). Off resonance the tips move
+    /// little and a joint in the clamp hardly slips: those steps carry little of the evidence
+    /// a resonance fit looks for, and a run from rest at a step below the cut starts with a
+    /// free transient that small, decayed over that step and the next one's settling (250
+    /// periods and more) before the first compared record window.
+    pub fn near_resonance(&self, ti: usize, fraction: f64) -> Option<Span> {
+        let span = self.before_contact(ti)?;
+        let size = |s: &SessionStep| s.measured.metrics.rms_upper + s.measured.metrics.rms_lower;
+        let steps: Vec<&SessionStep> = self.steps.iter().filter(|s| span.covers(s)).collect();
+        let peak = steps.iter().map(|s| size(s)).fold(0.0, f64::max);
+        let floor = steps.iter().map(|s| size(s)).fold(peak, f64::min);
+        if !(peak.is_finite() && floor.is_finite() && peak > floor) {
+            return Some(span);
+        }
+        let near = steps
+            .iter()
+            .filter(|s| size(s) - floor >= fraction * (peak - floor))
+            .map(|s| s.info.step);
+        let from = near.clone().min()?;
+        let through = near.max()?;
+        Some(Span {
+            test: ti,
+            from,
+            through: Some(through),
+            lead_in: LeadIn::Span,
+        })
     }
 
     /// The step `past` steps after the first (`first`) or last measured contact step of test
@@ -196,12 +223,40 @@ impl SessionSteps {
         let first = self.starts.iter().position(|s| s.0 == ti)?;
         first.checked_sub(1).map(|k| self.starts[k].2)
     }
+
+    /// The sample where a run of `span` from rest starts ([`LeadIn`]); `None` for the
+    /// session's first step.
+    fn lead_in_of(&self, span: &Span) -> Option<u64> {
+        if span.lead_in == LeadIn::Test || span.from == 0 {
+            return self.lead_in(span.test);
+        }
+        let Some(at) = self
+            .starts
+            .iter()
+            .position(|s| s.0 == span.test && s.1 == span.from)
+        else {
+            return self.lead_in(span.test);
+        };
+        at.checked_sub(1).map(|k| self.starts[k].2)
+    }
+}
+
+/// Where a run of a [`Span`] from rest starts: one step before the first it needs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum LeadIn {
+    /// The step before the test's first step (the previous test's last, or the session's
+    /// start): the steps before the span's first run too, and shape the state it starts in.
+    Test,
+    /// The step before the span's first step: the steps before it are not run (a span whose
+    /// steps depend on the earlier ones only through a free transient that has decayed).
+    Span,
 }
 
 /// The steps of a test a run compares: `from` (a step index) through `through` (`None`: the
-/// last). A run starts at the test's lead-in whatever `from` is, unless a state of open
-/// contact captured at `from` can stand in for the steps before it
-/// ([`ModelRunner::capture_open`]): the compared steps are the same either way.
+/// last). A run starts from rest at its lead-in ([`LeadIn`]: the test's, whatever `from` is,
+/// or the span's own), unless a state of open contact captured at `from` can stand in for
+/// the steps before it ([`ModelRunner::capture_open`]): the compared steps are the same
+/// either way.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub struct Span {
     /// Test index.
@@ -210,6 +265,8 @@ pub struct Span {
     pub from: usize,
     /// Last compared step (`None`: the test's last).
     pub through: Option<usize>,
+    /// Where a run from rest starts.
+    pub lead_in: LeadIn,
 }
 
 impl Span {
@@ -219,6 +276,17 @@ impl Span {
             test,
             from: 0,
             through: None,
+            lead_in: LeadIn::Test,
+        }
+    }
+
+    /// Steps `from` through `through` of test `test`, run from the test's lead-in.
+    pub fn of_test(test: usize, from: usize, through: Option<usize>) -> Span {
+        Span {
+            test,
+            from,
+            through,
+            lead_in: LeadIn::Test,
         }
     }
 
@@ -395,10 +463,13 @@ impl<'a> ModelRunner<'a> {
                     let start = self.open_start_for(ext, &span);
                     // Only this run's own stretches are extended.
                     let own = groups.len() > first;
+                    // A span run from its own lead-in starts a stretch of its own.
+                    let own_lead_in = span.from > 0 && span.lead_in == LeadIn::Span;
                     match groups.last_mut() {
                         Some((_, g, None))
                             if own
                                 && start.is_none()
+                                && !own_lead_in
                                 && g.last().is_some_and(|p| {
                                     p.test + 1 == span.test && p.through.is_none()
                                 }) =>
@@ -413,25 +484,53 @@ impl<'a> ModelRunner<'a> {
         }
         let wall = std::time::Instant::now();
         let models: Vec<TwinModel<'_>> = runs.iter().map(|(ext, _)| self.model(ext)).collect();
-        let mut results: Vec<Result<GroupRun, DiagnoseError>> = Vec::new();
         let this: &ModelRunner<'_> = self;
-        for chunk in groups.chunks(this.jobs) {
-            let done: Vec<_> = std::thread::scope(|s| {
-                let handles: Vec<_> = chunk
-                    .iter()
-                    .map(|(r, g, start)| {
-                        let model = &models[*r];
-                        let start = start.map(|i| &this.open_starts[i]);
-                        s.spawn(move || this.run_group(model, g, start))
+        // The longest stretches first, each thread taking the next one left when it is done:
+        // the threads finish close together whatever the mix of long and short stretches.
+        let mut order: Vec<usize> = (0..groups.len()).collect();
+        order.sort_by_key(|&k| {
+            let (_, g, start) = &groups[k];
+            std::cmp::Reverse(this.extent(g, start.map(|i| &this.open_starts[i])))
+        });
+        let next = std::sync::atomic::AtomicUsize::new(0);
+        let done: Vec<(usize, Result<GroupRun, DiagnoseError>)> = std::thread::scope(|s| {
+            let handles: Vec<_> = (0..this.jobs.min(groups.len()))
+                .map(|_| {
+                    let (order, next, groups, models) = (&order, &next, &groups, &models);
+                    s.spawn(move || {
+                        let mut done = Vec::new();
+                        loop {
+                            let k = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                            let Some(&g) = order.get(k) else {
+                                break done;
+                            };
+                            let (r, spans, start) = &groups[g];
+                            let start = start.map(|i| &this.open_starts[i]);
+                            done.push((g, this.run_group(&models[*r], spans, start)));
+                        }
                     })
-                    .collect();
-                handles
-                    .into_iter()
-                    .map(|h| h.join().unwrap_or_else(|_| Err(DiagnoseError::Panicked)))
-                    .collect()
-            });
-            results.extend(done);
+                })
+                .collect();
+            handles
+                .into_iter()
+                .flat_map(|h| {
+                    h.join()
+                        .unwrap_or_else(|_| vec![(usize::MAX, Err(DiagnoseError::Panicked))])
+                })
+                .collect()
+        });
+        let mut results: Vec<Option<Result<GroupRun, DiagnoseError>>> =
+            (0..groups.len()).map(|_| None).collect();
+        for (g, r) in done {
+            match results.get_mut(g) {
+                Some(slot) => *slot = Some(r),
+                None => return Err(DiagnoseError::Panicked),
+            }
         }
+        let results: Vec<Result<GroupRun, DiagnoseError>> = results
+            .into_iter()
+            .map(|r| r.unwrap_or(Err(DiagnoseError::Panicked)))
+            .collect();
         let mut out: Vec<Vec<StepScores>> = vec![Vec::new(); runs.len()];
         let mut impulse = vec![vec![None; self.steps.tests.len()]; runs.len()];
         for ((r, _, _), g) in groups.iter().zip(results) {
@@ -627,13 +726,30 @@ impl<'a> ModelRunner<'a> {
                 max_growth: None,
             });
         }
-        let spans = [Span {
-            test: through,
-            from: 0,
-            through: Some(0),
-        }];
+        let spans = [Span::of_test(through, 0, Some(0))];
         self.run_spans(&ext, &spans)?;
         Ok(self.last_contact_impulse.clone())
+    }
+
+    /// The samples a run of `group` from rest at its lead-in, or from `start`, covers (to
+    /// order the stretches by length).
+    fn extent(&self, group: &[Span], start: Option<&OpenStart>) -> u64 {
+        let Some(first) = group.first() else {
+            return 0;
+        };
+        let begin = match start {
+            Some(o) => o.state.next_sample,
+            None => self.steps.lead_in_of(first).unwrap_or(0),
+        };
+        let end = self
+            .steps
+            .steps
+            .iter()
+            .filter(|s| group.iter().any(|g| g.covers(s)))
+            .map(|s| s.info.record_end_sample())
+            .max()
+            .unwrap_or(begin);
+        end.saturating_sub(begin)
     }
 
     /// One stretch of consecutive tests (the steps `group` names), from rest at its lead-in
@@ -650,30 +766,30 @@ impl<'a> ModelRunner<'a> {
             rig_seconds: 0.0,
             impulse: Vec::new(),
         };
-        let Some(first) = group.first().map(|s| s.test) else {
+        if group.is_empty() {
             return Ok(empty);
-        };
+        }
         let windows: Vec<&SessionStep> = self
             .steps
             .steps
             .iter()
             .filter(|s| group.iter().any(|g| g.covers(s)))
             .collect();
-        let group: Vec<usize> = group.iter().map(|r| r.test).collect();
+        let tests: Vec<usize> = group.iter().map(|r| r.test).collect();
         let Some(last) = windows.last() else {
             return Ok(empty);
         };
         // The first step start of each test of the group: where its contact impulse is read.
         let mut test_starts: VecDeque<(usize, u64)> = VecDeque::new();
         for &(t, _, sample) in &self.steps.starts {
-            if group.contains(&t) && test_starts.iter().all(|x| x.0 != t) {
+            if tests.contains(&t) && test_starts.iter().all(|x| x.0 != t) {
                 test_starts.push_back((t, sample));
             }
         }
         let mut impulse = Vec::new();
         let end = last.info.record_end_sample();
         let (mut twin, start, mut clearances) = match start {
-            None => self.twin_at(model, self.steps.lead_in(first))?,
+            None => self.twin_at(model, self.steps.lead_in_of(&group[0]))?,
             Some(o) => {
                 // NOTE: the state was captured before the block at its `next_sample`, which
                 // `twin_at` finds; no test starts after it in this one-test group.
@@ -745,5 +861,96 @@ impl<'a> ModelRunner<'a> {
             rig_seconds,
             impulse,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::signal::metrics::StepMetrics;
+
+    /// Two tests of 8 and 6 steps (each step 1000 samples from the start of the session)
+    /// whose measured responses are `a` and `b`, the second test's from its step `contact` on
+    /// with contact.
+    fn session(a: &[f64], b: &[f64], contact: usize) -> SessionSteps {
+        let mut steps = Vec::new();
+        let mut starts = Vec::new();
+        let mut sample = 0;
+        for (ti, sizes) in [a, b].into_iter().enumerate() {
+            for (k, &size) in sizes.iter().enumerate() {
+                starts.push((ti, k, sample));
+                let mut info = StepInfo::synthetic(300.0, 1e-4, 500);
+                info.test = ["a", "b"][ti].into();
+                info.step = k;
+                info.record_first_sample = sample + 500;
+                let contact = ti == 1 && k >= contact;
+                let measured = StepSummary {
+                    omega_ratio: 1.0,
+                    metrics: StepMetrics {
+                        rms_upper: 0.75 * size,
+                        rms_lower: 0.25 * size,
+                        contact_fraction: if contact { 0.1 } else { 0.0 },
+                        ..StepMetrics::default()
+                    },
+                    base_amp_target: 1e-4,
+                    base_amp_measured: 1e-4,
+                    drive_amplitude: 0.1,
+                    settle_seconds: 1.0,
+                    settled: true,
+                    record_start_s: 0.0,
+                    record_attempt: 1,
+                    base_amp_off_tolerance: false,
+                    features: Vec::new(),
+                    noise_floor: Vec::new(),
+                };
+                let regime = if contact {
+                    Regime::Impacts
+                } else {
+                    Regime::ImpactFreeLow
+                };
+                steps.push(SessionStep {
+                    info,
+                    measured,
+                    test_index: ti,
+                    level: 1e-6,
+                    regime,
+                });
+                sample += 1000;
+            }
+        }
+        SessionSteps {
+            tests: vec!["a".into(), "b".into()],
+            levels: vec![1e-6, 1e-6],
+            steps,
+            starts,
+        }
+    }
+
+    #[test]
+    fn the_steps_near_a_resonance_run_from_the_step_before() {
+        let a = [30.0, 32.0, 40.0, 70.0, 130.0, 90.0, 50.0, 35.0];
+        let b = [10.0, 12.0, 20.0, 30.0, 50.0, 80.0];
+        let s = session(&a, &b, 4);
+        // Rise over the smallest (30): 100 at the peak; half of it: 80 and above.
+        let near = s.near_resonance(0, 0.5).expect("a test without contact");
+        assert_eq!((near.from, near.through), (4, Some(5)));
+        assert_eq!(near.lead_in, LeadIn::Span);
+        // From rest at step 3's start; the whole test from the session's start.
+        assert_eq!(s.lead_in_of(&near), Some(3000));
+        assert_eq!(s.lead_in_of(&Span::whole(0)), None);
+        // Test b is cut before its contact (steps 0-3: rise 20, half of it from 20 on).
+        let near = s.near_resonance(1, 0.5).expect("steps before the contact");
+        assert_eq!((near.from, near.through), (2, Some(3)));
+        assert_eq!(s.lead_in_of(&near), Some(9000));
+        // The test's own lead-in is test a's last step.
+        let tested = Span::of_test(1, 2, Some(3));
+        assert_eq!(s.lead_in_of(&tested), Some(7000));
+        // A flat response keeps every step before the contact.
+        let s = session(&a, &[20.0; 6], 2);
+        let near = s.near_resonance(1, 0.5).expect("steps before the contact");
+        assert_eq!((near.from, near.through), (0, Some(1)));
+        // Contact from the first step: nothing to run.
+        let s = session(&a, &b, 0);
+        assert!(s.near_resonance(1, 0.5).is_none());
     }
 }

@@ -506,8 +506,9 @@ fn a_twin_that_falls_behind_skips_visibly_and_does_not_stall_the_session() {
     ]);
     let out = text(&o);
     assert!(o.status.success(), "{out}");
-    // A twin that stalled the producer would make most blocks overrun (it is throttled to a
-    // quarter of real time); a loaded machine makes a few overrun on its own.
+    // A twin that stalled the producer would make about three blocks in four overrun (it is
+    // throttled to a quarter of real time); a loaded machine makes some overrun on its own
+    // (a bound of one in ten failed now and then at a load of 4 on the 2 cores: it is half).
     let (blocks, overruns): (u64, u64) = out
         .lines()
         .find_map(|l| {
@@ -522,7 +523,7 @@ fn a_twin_that_falls_behind_skips_visibly_and_does_not_stall_the_session() {
             Some((blocks, overruns))
         })
         .unwrap_or_else(|| panic!("no session line: {out}"));
-    assert!(blocks > 50 && overruns * 10 < blocks, "{out}");
+    assert!(blocks > 50 && overruns * 2 < blocks, "{out}");
     let skipped: u64 = out
         .lines()
         .find_map(|l| {

@@ -6,10 +6,12 @@
 //! steps past its first contact, [`ModelRunner::run_spans`]), each group of consecutive tests
 //! in one stretch, from rest at the
 //! start of the step before the group's first step (the lead-in: the previous test's last
-//! step, or the session's start): the twin's own state cannot be carried in from another
+//! step, or the session's start; for the steps near a resonance, the step before the first
+//! of them, [`LeadIn::Span`]): the twin's own state cannot be carried in from another
 //! model (a state belongs to the model that made it), and a free transient from rest decays
 //! over the lead-in step and the first step's settling (250 periods and more; e^-5 at 0.3 %
-//! damping) before the first compared record window. Groups run on separate threads; the
+//! damping) before the first compared record window. Groups run on the runner's threads, the
+//! longest first, each thread taking the next one left; the
 //! results do not depend on the number of threads. A hypothesis that changes the clearance
 //! over the session (wear) runs the whole session in one stretch.
 

@@ -495,7 +495,9 @@ impl<'a> ModelRunner<'a> {
             std::cmp::Reverse(this.extent(g, start.map(|i| &this.open_starts[i])))
         });
         let next = std::sync::atomic::AtomicUsize::new(0);
-        let done: Vec<(usize, Result<GroupRun, DiagnoseError>)> = std::thread::scope(|s| {
+        // Every stretch is taken by exactly one thread: with none panicked, `done` holds one
+        // result per stretch.
+        let mut done: Vec<(usize, Result<GroupRun, DiagnoseError>)> = std::thread::scope(|s| {
             let handles: Vec<_> = (0..this.jobs.min(groups.len()))
                 .map(|_| {
                     let (order, next, groups, models) = (&order, &next, &groups, &models);
@@ -515,24 +517,14 @@ impl<'a> ModelRunner<'a> {
                 .collect();
             handles
                 .into_iter()
-                .flat_map(|h| {
-                    h.join()
-                        .unwrap_or_else(|_| vec![(usize::MAX, Err(DiagnoseError::Panicked))])
-                })
-                .collect()
-        });
-        let mut results: Vec<Option<Result<GroupRun, DiagnoseError>>> =
-            (0..groups.len()).map(|_| None).collect();
-        for (g, r) in done {
-            match results.get_mut(g) {
-                Some(slot) => *slot = Some(r),
-                None => return Err(DiagnoseError::Panicked),
-            }
-        }
-        let results: Vec<Result<GroupRun, DiagnoseError>> = results
-            .into_iter()
-            .map(|r| r.unwrap_or(Err(DiagnoseError::Panicked)))
-            .collect();
+                .map(|h| h.join().map_err(|_| DiagnoseError::Panicked))
+                .collect::<Result<Vec<_>, _>>()
+        })?
+        .into_iter()
+        .flatten()
+        .collect();
+        done.sort_unstable_by_key(|d| d.0);
+        let results = done.into_iter().map(|(_, r)| r);
         let mut out: Vec<Vec<StepScores>> = vec![Vec::new(); runs.len()];
         let mut impulse = vec![vec![None; self.steps.tests.len()]; runs.len()];
         for ((r, _, _), g) in groups.iter().zip(results) {

@@ -187,6 +187,8 @@ fn clearance() -> ClearanceEvidence {
             lower_bound_omega_ratio: c.map(|_| 0.96),
             first_contact_omega_ratio: c.map(|_| 0.97),
             impact_free_windows: 7,
+            onset_clearance_m: c.map(|c| 0.97 * c),
+            onsets: if c.is_some() { 40 } else { 0 },
             accumulated_contact_impulse_ns: None,
             note: String::new(),
         }

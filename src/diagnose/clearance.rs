@@ -16,7 +16,18 @@
 //! mean opening, a few per cent on the default rig), while the last impact-free window falls
 //! short of it by however much the response still grows to the next frequency step (tens of
 //! per cent in 0.005 omega_2 steps near the band). The bracket is the uncertainty: the
-//! clearance lies between the bounds. The sensors sit at the tips, the contact nearer the
+//! clearance lies between the bounds.
+//!
+//! A second estimate does not depend on the plan's frequency steps: at every contact onset (a
+//! closed sample of the contact-resistance channel after an open one) the probes have just
+//! met, so the closing excursion there is the clearance. Its mean over every onset of the
+//! test's windows with contact ([`TestClearance::onset_clearance_m`]; tens of onsets per
+//! test on a grazing sweep) scatters much less than the upper bound: the ringing of the
+//! higher modes after an impact moves the tips' reading at a single onset by tens of per
+//! cent, and the zero-mean displacement reads the onsets a few per cent low where the
+//! impacts push the probes apart (BENCHMARKS.md, "Wear on six probes, and the clearance at
+//! the contact onsets").
+//! The sensors sit at the tips, the contact nearer the
 //! clamp: excursions are scaled to the contact by [`ClearanceOptions::contact_over_sensor`]
 //! (the ratio of the first bending mode's displacements there) and the model's static
 //! relative offset at the contact, if any, is
@@ -109,6 +120,12 @@ pub struct TestClearance {
     pub first_contact_omega_ratio: Option<f64>,
     /// Impact-free windows before the first contact.
     pub impact_free_windows: usize,
+    /// Second estimate: the mean closing excursion at the contact onsets of the test's windows
+    /// with contact (all of them), scaled to the contact like the bounds, m (None without an
+    /// onset; module docs).
+    pub onset_clearance_m: Option<f64>,
+    /// Contact onsets behind [`Self::onset_clearance_m`].
+    pub onsets: usize,
     /// Normal contact impulse the model accumulated before the test, N s: not measured,
     /// filled in by a model run (the abscissa of the wear trend). None here.
     pub accumulated_contact_impulse_ns: Option<f64>,
@@ -177,6 +194,13 @@ pub fn clearance_per_test_of(
             (Some(a), Some(b)) => (Some(b), Some((b - a).abs())),
             _ => (None, None),
         };
+        let at_onsets: Vec<f64> = ws
+            .iter()
+            .flat_map(|w| w.closing_at_onsets.iter())
+            .map(|&x| x * opts.contact_over_sensor + opts.static_offset)
+            .collect();
+        let onset_clearance =
+            (!at_onsets.is_empty()).then(|| at_onsets.iter().sum::<f64>() / at_onsets.len() as f64);
         let note = match (lo, hi) {
             (Some(_), Some(_)) => String::new(),
             (Some(_), None) => "no contact in the test: the clearance is above the lower bound".into(),
@@ -197,6 +221,8 @@ pub fn clearance_per_test_of(
             lower_bound_omega_ratio: lower.map(|w| w.omega_ratio),
             first_contact_omega_ratio: upper.map(|w| w.omega_ratio),
             impact_free_windows: before.len(),
+            onset_clearance_m: onset_clearance,
+            onsets: at_onsets.len(),
             accumulated_contact_impulse_ns: None,
             note,
         });
@@ -302,6 +328,8 @@ mod tests {
             lower_bound_omega_ratio: None,
             first_contact_omega_ratio: None,
             impact_free_windows: 3,
+            onset_clearance_m: None,
+            onsets: 0,
             accumulated_contact_impulse_ns: None,
             note: String::new(),
         }

@@ -66,6 +66,10 @@ pub struct WindowEvidence {
     /// displacements relative to the base (drift-free integrals of the relative velocities,
     /// zero mean over the window). The tips close the clearance when it reaches it.
     pub closing_peak: f64,
+    /// The closing displacement `-(x_upper - x_lower)` (as in [`Self::closing_peak`]) at every
+    /// contact onset of the window (a closed sample after an open one, contact-resistance
+    /// channel), m, in time order: the tips' closing when the probes met. Empty without one.
+    pub closing_at_onsets: Vec<f64>,
     /// Share of the window's samples with the contact closed (contact-resistance channel
     /// below the threshold), -.
     pub contact_fraction: f64,
@@ -185,6 +189,10 @@ fn window_evidence(
         .zip(&xl[..used])
         .map(|(u, l)| l - u)
         .fold(f64::NEG_INFINITY, f64::max);
+    let closing_at_onsets = (1..used)
+        .filter(|&i| w.closed[i] && !w.closed[i - 1])
+        .map(|i| xl[i] - xu[i])
+        .collect();
     let closed = w.closed.iter().filter(|&&c| c).count();
     Ok(WindowEvidence {
         test: info.test.clone(),
@@ -202,6 +210,7 @@ fn window_evidence(
         upper_periods: per_period(&w.upper)?,
         lower_periods: per_period(&w.lower)?,
         closing_peak,
+        closing_at_onsets,
         contact_fraction: closed as f64 / n as f64,
     })
 }

@@ -7,7 +7,8 @@
 //! 1. The clearance of every test that brackets it (impact-free steps, then contact;
 //!    [`super::clearance`], reference section 4, Table 2) is refined by model runs of that
 //!    test alone over its bracket (`clearance_fit::test_clearance_by_runs`, shared with the
-//!    clearance and tilt stages).
+//!    clearance and tilt stages), and averaged with the one read at the test's contact
+//!    onsets ([`measured_clearance`]).
 //! 2. The accumulated impulse `P` at the start of each test comes from one run of the model as
 //!    accepted so far from the session's start to the last bracketed test's first step, with
 //!    the wear counter on and a zero coefficient
@@ -72,6 +73,25 @@ fn record_impulses(ce: &mut ClearanceEvidence, impulse: &[Option<f64>]) {
     }
 }
 
+/// A probe's clearance from its two estimates, m: the mean of the one refined by model runs
+/// within the bracket (`by_runs`) and the one at the contact onsets (`at_onsets`), or the
+/// first alone.
+///
+/// NOTE: each scatters by 2-5 % (15-50 um) on the wear proofs' probes, from different
+/// information (BENCHMARKS.md, "Wear on six probes, and the clearance at the contact
+/// onsets"): the runs from how the model's response past the first contact matches the
+/// test's, whose error over the bracket has false minima (chaotic features; a finer grid
+/// over a narrower range found other ones, 50 um off), the onsets from the tips' reading
+/// where the probes met (0-5 % low, no outlier seen). Their errors were not correlated there,
+/// so the mean lowers the variance; a growth of 80-130 um over a session, the weaker wear the
+/// proofs hide, needs it.
+fn measured_clearance(by_runs: f64, at_onsets: Option<f64>) -> f64 {
+    match at_onsets.filter(|c| c.is_finite() && *c > 0.0) {
+        Some(o) => 0.5 * (by_runs + o),
+        None => by_runs,
+    }
+}
+
 /// What the wear stage measured, for the evidence figure.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct WearPoint {
@@ -80,12 +100,19 @@ pub struct WearPoint {
     /// The model's accumulated normal contact impulse before the test, N s (the model without
     /// wear in the trend's points; with the fitted coefficient in an accepted candidate's).
     pub contact_impulse_ns: f64,
-    /// The measured clearance (refined by model runs within the bracket), m.
+    /// The measured clearance, m: the mean of the two estimates, [`Self::run_clearance_m`]
+    /// and [`Self::onset_clearance_m`] (the first alone without contact onsets).
     pub clearance_m: f64,
+    /// The clearance refined by model runs within the bracket, m.
+    #[serde(default)]
+    pub run_clearance_m: f64,
     /// The plan's clearance, m.
     pub plan_clearance_m: f64,
     /// The bracket of the first contact, m.
     pub bracket_m: [f64; 2],
+    /// The clearance at the test's contact onsets ([`super::clearance`]), m.
+    #[serde(default)]
+    pub onset_clearance_m: Option<f64>,
     /// Whether the point was used to fit (else it validates).
     pub train: bool,
 }
@@ -158,9 +185,11 @@ pub(super) fn wear_stage(
             points.push(WearPoint {
                 test: t.test.clone(),
                 contact_impulse_ns: p,
-                clearance_m: r.clearance_m,
+                clearance_m: measured_clearance(r.clearance_m, t.onset_clearance_m),
+                run_clearance_m: r.clearance_m,
                 plan_clearance_m: t.plan_clearance_m,
                 bracket_m: [lo.min(hi), lo.max(hi)],
+                onset_clearance_m: t.onset_clearance_m,
                 train: train.contains(&t.test_index),
             });
         }

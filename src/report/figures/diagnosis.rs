@@ -775,7 +775,14 @@ fn evidence_clearance(d: &Diagnosis) -> Option<Panels> {
         })
         .unwrap_or_default();
     let ys: Vec<f64> = (est.iter())
-        .flat_map(|t| [mm(t.clearance_m), mm(t.lower_bound_m), mm(t.upper_bound_m)])
+        .flat_map(|t| {
+            [
+                mm(t.clearance_m),
+                mm(t.lower_bound_m),
+                mm(t.upper_bound_m),
+                mm(t.onset_clearance_m),
+            ]
+        })
         .chain(plan.iter().chain(&trend_pts).map(|p| p.1))
         .collect();
     let x_desc = match by_impulse {
@@ -827,13 +834,27 @@ fn evidence_clearance(d: &Diagnosis) -> Option<Panels> {
         legend.push(entry(t.test.clone(), color, LineKind::Markers));
     }
     legend.push(entry("bars: lower … upper bound", GREY, LineKind::Solid));
+    // The second estimate, at the contact onsets.
+    let onsets: Vec<(f64, f64)> = (est.iter())
+        .map(|t| (at(t), mm(t.onset_clearance_m)))
+        .filter(|q| q.1.is_finite())
+        .collect();
+    if !onsets.is_empty() {
+        p.series
+            .push(line(onsets, GREY, LineKind::Markers, width() + 1));
+        legend.push(entry(
+            "at the contact onsets (mean closing)",
+            GREY,
+            LineKind::Markers,
+        ));
+    }
     legend.push(entry(
         "plan clearance (model as given)",
         GREY,
         LineKind::Solid,
     ));
-    // The wear stage: each test's clearance refined by model runs within its bracket
-    // (measured) and the fitted model's clearance `plan + offset + k P` (model).
+    // The wear stage: each test's clearance, the mean of the one refined by model runs within
+    // its bracket and the one at the contact onsets (measured) and the fitted model's clearance `plan + offset + k P` (model).
     let wear = d.effects.iter().find(|e| e.effect == "wear");
     if let (true, Some(w)) = (by_impulse, wear) {
         let pts: Vec<(f64, f64)> = (w.evidence["points"].as_array().into_iter().flatten())
@@ -848,7 +869,7 @@ fn evidence_clearance(d: &Diagnosis) -> Option<Panels> {
             p.series
                 .push(line(pts, BLACK, LineKind::Markers, width() + 2));
             legend.push(entry(
-                "measured: refined by model runs within the bracket",
+                "measured: mean of the model runs' value and the onsets'",
                 BLACK,
                 LineKind::Markers,
             ));

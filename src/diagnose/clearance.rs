@@ -22,11 +22,12 @@
 //! closed sample of the contact-resistance channel after an open one) the probes have just
 //! met, so the closing excursion there is the clearance. Its mean over every onset of the
 //! test's windows with contact ([`TestClearance::onset_clearance_m`]; tens of onsets per
-//! test on a grazing sweep) scatters much less than the upper bound: the ringing of the
-//! higher modes after an impact moves the tips' reading at a single onset by tens of per
-//! cent, and the zero-mean displacement reads the onsets a few per cent low where the
-//! impacts push the probes apart (BENCHMARKS.md, "Wear on six probes, and the clearance at
-//! the contact onsets").
+//! test on a grazing sweep) scatters much less than the upper bound, though each onset's
+//! reading is off by tens of per cent (the higher modes ring after an impact), and it reads
+//! up to 5 % low where the impacts push the probes apart (the zero-mean displacement hides
+//! the mean opening; BENCHMARKS.md, "Wear on six probes, and the clearance at the contact
+//! onsets").
+//!
 //! The sensors sit at the tips, the contact nearer the
 //! clamp: excursions are scaled to the contact by [`ClearanceOptions::contact_over_sensor`]
 //! (the ratio of the first bending mode's displacements there) and the model's static

@@ -82,7 +82,7 @@ fn record_impulses(ce: &mut ClearanceEvidence, impulse: &[Option<f64>]) {
 /// onsets"): the runs from how the model's response past the first contact matches the
 /// test's, whose error over the bracket has false minima (chaotic features; a finer grid
 /// over a narrower range found other ones, 50 um off), the onsets from the tips' reading
-/// where the probes met (0-5 % low, no outlier seen). Their errors were not correlated there,
+/// where the probes met (-5 % to +3 %, no outlier seen). Their errors were not correlated there,
 /// so the mean lowers the variance; a growth of 80-130 um over a session, the weaker wear the
 /// proofs hide, needs it.
 fn measured_clearance(by_runs: f64, at_onsets: Option<f64>) -> f64 {

@@ -152,7 +152,7 @@ fn a_tilt_of_0_03_rad_is_named_or_an_equal_alternative() {
 
 #[test]
 #[ignore = "8 minutes of diagnosis; BENCHMARKS.md, Diagnosis: wear and tilt"]
-fn nothing_hidden_on_the_wear_plan_is_no_significant_mismatch() {
+fn nothing_hidden_on_the_four_probe_plan_is_no_significant_mismatch() {
     let dir = tempfile::tempdir().unwrap();
     let (_, log) = sim_session(dir.path(), "null", "", &short_plan());
     let d = diagnose(&log, dir.path(), "null", &[]);

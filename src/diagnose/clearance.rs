@@ -178,8 +178,9 @@ pub fn clearance_per_test_of(
     if !(opts.beam_length.is_finite() && opts.beam_length > 0.0) {
         return Err(EvidenceError::BadBeamLength(opts.beam_length));
     }
-    let to_contact =
-        |w: &WindowEvidence| w.closing_peak * opts.contact_over_sensor + opts.static_offset;
+    // A closing excursion of the tips, scaled to the contact.
+    let at_contact = |x: f64| x * opts.contact_over_sensor + opts.static_offset;
+    let to_contact = |w: &WindowEvidence| at_contact(w.closing_peak);
     let mut tests = Vec::new();
     for (ti, test) in ev.tests.iter().enumerate() {
         let ws: Vec<&WindowEvidence> = ev.windows.iter().filter(|w| w.test_index == ti).collect();
@@ -198,7 +199,7 @@ pub fn clearance_per_test_of(
         let at_onsets: Vec<f64> = ws
             .iter()
             .flat_map(|w| w.closing_at_onsets.iter())
-            .map(|&x| x * opts.contact_over_sensor + opts.static_offset)
+            .map(|&x| at_contact(x))
             .collect();
         let onset_clearance =
             (!at_onsets.is_empty()).then(|| at_onsets.iter().sum::<f64>() / at_onsets.len() as f64);

@@ -9,7 +9,10 @@
 //! - tilt (0.02 and 0.03 rad about y, on four probes): named first, or an equal alternative
 //!   of the first (the clearance offset it looks like), the angle within 20 %, the validation
 //!   error at least 3x lower;
-//! - nothing hidden on either plan: `no_significant_mismatch`, nothing accepted.
+//! - nothing hidden on either plan: `no_significant_mismatch`, nothing accepted;
+//! - wear on `rig-config/plans/identify.toml` (the plan a user runs), alone (2.5e-5) and
+//!   beside a sensor gain (3e-5, upper tip 1.05): both named, the coefficient within 20 %,
+//!   validated 3x.
 //!
 //! Each case runs 2-3 minutes of rig time and 4-10 minutes of diagnosis on the 2-core
 //! machine: all are `#[ignore]`d; their figures, and which of them hold, are in BENCHMARKS.md
@@ -73,15 +76,33 @@ fn validation(e: &serde_json::Value) -> (f64, f64) {
     )
 }
 
-fn wear_is_found(coefficient: f64) {
+/// The plan a user is told to run for a diagnosis (`rig-config/plans/identify.toml`).
+fn identify_plan() -> String {
+    std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/rig-config/plans/identify.toml"
+    ))
+    .unwrap()
+}
+
+/// A session of `plan` with wear `coefficient` hidden, and `also` (more `[truth.variants]`
+/// keys) beside it, diagnosed; asserts wear accepted, named after `named_before` accepted
+/// effects, within 20 % and validated 3x. Returns the diagnosis.
+fn wear_is_found_on(
+    coefficient: f64,
+    plan: &str,
+    also: &str,
+    named_before: usize,
+) -> serde_json::Value {
     let dir = tempfile::tempdir().unwrap();
-    let truth = format!("[truth.variants.wear]\ncoefficient = {coefficient}\n");
-    let (_, log) = sim_session(dir.path(), "wear", &truth, &wear_plan());
+    let truth =
+        format!("[truth.variants]\n{also}\n[truth.variants.wear]\ncoefficient = {coefficient}\n");
+    let (_, log) = sim_session(dir.path(), "wear", &truth, plan);
     let d = diagnose(&log, dir.path(), "wear", &[]);
     assert_eq!(d["verdict"], "mismatch", "{d:#}");
     let w = accepted(&d, "wear");
     assert_eq!(w.len(), 1, "{d:#}");
-    assert_eq!(w[0]["rank"], 1, "{d:#}");
+    assert_eq!(w[0]["rank"], 1 + named_before, "{d:#}");
     let fit = w[0]["parameters"]["coefficient"].as_f64().unwrap();
     assert!(
         (fit / coefficient - 1.0).abs() < 0.2,
@@ -89,6 +110,11 @@ fn wear_is_found(coefficient: f64) {
     );
     let (b, a) = validation(w[0]);
     assert!(b >= 3.0 * a, "validation {b} -> {a}");
+    d
+}
+
+fn wear_is_found(coefficient: f64) {
+    wear_is_found_on(coefficient, &wear_plan(), "", 0);
 }
 
 fn tilt_is_found(angle: f64) {
@@ -166,4 +192,22 @@ fn nothing_hidden_on_the_six_probe_wear_plan_is_no_significant_mismatch() {
     let (_, log) = sim_session(dir.path(), "null6", "", &wear_plan());
     let d = diagnose(&log, dir.path(), "null6", &[]);
     assert_null(&d);
+}
+
+#[test]
+#[ignore = "4 minutes of rig time, 10 minutes of diagnosis; BENCHMARKS.md, Wear on identify.toml"]
+fn wear_2_5e_5_on_identify_toml_is_found() {
+    wear_is_found_on(2.5e-5, &identify_plan(), "", 0);
+}
+
+#[test]
+#[ignore = "4 minutes of rig time, 12 minutes of diagnosis; BENCHMARKS.md, Wear on identify.toml"]
+fn wear_and_a_sensor_gain_on_identify_toml_are_both_named() {
+    let also = r#"sensor_gains = [{ channel = "upper_tip", gain = 1.05 }]"#;
+    let d = wear_is_found_on(3e-5, &identify_plan(), also, 1);
+    let g = accepted(&d, "sensor_gain");
+    assert_eq!(g.len(), 1, "{d:#}");
+    assert_eq!(g[0]["parameters"]["channel"], "upper_tip", "{d:#}");
+    let gain = g[0]["parameters"]["gain"].as_f64().unwrap();
+    assert!((gain / 1.05 - 1.0).abs() < 0.01, "gain {gain}");
 }

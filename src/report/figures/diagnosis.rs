@@ -870,7 +870,7 @@ fn evidence_clearance(d: &Diagnosis) -> Option<Panels> {
             p.series
                 .push(line(pts, BLACK, LineKind::Markers, width() + 2));
             legend.push(entry(
-                "measured: mean of the model runs' value and the onsets'",
+                "measured: the model runs' value and the onsets', combined",
                 BLACK,
                 LineKind::Markers,
             ));

@@ -127,12 +127,13 @@ const ESTIMATES_AGREE: f64 = 0.1;
 ///
 /// The bracketed tests (`bracketed`: test index and the model's impulse at its start, N s,
 /// in session order) alternately, as every stage splits them, but a test can only validate
-/// wear where the model with it differs from the model without: where the line over all points (slope `k_all`, m/(N s)) predicts a
-/// growth of more than 2 % of the plan's clearance `plan` (the trend's own threshold) by the
-/// test's start. A bracketed test below that is fitted instead. Without a bracketed test left
-/// to validate on, the tests with contact that are not bracketed (`contact`: test index and
-/// the model's impulse at its start, N s) and above that growth validate: their clearances
-/// were not fitted, and the wear the model exchanges in them is what it predicts.
+/// wear where the model with it differs from the model without: where the line over all
+/// points (slope `k_all`, m/(N s)) predicts a growth of more than 2 % of the plan's clearance
+/// `plan` (the trend's own threshold) by the test's start. A bracketed test below that is
+/// fitted instead. Without a bracketed test left to validate on, the tests with contact that
+/// are not bracketed (`contact`: test index and the model's impulse at its start, N s) and
+/// above that growth validate: their clearances were not fitted, and the wear the model
+/// exchanges in them is what it predicts.
 ///
 /// NOTE: on `identify.toml` the bracketed tests are the two low-level tests (0 and 0.6 N s
 /// before them) and the last high-level one (16 N s): alternately, the low-level up test

@@ -38,9 +38,22 @@ use super::{DiagnoseError, DiagnoseProgress};
 /// Rounds of the coefficient's fixed point (the model's impulse with the coefficient found).
 const MAX_ROUNDS: usize = 4;
 
-/// Least-squares line `y = a + k x`: (a, k, standard error of k, NaN with two points); `None`
-/// with fewer than two points or no spread in `x`.
-fn line(points: &[(f64, f64)]) -> Option<(f64, f64, f64)> {
+/// A least-squares line `y = a + k x` ([`line`]).
+#[derive(Clone, Copy, Debug)]
+struct Line {
+    /// `a`.
+    intercept: f64,
+    /// `k`.
+    slope: f64,
+    /// Standard error of `k`, NaN with two points.
+    slope_se: f64,
+    /// Standard error of `a`, NaN with two points.
+    intercept_se: f64,
+}
+
+/// The least-squares line through `points`; `None` with fewer than two points or no spread in
+/// `x`.
+fn line(points: &[(f64, f64)]) -> Option<Line> {
     let n = points.len();
     if n < 2 {
         return None;
@@ -57,26 +70,19 @@ fn line(points: &[(f64, f64)]) -> Option<(f64, f64, f64)> {
     let sxy: f64 = points.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum();
     let k = sxy / sxx;
     let a = my - k * mx;
-    let se = if n > 2 {
+    // The residuals' variance, NaN with two points (no degree of freedom left).
+    let s2 = if n > 2 {
         let rss: f64 = points.iter().map(|p| (p.1 - a - k * p.0).powi(2)).sum();
-        (rss / (nf - 2.0) / sxx).sqrt()
+        rss / (nf - 2.0)
     } else {
         f64::NAN
     };
-    Some((a, k, se))
-}
-
-/// The standard error of the intercept of [`line`] through `points`, NaN with two points or
-/// none.
-fn intercept_standard_error(points: &[(f64, f64)]) -> f64 {
-    let Some((a, k, _)) = line(points).filter(|_| points.len() > 2) else {
-        return f64::NAN;
-    };
-    let nf = points.len() as f64;
-    let mx = points.iter().map(|p| p.0).sum::<f64>() / nf;
-    let sxx: f64 = points.iter().map(|p| (p.0 - mx).powi(2)).sum();
-    let rss: f64 = points.iter().map(|p| (p.1 - a - k * p.0).powi(2)).sum();
-    (rss / (nf - 2.0) * (1.0 / nf + mx * mx / sxx)).sqrt()
+    Some(Line {
+        intercept: a,
+        slope: k,
+        slope_se: (s2 / sxx).sqrt(),
+        intercept_se: (s2 * (1.0 / nf + mx * mx / sxx)).sqrt(),
+    })
 }
 
 /// Least-squares slope of `y = k x` (no intercept); `None` without a nonzero `x`.
@@ -274,7 +280,13 @@ pub(super) fn wear_stage(
     let xy = |p: &WearPoint| (p.contact_impulse_ns, p.clearance_m - p.plan_clearance_m);
     let all: Vec<(f64, f64)> = points.iter().map(xy).collect();
     let plan = bracketed[0].plan_clearance_m;
-    let Some((a_all, k_all, se_all)) = line(&all) else {
+    let Some(Line {
+        intercept: a_all,
+        slope: k_all,
+        slope_se: se_all,
+        ..
+    }) = line(&all)
+    else {
         work.undecided(
             "wear",
             "the clearance per test could not be refined by model runs in three or more tests",
@@ -340,8 +352,9 @@ pub(super) fn wear_stage(
     (work.progress)(DiagnoseProgress::Note(said));
     // The train tests' line (all points when they are fewer than two with spread in P).
     let tr: Vec<(f64, f64)> = points.iter().filter(|p| p.train).map(xy).collect();
-    let (a0, k_line) = match line(&tr) {
-        Some((a, k, _)) if k > 0.0 => (a, k),
+    let tr_line = line(&tr);
+    let (a0, k_line) = match tr_line {
+        Some(l) if l.slope > 0.0 => (l.intercept, l.slope),
         _ => (a_all, k_all),
     };
     // A constant offset under the growth only where the train tests show one: 2 % of the
@@ -352,12 +365,12 @@ pub(super) fn wear_stage(
     // by model runs came out 180 um high (its bracket spans 0.47-1.03 mm), and the line's
     // intercept took +46 um from it (its standard error 50 um) into the model: the coefficient
     // came out 15 % low (BENCHMARKS.md, "Wear on `identify.toml`").
-    let se_a0 = intercept_standard_error(&tr);
+    let se_a0 = tr_line.map_or(f64::NAN, |l| l.intercept_se);
     let shown = a0.abs() > 0.02 * plan && (se_a0.is_nan() || a0.abs() > 3.0 * se_a0);
     let offset = if shown { a0 } else { 0.0 };
     let slope = |tr: &[(f64, f64)]| -> Option<f64> {
         if offset != 0.0 {
-            line(tr).map(|l| l.1)
+            line(tr).map(|l| l.slope)
         } else {
             slope_through_origin(tr)
         }
@@ -490,13 +503,14 @@ mod tests {
         let pts: Vec<(f64, f64)> = (0..5)
             .map(|i| (0.1 * i as f64, 1e-5 + 2e-4 * 0.1 * i as f64))
             .collect();
-        let (a, k, se) = line(&pts).unwrap();
+        let l = line(&pts).unwrap();
+        let (a, k, se) = (l.intercept, l.slope, l.slope_se);
         assert!((a - 1e-5).abs() < 1e-15 && (k - 2e-4).abs() < 1e-12 && se < 1e-12);
         // No spread in P: no line.
         assert!(line(&[(0.1, 1.0), (0.1, 2.0), (0.1, 3.0)]).is_none());
         // Scattered without trend: a slope within its standard error.
-        let (_, k, se) =
-            line(&[(0.0, 1.0), (1.0, -1.0), (2.0, 1.0), (3.0, -1.0), (4.0, 0.5)]).unwrap();
+        let l = line(&[(0.0, 1.0), (1.0, -1.0), (2.0, 1.0), (3.0, -1.0), (4.0, 0.5)]).unwrap();
+        let (k, se) = (l.slope, l.slope_se);
         assert!(k.abs() < 3.0 * se, "{k} {se}");
     }
 
@@ -504,12 +518,12 @@ mod tests {
     fn an_intercept_is_shown_only_beyond_its_error() {
         // On a line: exact intercept, no error.
         let pts = [(0.0, 1.0), (1.0, 3.0), (2.0, 5.0)];
-        assert!(intercept_standard_error(&pts) < 1e-12);
+        assert!(line(&pts).unwrap().intercept_se < 1e-12);
         // One point off: the error covers the intercept it makes.
         let pts = [(0.0, 0.0), (0.5, 1.0), (10.0, 3.0)];
-        let (a, _, _) = line(&pts).unwrap();
-        assert!(intercept_standard_error(&pts) * 3.0 > a.abs());
-        assert!(intercept_standard_error(&pts[..2]).is_nan());
+        let l = line(&pts).unwrap();
+        assert!(l.intercept_se * 3.0 > l.intercept.abs());
+        assert!(line(&pts[..2]).unwrap().intercept_se.is_nan());
         assert_eq!(slope_through_origin(&[(1.0, 2.0), (2.0, 4.0)]), Some(2.0));
         assert_eq!(slope_through_origin(&[(0.0, 2.0)]), None);
     }

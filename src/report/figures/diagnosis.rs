@@ -853,9 +853,9 @@ fn evidence_clearance(d: &Diagnosis) -> Option<Panels> {
         GREY,
         LineKind::Solid,
     ));
-    // The wear stage: each test's clearance, the mean of the one refined by model runs within
-    // its bracket and the one at the contact onsets (measured), and the fitted model's
-    // clearance `plan + offset + k P` (model).
+    // The wear stage: each test's clearance from the one refined by model runs within its
+    // bracket and the one at the contact onsets (measured; `wear::measured_clearance`), and
+    // the fitted model's clearance `plan + offset + k P` (model).
     let wear = d.effects.iter().find(|e| e.effect == "wear");
     if let (true, Some(w)) = (by_impulse, wear) {
         let pts: Vec<(f64, f64)> = (w.evidence["points"].as_array().into_iter().flatten())

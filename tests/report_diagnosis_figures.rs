@@ -14,7 +14,8 @@ use rigtwin::diagnose::clearance::{ClearanceEvidence, ClearanceOptions, Clearanc
 use rigtwin::diagnose::linear::Trend;
 use rigtwin::diagnose::linear::{AmplitudeDependence, LinearEvidence, LinearOptions, ModeFit};
 use rigtwin::diagnose::outcome::{
-    Diagnosis, DiagnosisCost, EffectResult, Regime, SetError, StepScores, Verdict,
+    BandSpread, BandStep, Diagnosis, DiagnosisCost, EffectResult, Regime, RegimeScores, SetError,
+    StepScores, Verdict,
 };
 use rigtwin::diagnose::sensors::SensorOptions;
 use rigtwin::diagnose::sensors::{ChannelSensitivity, SensitivityStatus, SensorEvidence};
@@ -233,6 +234,36 @@ fn sensors() -> SensorEvidence {
     }
 }
 
+/// The impact band of `scores` with a spread `widen` times the pointwise one.
+fn band(scores: &[StepScores], widen: f64) -> BandSpread {
+    let steps: Vec<BandStep> = (scores.iter())
+        .filter(|s| s.regime == Regime::Impacts)
+        .filter_map(|s| {
+            Some(BandStep {
+                test: s.test.clone(),
+                step: s.step,
+                omega_ratio: s.omega_ratio,
+                max_score: s.max_score()? / widen,
+            })
+        })
+        .collect();
+    let mut m: Vec<f64> = steps.iter().map(|s| s.max_score).collect();
+    m.sort_by(f64::total_cmp);
+    let median = m[m.len() / 2];
+    BandSpread {
+        members: 4,
+        finer_modes: Some(74),
+        scores: RegimeScores {
+            regime: Regime::Impacts,
+            steps: m.len(),
+            steps_above: m.iter().filter(|&&v| v > 3.0).count(),
+            median_max_score: median,
+        },
+        steps,
+        beyond: median > 3.0,
+    }
+}
+
 fn empty() -> Diagnosis {
     Diagnosis {
         verdict: Verdict::NoSignificantMismatch,
@@ -242,6 +273,8 @@ fn empty() -> Diagnosis {
         scores_after: Vec::new(),
         regimes_before: Vec::new(),
         regimes_after: Vec::new(),
+        band_before: None,
+        band_after: None,
         effects: Vec::new(),
         undecided: Vec::new(),
         model_before: PhysicsSpec::default(),
@@ -276,10 +309,13 @@ fn full() -> Diagnosis {
             validation: 1.2,
         }),
     };
+    let (before, after) = (scores(1.01, 1.0), scores(0.991, 1.04));
     Diagnosis {
         verdict: Verdict::Mismatch,
-        scores_before: scores(1.01, 1.0),
-        scores_after: scores(0.991, 1.04),
+        band_before: Some(band(&before, 1.5)),
+        band_after: Some(band(&after, 4.0)),
+        scores_before: before,
+        scores_after: after,
         effects: vec![effect],
         validation_tests: vec!["high-up".into()],
         sensors: Some(sensors()),
@@ -327,7 +363,7 @@ fn assert_svg(path: &Path, labels: &[&str]) {
 fn a_diagnosis_draws_every_figure_as_png_and_svg() {
     let dir = out_dir("report_diagnosis_figures");
     let written = draw_diagnosis(&full(), &dir).unwrap();
-    let figures: [(&str, &[&str]); 6] = [
+    let figures: [(&str, &[&str]); 7] = [
         (
             "mismatch-map",
             &["Mismatch map", "upper_tip", "contact", "high-up"],
@@ -339,6 +375,10 @@ fn a_diagnosis_draws_every_figure_as_png_and_svg() {
             &["clearance (mm)", "high-up", "plan clearance"],
         ),
         ("evidence-sensors", &["lower_tip", "RMS measured"]),
+        (
+            "evidence-band",
+            &["mid-up", "with the spread", "fixed model", "threshold"],
+        ),
         ("before-after", &["high-up", "model as given", "contact"]),
     ];
     let expected: Vec<PathBuf> = (figures.iter())
@@ -369,6 +409,7 @@ fn missing_data_leaves_figures_out() {
     d.scores_after.clear();
     d.threshold = f64::NAN;
     d.sensors = None;
+    d.band_before = None;
     if let Some(l) = &mut d.linear {
         l.fits
             .iter_mut()
@@ -395,6 +436,9 @@ fn missing_data_leaves_figures_out() {
         s.omega_ratio = f64::NAN;
         s.features.iter_mut().for_each(|f| f.score = f64::NAN);
     }
+    for b in d.band_before.iter_mut().chain(&mut d.band_after) {
+        b.steps.iter_mut().for_each(|s| s.omega_ratio = f64::NAN);
+    }
     d.linear = None;
     d.clearance = None;
     let dir = tempfile::tempdir().unwrap();
@@ -406,13 +450,19 @@ fn missing_data_leaves_figures_out() {
 
 #[test]
 fn single_and_extreme_values_draw() {
-    // One step with an infinite score, one fit per mode, one clearance against contact impulse,
-    // a threshold below 1: degenerate ranges are widened, nothing panics.
+    // One step with an infinite score (and one band step), one fit per mode, one clearance
+    // against contact impulse, a threshold below 1: degenerate ranges are widened, nothing
+    // panics.
     let mut d = full();
     d.threshold = 0.5;
     d.scores_before.truncate(1);
     d.scores_before[0].features[0].score = f64::INFINITY;
     d.scores_after.truncate(1);
+    if let Some(b) = &mut d.band_before {
+        b.steps.truncate(1);
+        b.steps[0].max_score = f64::INFINITY;
+    }
+    d.band_after = None;
     d.validation_tests = vec!["low-up".into()];
     if let Some(l) = &mut d.linear {
         l.fits.retain(|f| f.test_index == 2);
@@ -424,7 +474,7 @@ fn single_and_extreme_values_draw() {
     }
     let dir = out_dir("report_diagnosis_figures_degenerate");
     let written = draw_diagnosis(&d, &dir).unwrap();
-    assert_eq!(written.len(), 12, "{written:?}");
+    assert_eq!(written.len(), 14, "{written:?}");
     for p in written.iter().filter(|p| p.extension().unwrap() == "png") {
         assert_png(p);
     }

@@ -8,13 +8,20 @@
 //!   (`--out`) holds the same bytes, and `report` draws them;
 //! - warm starts: the twin's state is logged at every step start (`/twin/state`), and
 //!   `replay --twin --steps` re-runs a subset of steps from there, bit for bit equal to the
-//!   whole run, with every model extension on.
+//!   whole run, with every model extension on;
+//! - the diagnosis' runs: an ensemble in the windows with contact only
+//!   (`EnsembleOptions::contact_windows_only`), and the comparison before the ensemble joins it
+//!   (`TwinSink::pointwise`) equal to the run without an ensemble.
 
 mod cli_support;
+mod default_rom;
 
 use std::path::PathBuf;
 
 use cli_support::{default_rig_with, json, rigtwin, text};
+use rigtwin::control::summary::StepInfo;
+use rigtwin::session::twin_replay::{replay_twin, EnsembleOptions, TwinReplayError, TwinSink};
+use rigtwin::twin::{TwinBlock, TwinComparison, TwinModel};
 
 const PLAN: &str = r#"
 name = "twin-replay-test"
@@ -550,4 +557,125 @@ fn a_twin_that_falls_behind_skips_visibly_and_does_not_stall_the_session() {
     let s = json(&summary);
     assert_eq!(s["aborted"], false);
     assert_eq!(s["tests"][0]["steps"].as_array().unwrap().len(), 2);
+}
+
+/// Keeps each step's comparison before the ensemble joins it, and after.
+#[derive(Default)]
+struct Both {
+    pointwise: Vec<Option<String>>,
+    after: Vec<Option<TwinComparison>>,
+}
+
+impl TwinSink for Both {
+    fn block(&mut self, _: &TwinBlock) -> Result<(), TwinReplayError> {
+        Ok(())
+    }
+    fn step(&mut self, _: &StepInfo, c: Option<&TwinComparison>) -> Result<(), TwinReplayError> {
+        self.after.push(c.cloned());
+        Ok(())
+    }
+    fn pointwise(
+        &mut self,
+        _: &StepInfo,
+        c: Option<&TwinComparison>,
+    ) -> Result<(), TwinReplayError> {
+        self.pointwise
+            .push(c.map(|c| serde_json::to_string(c).unwrap()));
+        Ok(())
+    }
+}
+
+#[test]
+fn an_ensemble_in_the_contact_windows_only_keeps_the_pointwise_comparison() {
+    let dir = tempfile::tempdir().unwrap();
+    let plan = dir.path().join("plan.toml");
+    std::fs::write(&plan, PLAN).unwrap();
+    let mcap = dir.path().join("session.mcap");
+    let o = rigtwin(&[
+        "run",
+        "--plan",
+        plan.to_str().unwrap(),
+        "--quiet",
+        "--out",
+        mcap.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let r = rigtwin::session::replay::replay(&mcap).unwrap();
+    let cfg = rigtwin::config::RigConfig::default_rig();
+    let rom = default_rom::default_rom();
+    let model = TwinModel::of_config(rom, &cfg);
+    let mut spec = cfg.twin.clone();
+    let l = cfg.rig.beam_length;
+
+    // Without an ensemble.
+    spec.ensemble_members = 0;
+    let mut bare = r.summary.clone();
+    replay_twin(
+        &r.recording,
+        &mut bare,
+        &model,
+        &spec,
+        l,
+        EnsembleOptions::NONE,
+        &mut (),
+    )
+    .unwrap();
+    // With two members in the windows with contact only.
+    spec.ensemble_members = 2;
+    let mut with = r.summary.clone();
+    let mut both = Both::default();
+    let ensemble = EnsembleOptions {
+        members: 2,
+        contact_windows_only: true,
+        ..EnsembleOptions::of(&spec, 1)
+    };
+    replay_twin(
+        &r.recording,
+        &mut with,
+        &model,
+        &spec,
+        l,
+        ensemble,
+        &mut both,
+    )
+    .unwrap();
+
+    let bare: Vec<&TwinComparison> = bare.steps().filter_map(|s| s.twin.as_ref()).collect();
+    let measured: Vec<f64> = (r.summary.steps())
+        .map(|s| s.measured.metrics.contact_fraction)
+        .collect();
+    assert_eq!(bare.len(), 3);
+    assert_eq!(both.pointwise.len(), 3);
+    let (mut ensembles, mut after_contact) = (0, false);
+    for (i, b) in bare.iter().enumerate() {
+        assert_eq!(
+            both.pointwise[i].as_deref(),
+            Some(serde_json::to_string(b).unwrap().as_str()),
+            "step {i}: the comparison before the ensemble is the run without one"
+        );
+        let c = both.after[i].as_ref().unwrap();
+        let contact = after_contact || measured[i] > 0.0 || b.metrics.contact_fraction > 0.0;
+        after_contact = measured[i] > 0.0;
+        if contact && i > 0 {
+            assert_eq!(c.ensemble_members, 2, "step {i}");
+            ensembles += 1;
+            for (f, g) in c.features.iter().zip(&b.features) {
+                assert_eq!(f.model, g.model, "the twin's own values do not move");
+            }
+        } else {
+            assert_eq!(
+                serde_json::to_string(c).unwrap(),
+                serde_json::to_string(b).unwrap(),
+                "step {i}: no contact, no ensemble"
+            );
+        }
+    }
+    assert!(
+        ensembles >= 1,
+        "no window with contact: the ensemble was not exercised"
+    );
+    assert!(
+        ensembles < 3,
+        "every window had contact: the impact-free one was not exercised"
+    );
 }

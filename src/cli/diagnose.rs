@@ -92,6 +92,18 @@ pub(crate) fn run(a: DiagnoseArgs) -> anyhow::Result<()> {
         rom_path.display(),
         super::extensions_line(&cfg.model)
     );
+    // The impact band's verdict compares with the discretisation member's spread: its finer
+    // ROM, only for a session with contact.
+    let d = &cfg.twin.discretisation;
+    let contact = r
+        .summary
+        .steps()
+        .any(|s| s.measured.metrics.contact_fraction > 0.0);
+    let finer = if contact && d.enabled && cfg.twin.ensemble_members > 0 {
+        Some(models::finer_rom(&cfg, d.cutoff_ratio, a.rebuild, a.quiet)?)
+    } else {
+        None
+    };
     let jobs = a.jobs.map_or_else(
         || std::thread::available_parallelism().map_or(1, |n| n.get()),
         usize::from,
@@ -137,6 +149,7 @@ pub(crate) fn run(a: DiagnoseArgs) -> anyhow::Result<()> {
         summary: &r.summary,
         cfg: &cfg,
         rom: &rom,
+        finer: finer.as_ref(),
     };
     let mut d = diagnose(&input, &opts, &mut progress)
         .with_context(|| format!("diagnosis of {}", a.file.display()))?;
@@ -162,6 +175,14 @@ pub(crate) fn run(a: DiagnoseArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// Whether the impact band lies within the comparison's spread, in words.
+fn within(b: &crate::diagnose::outcome::BandSpread) -> &'static str {
+    match b.beyond {
+        true => "beyond the spread",
+        false => "within the spread",
+    }
+}
+
 /// The human summary of a diagnosis.
 fn print_diagnosis(d: &Diagnosis) {
     println!(
@@ -185,6 +206,28 @@ fn print_diagnosis(d: &Diagnosis) {
                 .map(|a| format!(
                     "; fixed model: {} above (median {:.2})",
                     a.steps_above, a.median_max_score
+                ))
+                .unwrap_or_default()
+        );
+    }
+    if let Some(b) = &d.band_before {
+        println!(
+            "  Impacts with the comparison's spread (ensemble of {}{}): {} above {} (median {:.2}), {}{}",
+            b.members,
+            b.finer_modes
+                .map(|m| format!(", finer model of {m} modes"))
+                .unwrap_or_default(),
+            b.scores.steps_above,
+            d.threshold,
+            b.scores.median_max_score,
+            within(b),
+            d.band_after
+                .as_ref()
+                .map(|a| format!(
+                    "; fixed model: {} above (median {:.2}), {}",
+                    a.scores.steps_above,
+                    a.scores.median_max_score,
+                    within(a)
                 ))
                 .unwrap_or_default()
         );

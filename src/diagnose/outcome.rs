@@ -17,7 +17,8 @@ use super::sensors::SensorEvidence;
 #[serde(rename_all = "snake_case")]
 pub enum Verdict {
     /// The model misses physics the session shows (an effect was accepted, or mismatches
-    /// beyond the null spread remain where the comparison is reliable).
+    /// beyond the null spread remain: in a regime of impact-free steps, or in the impact band
+    /// with the comparison's spread, [`BandSpread`]).
     Mismatch,
     /// Model and recording agree within the comparison's spread.
     NoSignificantMismatch,
@@ -106,6 +107,41 @@ pub struct RegimeScores {
     pub steps_above: usize,
     /// Median over the steps of the step's largest score.
     pub median_max_score: f64,
+}
+
+/// The impact band of a model compared with the comparison's own spread (the verdict on the
+/// band): every window with contact gets an ensemble of runs from perturbed states and
+/// a finer model's difference beside the twin's own sub-windows
+/// ([`crate::session::twin_replay::EnsembleOptions`]), as `rigtwin replay --twin` compares.
+/// The band is non-periodic: a step scores above the threshold pointwise where the model is
+/// right (chaos, the twin's own step); with this spread the typical step of a right model
+/// does not.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct BandSpread {
+    /// Ensemble members per window.
+    pub members: usize,
+    /// Modes of the finer model whose difference joins the spread (None: ensemble only).
+    pub finer_modes: Option<usize>,
+    /// The band's steps, those above the threshold and the median largest score.
+    pub scores: RegimeScores,
+    /// Per band step, its largest score with the spread, in session order.
+    pub steps: Vec<BandStep>,
+    /// Whether the typical band step lies beyond the spread (the median largest score above
+    /// the threshold): the band is a mismatch.
+    pub beyond: bool,
+}
+
+/// One step of the impact band with the comparison's spread ([`BandSpread`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct BandStep {
+    /// Test name.
+    pub test: String,
+    /// Step, counted from 0.
+    pub step: usize,
+    /// Omega / omega_2.
+    pub omega_ratio: f64,
+    /// The step's largest score.
+    pub max_score: f64,
 }
 
 /// An error on a set of steps: the RMS of the compared features' scores.
@@ -200,6 +236,12 @@ pub struct Diagnosis {
     pub regimes_before: Vec<RegimeScores>,
     /// Per regime, after.
     pub regimes_after: Vec<RegimeScores>,
+    /// The impact band of the model as given with the comparison's spread (None: no step with
+    /// contact, or no ensemble configured).
+    pub band_before: Option<BandSpread>,
+    /// The same with the accepted effects, where the model as given was beyond the spread
+    /// (None as well when no effect was accepted).
+    pub band_after: Option<BandSpread>,
     /// The effects tried, by rank.
     pub effects: Vec<EffectResult>,
     /// What the session cannot decide.

@@ -126,7 +126,7 @@ pub struct TwinReplayStats {
 /// runs of the twin from its state at the step's start with the modal velocities perturbed by
 /// `perturbation` of their norm ([`TwinState::perturbed`]), through the end of the step's
 /// record window, on `jobs` threads. A step that starts with the recording (from rest) gets
-/// no ensemble.
+/// no ensemble; with `contact_windows_only`, neither does a window without contact.
 #[derive(Clone, Copy)]
 pub struct EnsembleOptions<'a> {
     /// Members besides the twin's own run (0: none).
@@ -137,6 +137,10 @@ pub struct EnsembleOptions<'a> {
     pub jobs: usize,
     /// The discretisation member run beside the members (none without members).
     pub discretisation: Option<&'a DiscretisationMember<'a>>,
+    /// Members (and the discretisation member) only in the windows where the discretisation
+    /// member runs (contact measured or modelled, or right after a measured one): the
+    /// non-periodic ones. The periodic windows keep the twin's own sub-window spread.
+    pub contact_windows_only: bool,
 }
 
 impl<'a> EnsembleOptions<'a> {
@@ -146,6 +150,7 @@ impl<'a> EnsembleOptions<'a> {
         perturbation: 1e-3,
         jobs: 1,
         discretisation: None,
+        contact_windows_only: false,
     };
 
     /// The ensemble of `[twin]` (`spec`) on `jobs` threads, without a discretisation member.
@@ -155,6 +160,7 @@ impl<'a> EnsembleOptions<'a> {
             perturbation: spec.ensemble_perturbation,
             jobs: jobs.max(1),
             discretisation: None,
+            contact_windows_only: false,
         }
     }
 }
@@ -238,9 +244,12 @@ impl<'r> Ensemble<'r> {
             return Ok(c);
         }
         let measured_contact = c.metrics.contact_fraction - c.contact_fraction_error;
-        let fine = self.fine.as_mut().filter(|_| {
-            after_contact || c.metrics.contact_fraction > 0.0 || measured_contact > 0.0
-        });
+        let contact_window =
+            after_contact || c.metrics.contact_fraction > 0.0 || measured_contact > 0.0;
+        if self.options.contact_windows_only && !contact_window {
+            return Ok(c);
+        }
+        let fine = self.fine.as_mut().filter(|_| contact_window);
         let mut channels: Vec<&str> = Vec::new();
         for f in &c.features {
             if f.channel != CONTACT_CHANNEL && !channels.contains(&f.channel.as_str()) {
@@ -446,6 +455,16 @@ pub trait TwinSink {
     fn state(&mut self, _state: &TwinStateMessage) -> Result<(), TwinReplayError> {
         Ok(())
     }
+    /// A step's comparison with the twin's own spread only (its sub-windows), before the
+    /// ensemble's joins it ([`TwinSink::step`] has it after): the `--ensemble 0` comparison,
+    /// got from the same run.
+    fn pointwise(
+        &mut self,
+        _info: &StepInfo,
+        _twin: Option<&TwinComparison>,
+    ) -> Result<(), TwinReplayError> {
+        Ok(())
+    }
 }
 
 impl TwinSink for () {
@@ -505,6 +524,7 @@ pub fn replay_twin(
                     sink: &mut dyn TwinSink|
      -> Result<(), TwinReplayError> {
         for (info, c) in done {
+            sink.pointwise(&info, c.as_ref().and_then(|c| c.as_ref().ok()))?;
             let c = match c {
                 Some(Ok(c)) => match starts.get(&(info.test.clone(), info.step)) {
                     Some(state) => {
@@ -750,7 +770,9 @@ pub fn replay_twin_steps(
             stats.solver_failures += tb.solver_failure_count();
             out.push(&tb);
         }
-        let c = match out.compare(info, measured, dt) {
+        let c = out.compare(info, measured, dt);
+        sink.pointwise(info, c.as_ref().and_then(|c| c.as_ref().ok()))?;
+        let c = match c {
             Some(Ok(c)) => match logged {
                 Some(m) => {
                     let lead_in = lead_in(rec.twin_states.iter().map(|m| &m.state), &m.state);

@@ -19,7 +19,7 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 
 use super::panel::{axis_areas, grid_styles, Band, Series};
-use crate::diagnose::outcome::{Diagnosis, Regime, StepScores};
+use crate::diagnose::outcome::{BandSpread, Diagnosis, Regime, StepScores};
 use crate::diagnose::TestClearance;
 use crate::report::draw::{
     draw_legend, draw_runs, finite_range, marker_radius, padded, palette, segments, split_legend,
@@ -72,6 +72,9 @@ pub fn draw_diagnosis(d: &Diagnosis, dir: &Path) -> Result<Vec<PathBuf>, ReportE
     }
     if let Some(f) = evidence_sensors(d) {
         write(dir, "evidence-sensors", &f, &mut written)?;
+    }
+    if let Some(f) = evidence_band(d) {
+        write(dir, "evidence-band", &f, &mut written)?;
     }
     if let Some(f) = before_after(d, &with) {
         write(dir, "before-after", &f, &mut written)?;
@@ -912,6 +915,117 @@ fn evidence_clearance(d: &Diagnosis) -> Option<Panels> {
         title: "Clearance per test: a trend over the session points to wear".into(),
         cols: 1,
         panels: vec![p],
+        legend,
+    })
+}
+
+/// The impact band's steps, one panel per test: the largest score of each step of the model
+/// as given pointwise and with the comparison's spread
+/// ([`crate::diagnose::outcome::BandSpread`]), and of the fixed model with the spread, against
+/// the threshold.
+fn evidence_band(d: &Diagnosis) -> Option<Panels> {
+    let b = d.band_before.as_ref()?;
+    let after = d.band_after.as_ref();
+    let mut tests: Vec<&str> = Vec::new();
+    for s in &b.steps {
+        if !tests.contains(&s.test.as_str()) {
+            tests.push(&s.test);
+        }
+    }
+    let of = |band: Option<&BandSpread>, t: &str| -> Vec<(f64, f64)> {
+        (band.into_iter().flat_map(|b| b.steps.iter()))
+            .filter(|s| s.test == t && s.omega_ratio.is_finite())
+            .map(|s| (s.omega_ratio, s.max_score))
+            .collect()
+    };
+    let mut panels = Vec::new();
+    for t in &tests {
+        let spread = of(Some(b), t);
+        let fixed = of(after, t);
+        let point: Vec<(f64, f64)> = (b.steps.iter())
+            .filter(|s| s.test == *t && s.omega_ratio.is_finite())
+            .filter_map(|s| {
+                let q = (d.scores_before.iter()).find(|q| q.test == s.test && q.step == s.step)?;
+                Some((s.omega_ratio, q.max_score()?))
+            })
+            .collect();
+        let xs: Vec<f64> = spread.iter().map(|q| q.0).collect();
+        let ys: Vec<f64> = (spread.iter().chain(&point).chain(&fixed))
+            .map(|q| q.1)
+            .chain([0.0, d.threshold])
+            .collect();
+        let Some(mut p) = Panel::over(
+            (*t).to_string(),
+            ("Omega / omega_2", "largest feature score"),
+            &xs,
+            &ys,
+        ) else {
+            continue;
+        };
+        let (x0, x1) = p.x;
+        p.series.push(line(
+            vec![(x0, d.threshold), (x1, d.threshold)],
+            GREY,
+            LineKind::Dashed,
+            width(),
+        ));
+        p.series.push(line(point, GREY, LineKind::Markers, width()));
+        p.series
+            .push(line(spread, palette(0), LineKind::Markers, width() + 1));
+        if !fixed.is_empty() {
+            p.series
+                .push(line(fixed, palette(1), LineKind::Markers, width() + 1));
+        }
+        panels.push(p);
+    }
+    if panels.is_empty() {
+        return None;
+    }
+    let finer = b
+        .finer_modes
+        .map(|m| format!(" and a finer model of {m} modes"))
+        .unwrap_or_default();
+    let verdict = |b: &BandSpread| {
+        format!(
+            "median {} ({} of {} steps above {}): {}",
+            sig(b.scores.median_max_score),
+            b.scores.steps_above,
+            b.scores.steps,
+            sig(d.threshold),
+            if b.beyond { "beyond" } else { "within" }
+        )
+    };
+    let mut legend = vec![
+        entry(
+            "model as given, pointwise (the twin alone)",
+            GREY,
+            LineKind::Markers,
+        ),
+        entry(
+            format!("model as given, with the spread: {}", verdict(b)),
+            palette(0),
+            LineKind::Markers,
+        ),
+    ];
+    if let Some(a) = after {
+        legend.push(entry(
+            format!("fixed model, with the spread: {}", verdict(a)),
+            palette(1),
+            LineKind::Markers,
+        ));
+    }
+    legend.push(entry(
+        format!("threshold = {}", sig(d.threshold)),
+        GREY,
+        LineKind::Dashed,
+    ));
+    Some(Panels {
+        title: format!(
+            "The impact band, largest score per step with the comparison's spread (an ensemble of {}{finer})",
+            b.members
+        ),
+        cols: panels.len().min(2),
+        panels,
         legend,
     })
 }

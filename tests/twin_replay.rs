@@ -40,12 +40,11 @@ omega_start = 1.08
 omega_end = 1.00
 "#;
 
-#[test]
-fn replay_with_the_twin_compares_every_step_deterministically() {
-    let dir = tempfile::tempdir().unwrap();
-    let plan = dir.path().join("plan.toml");
+/// A session of [`PLAN`] on the simulated rig, recorded into `dir`; returns the log.
+fn record(dir: &std::path::Path) -> PathBuf {
+    let plan = dir.join("plan.toml");
     std::fs::write(&plan, PLAN).unwrap();
-    let mcap = dir.path().join("session.mcap");
+    let mcap = dir.join("session.mcap");
     let o = rigtwin(&[
         "run",
         "--plan",
@@ -55,6 +54,13 @@ fn replay_with_the_twin_compares_every_step_deterministically() {
         mcap.to_str().unwrap(),
     ]);
     assert!(o.status.success(), "{}", text(&o));
+    mcap
+}
+
+#[test]
+fn replay_with_the_twin_compares_every_step_deterministically() {
+    let dir = tempfile::tempdir().unwrap();
+    let mcap = record(dir.path());
 
     let replay = |name: &str, extra: &[&str]| -> PathBuf {
         let out = dir.path().join(name);
@@ -588,18 +594,7 @@ impl TwinSink for Both {
 #[test]
 fn an_ensemble_in_the_contact_windows_only_keeps_the_pointwise_comparison() {
     let dir = tempfile::tempdir().unwrap();
-    let plan = dir.path().join("plan.toml");
-    std::fs::write(&plan, PLAN).unwrap();
-    let mcap = dir.path().join("session.mcap");
-    let o = rigtwin(&[
-        "run",
-        "--plan",
-        plan.to_str().unwrap(),
-        "--quiet",
-        "--out",
-        mcap.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", text(&o));
+    let mcap = record(dir.path());
     let r = rigtwin::session::replay::replay(&mcap).unwrap();
     let cfg = rigtwin::config::RigConfig::default_rig();
     let rom = default_rom::default_rom();

@@ -25,6 +25,12 @@
 //!    of the compared features' scores over the regime the effect shows in. It is accepted
 //!    only if the validation error falls by more than the null spread plus a penalty per
 //!    parameter; rejected candidates are reported with the reason.
+//! 4. **Verdict**: a mismatch when an effect was accepted, or when a regime's typical step
+//!    (the median of the steps' largest scores) lies above the threshold: the impact-free
+//!    regimes compared pointwise, the impact band with the comparison's own spread (the
+//!    locate run's ensemble and discretisation member in the windows with contact,
+//!    [`BandSpread`]): pointwise, the band's chaos and the twin's own step put a right
+//!    model's band steps above the threshold.
 //!
 //! A diagnosis never reads the simulated rig's hidden physics: its inputs are the recording
 //! (DAQ counts, layout, events), its replayed summary and the model, from whose rig

@@ -131,9 +131,9 @@ impl TwinSink for Pointwise {
 /// One run of the model with extensions `ext` over the whole session: every step compared
 /// pointwise (the twin's own spread: `rigtwin replay --twin --ensemble 0` of that model), and,
 /// `with_band`, the impact band with the comparison's spread ([`BandSpread`]; None without a
-/// step with contact or without an ensemble, `[twin] ensemble_members = 0`). The band's spread comes
-/// from the `[twin]` ensemble and the discretisation member (with `input.finer`), run in the
-/// windows with contact only.
+/// step with contact or without an ensemble, `[twin] ensemble_members = 0`). The band's
+/// spread comes from the `[twin]` ensemble and the discretisation member (with
+/// `input.finer`), run in the windows with contact only.
 fn whole_session(
     input: &DiagnoseInput<'_>,
     steps: &SessionSteps,
@@ -167,14 +167,12 @@ fn whole_session(
         contact_windows_only: true,
     };
     let mut summary = input.summary.clone();
-    let mut run_spec: TwinSpec = spec.clone();
-    run_spec.ensemble_members = members;
     let mut pointwise = Pointwise::default();
     replay_twin(
         input.rec,
         &mut summary,
         &model,
-        &run_spec,
+        spec,
         input.cfg.rig.beam_length,
         ensemble,
         &mut pointwise,

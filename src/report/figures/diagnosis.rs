@@ -19,7 +19,7 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 
 use super::panel::{axis_areas, grid_styles, Band, Series};
-use crate::diagnose::outcome::{BandSpread, Diagnosis, Regime, StepScores};
+use crate::diagnose::outcome::{BandSpread, BandStep, Diagnosis, Regime, StepScores};
 use crate::diagnose::TestClearance;
 use crate::report::draw::{
     draw_legend, draw_runs, finite_range, marker_radius, padded, palette, segments, split_legend,
@@ -932,18 +932,20 @@ fn evidence_band(d: &Diagnosis) -> Option<Panels> {
             tests.push(&s.test);
         }
     }
-    let of = |band: Option<&BandSpread>, t: &str| -> Vec<(f64, f64)> {
-        (band.into_iter().flat_map(|b| b.steps.iter()))
+    fn steps_of<'b>(band: &'b BandSpread, t: &str) -> Vec<&'b BandStep> {
+        (band.steps.iter())
             .filter(|s| s.test == t && s.omega_ratio.is_finite())
-            .map(|s| (s.omega_ratio, s.max_score))
             .collect()
+    }
+    let points = |steps: &[&BandStep]| -> Vec<(f64, f64)> {
+        steps.iter().map(|s| (s.omega_ratio, s.max_score)).collect()
     };
     let mut panels = Vec::new();
     for t in &tests {
-        let spread = of(Some(b), t);
-        let fixed = of(after, t);
-        let point: Vec<(f64, f64)> = (b.steps.iter())
-            .filter(|s| s.test == *t && s.omega_ratio.is_finite())
+        let given = steps_of(b, t);
+        let spread = points(&given);
+        let fixed = after.map(|a| points(&steps_of(a, t))).unwrap_or_default();
+        let point: Vec<(f64, f64)> = (given.iter())
             .filter_map(|s| {
                 let q = (d.scores_before.iter()).find(|q| q.test == s.test && q.step == s.step)?;
                 Some((s.omega_ratio, q.max_score()?))

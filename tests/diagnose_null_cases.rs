@@ -14,17 +14,8 @@
 mod cli_support;
 mod diagnose_support;
 
-use diagnose_support::{assert_null, diagnose, sim_session};
+use diagnose_support::{assert_null, diagnose, repo_plan, sim_session};
 use serde_json::Value;
-
-/// A plan file of the repository.
-fn plan(name: &str) -> String {
-    std::fs::read_to_string(format!(
-        "{}/rig-config/plans/{name}",
-        env!("CARGO_MANIFEST_DIR")
-    ))
-    .unwrap()
-}
 
 /// The effects a diagnosis says it cannot decide.
 fn undecided(d: &Value) -> Vec<String> {
@@ -39,7 +30,7 @@ fn undecided(d: &Value) -> Vec<String> {
 #[test]
 fn the_demo_plan_on_the_nominal_rig_is_no_mismatch_and_says_what_it_cannot_decide() {
     let dir = tempfile::tempdir().unwrap();
-    let (_, stripped) = sim_session(dir.path(), "demo", "", &plan("demo.toml"));
+    let (_, stripped) = sim_session(dir.path(), "demo", "", &repo_plan("demo.toml"));
     let d = diagnose(&stripped, dir.path(), "demo", &[]);
     assert_null(&d);
     let u = undecided(&d);
@@ -56,7 +47,7 @@ fn the_demo_plan_on_the_nominal_rig_is_no_mismatch_and_says_what_it_cannot_decid
 fn identify_plan_on_the_nominal_rig_is_no_mismatch() {
     let dir = tempfile::tempdir().unwrap();
     let started = std::time::Instant::now();
-    let (_, stripped) = sim_session(dir.path(), "identify", "", &plan("identify.toml"));
+    let (_, stripped) = sim_session(dir.path(), "identify", "", &repo_plan("identify.toml"));
     let recorded = started.elapsed().as_secs_f64();
     let d = diagnose(&stripped, dir.path(), "identify", &[]);
     eprintln!(

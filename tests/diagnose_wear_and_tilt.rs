@@ -22,7 +22,7 @@
 mod cli_support;
 mod diagnose_support;
 
-use diagnose_support::{accepted, assert_null, diagnose, sim_session};
+use diagnose_support::{accepted, assert_null, diagnose, repo_plan, sim_session};
 
 /// The plan's defaults: probes at 2e-5 l down 1.015 -> 0.995 (9 steps of 0.0025).
 const DEFAULTS: &str = r#"
@@ -74,15 +74,6 @@ fn validation(e: &serde_json::Value) -> (f64, f64) {
         e["error_before"]["validation"].as_f64().unwrap(),
         e["error_after"]["validation"].as_f64().unwrap(),
     )
-}
-
-/// The plan a user is told to run for a diagnosis (`rig-config/plans/identify.toml`).
-fn identify_plan() -> String {
-    std::fs::read_to_string(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/rig-config/plans/identify.toml"
-    ))
-    .unwrap()
 }
 
 /// A session of `plan` with wear `coefficient` hidden, and `also` (more `[truth.variants]`
@@ -197,14 +188,14 @@ fn nothing_hidden_on_the_six_probe_wear_plan_is_no_significant_mismatch() {
 #[test]
 #[ignore = "4 minutes of rig time, 10 minutes of diagnosis; BENCHMARKS.md, Wear on identify.toml"]
 fn wear_2_5e_5_on_identify_toml_is_found() {
-    wear_is_found_on(2.5e-5, &identify_plan(), "", 0);
+    wear_is_found_on(2.5e-5, &repo_plan("identify.toml"), "", 0);
 }
 
 #[test]
 #[ignore = "4 minutes of rig time, 12 minutes of diagnosis; BENCHMARKS.md, Wear on identify.toml"]
 fn wear_and_a_sensor_gain_on_identify_toml_are_both_named() {
     let also = r#"sensor_gains = [{ channel = "upper_tip", gain = 1.05 }]"#;
-    let d = wear_is_found_on(3e-5, &identify_plan(), also, 1);
+    let d = wear_is_found_on(3e-5, &repo_plan("identify.toml"), also, 1);
     let g = accepted(&d, "sensor_gain");
     assert_eq!(g.len(), 1, "{d:#}");
     assert_eq!(g[0]["parameters"]["channel"], "upper_tip", "{d:#}");

@@ -326,7 +326,7 @@ pub(super) fn wear_stage(
         .tests
         .iter()
         .filter(|t| t.onsets > 0 && !is_bracketed(t))
-        .filter_map(|t| Some((t.test_index, impulse.get(t.test_index).copied().flatten()?)))
+        .filter_map(|t| Some((t.test_index, p_of(t)?)))
         .collect();
     let at: Vec<(usize, f64)> = index_of
         .iter()
@@ -369,7 +369,7 @@ pub(super) fn wear_stage(
     let shown = a0.abs() > 0.02 * plan && (se_a0.is_nan() || a0.abs() > 3.0 * se_a0);
     let offset = if shown { a0 } else { 0.0 };
     let slope = |tr: &[(f64, f64)]| -> Option<f64> {
-        if offset != 0.0 {
+        if shown {
             line(tr).map(|l| l.slope)
         } else {
             slope_through_origin(tr)

@@ -22,6 +22,15 @@ use anyhow::{bail, Context};
 use rigtwin::config::RigConfig;
 use rigtwin::log::{read_session, write_atomically, SessionRead};
 
+/// The plan file `name` of the repository's `rig-config/plans/`.
+pub fn repo_plan(name: &str) -> String {
+    std::fs::read_to_string(format!(
+        "{}/rig-config/plans/{name}",
+        env!("CARGO_MANIFEST_DIR")
+    ))
+    .unwrap()
+}
+
 /// The rig description attachment.
 const RIG_ATTACHMENT: &str = "rig.toml";
 

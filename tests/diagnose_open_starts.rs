@@ -9,14 +9,16 @@
 //!   below it) is run from rest instead, with the same results as without any capture;
 //! - a capture during which a pair closed is not kept;
 //! - runs made side by side on two threads (`ModelRunner::run_many`, a fit's grid) give what
-//!   the same runs one after the other give.
+//!   the same runs one after the other give;
+//! - a run with wear starts a test worn as a run from the session's start left it
+//!   (`ModelRunner::set_wear_from`).
 
 mod cli_support;
 mod default_rom;
 mod diagnose_support;
 
 use diagnose_support::sim_session;
-use rigtwin::config::{ClearanceSpec, PhysicsSpec, RigConfig, TiltSpec};
+use rigtwin::config::{ClearanceSpec, PhysicsSpec, RigConfig, TiltSpec, WearSpec};
 use rigtwin::diagnose::rerun::{ModelRunner, SessionSteps, Span};
 use rigtwin::session::replay::replay;
 use rigtwin::twin::TwinModel;
@@ -138,4 +140,101 @@ fn runs_from_an_open_state_compare_what_runs_from_rest_do() {
     // A clearance so small that the probes touch before the capture's step: not kept.
     let mut touching = runner();
     assert!(!touching.capture_open(&offset(-6.5e-4), 0, from).unwrap());
+}
+
+/// Into the band, a rest at a low level far below the resonance, into the band again.
+const WORN_PLAN: &str = r#"
+name = "worn-starts"
+[defaults]
+clearance = 2.33e-3
+settle_periods = 40
+record_periods = 30
+steps_per_period = 1000
+
+[[test]]
+name = "down"
+level = 2e-5
+direction = "down"
+omega_start = 1.03
+omega_end = 0.98
+steps = 6
+
+[[test]]
+name = "quiet"
+level = 3e-6
+direction = "up"
+omega_start = 0.90
+omega_end = 0.91
+steps = 2
+
+[[test]]
+name = "again"
+level = 2e-5
+direction = "down"
+omega_start = 1.03
+omega_end = 0.99
+steps = 3
+"#;
+
+/// `ModelRunner::set_wear_from`: a run of a model with wear starts a test from rest at its
+/// lead-in, with the clearance and wear a run from the session's start at the twin's own step
+/// had there. The lead-in of `again` (the last step of `quiet`) has no contact, so the normal
+/// contact impulse at `again`'s start is the run from the start's exactly, at the twin's step
+/// and at a 3x finer one (where a finer run from the session's start exchanges its own).
+#[test]
+fn a_run_with_wear_starts_a_test_worn_as_the_twins_step_left_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let (log, _) = sim_session(
+        dir.path(),
+        "worn",
+        "[safety]\ndaq_timeout_s = 30\n",
+        WORN_PLAN,
+    );
+    let r = replay(&log).unwrap();
+    let cfg = RigConfig::default_rig();
+    let rom = default_rom::default_rom();
+    let steps = SessionSteps::of(&r.recording, &r.summary);
+    let mut runner = ModelRunner::new(
+        &r.recording,
+        &steps,
+        TwinModel::of_config(rom, &cfg),
+        &cfg.twin,
+        cfg.rig.beam_length,
+        1,
+    );
+    let wear = PhysicsSpec {
+        wear: Some(WearSpec {
+            coefficient: 2e-5,
+            max_growth: None,
+        }),
+        ..PhysicsSpec::default()
+    };
+    let from_start = runner.contact_impulse(&wear, 2).unwrap();
+    let whole = runner.cost.rig_seconds;
+    let p = from_start[2].expect("the impulse at the start of `again`");
+    assert!(p > 0.0, "no contact in `down`");
+    assert_eq!(from_start[1], from_start[2], "contact in `quiet`");
+
+    runner.set_wear_from(Some(1));
+    let worn = runner.contact_impulse(&wear, 2).unwrap();
+    assert_eq!(worn[2], Some(p));
+    let short = runner.cost.rig_seconds - whole;
+    assert!(
+        short < 0.5 * whole,
+        "{short} s of rig time, {whole} s from the start"
+    );
+
+    runner.set_refinement(3);
+    let fine_worn = runner.contact_impulse(&wear, 2).unwrap();
+    assert_eq!(fine_worn[2], Some(p));
+    let fine_scores = runner.run_spans(&wear, &[Span::whole(2)]).unwrap();
+    assert_eq!(fine_scores.len(), 3);
+    assert!(fine_scores.iter().all(|s| !s.features.is_empty()));
+    runner.set_wear_from(None);
+    let fine_from_start = runner.contact_impulse(&wear, 2).unwrap();
+    let q = fine_from_start[2].expect("the impulse at the start of `again`");
+    assert!(
+        q > 0.0 && q != p,
+        "{q} N s at the finer step, {p} N s at the twin's"
+    );
 }

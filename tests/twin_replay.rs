@@ -11,7 +11,8 @@
 //!   whole run, with every model extension on;
 //! - the diagnosis' runs: an ensemble in the windows with contact only
 //!   (`EnsembleOptions::contact_windows_only`), and the comparison before the ensemble joins it
-//!   (`TwinSink::pointwise`) equal to the run without an ensemble.
+//!   (`TwinSink::pointwise`) equal to the run without an ensemble; with an ensemble (the
+//!   twin on a thread of its own) a failing sink stops the replay with its own error.
 
 mod cli_support;
 mod default_rom;
@@ -673,4 +674,42 @@ fn an_ensemble_in_the_contact_windows_only_keeps_the_pointwise_comparison() {
         ensembles < 3,
         "every window had contact: the impact-free one was not exercised"
     );
+
+    // With an ensemble the twin runs on a thread of its own: a sink that fails stops it, and
+    // its error is the one reported.
+    let mut failing = FailsAtSecondStep(0);
+    let mut again = r.summary.clone();
+    let err = replay_twin(
+        &r.recording,
+        &mut again,
+        &model,
+        &spec,
+        l,
+        ensemble,
+        &mut failing,
+    )
+    .unwrap_err();
+    assert!(
+        matches!(&err, TwinReplayError::Overwrite { path } if path == "the sink"),
+        "{err}"
+    );
+    assert_eq!(failing.0, 2);
+}
+
+/// A sink whose second step fails.
+struct FailsAtSecondStep(usize);
+
+impl TwinSink for FailsAtSecondStep {
+    fn block(&mut self, _: &TwinBlock) -> Result<(), TwinReplayError> {
+        Ok(())
+    }
+    fn step(&mut self, _: &StepInfo, _: Option<&TwinComparison>) -> Result<(), TwinReplayError> {
+        self.0 += 1;
+        if self.0 == 2 {
+            return Err(TwinReplayError::Overwrite {
+                path: "the sink".into(),
+            });
+        }
+        Ok(())
+    }
 }

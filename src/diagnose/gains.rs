@@ -11,7 +11,7 @@ use crate::config::{PhysicsSpec, SensorGainSpec};
 use super::evidence::SessionEvidence;
 use super::judge::{alternate, set_error, Candidate, Steps, Work};
 use super::outcome::{Regime, SetError, StepScores};
-use super::rerun::SessionSteps;
+use super::rerun::{SessionSteps, Span};
 use super::sensors::{sensor_sensitivities_of, SensitivityStatus, SensorOptions};
 use super::DiagnoseError;
 
@@ -171,10 +171,20 @@ pub(super) fn sensor_stage(
     if let Some(r) = &sens.upper_tip_over_vibrometer {
         if !r.is_one(&opts) && !free_train.is_empty() && !free_validation.is_empty() {
             let mut tried = Vec::new();
-            for (channel, gain) in [("upper_tip", r.ratio), ("vibrometer", 1.0 / r.ratio)] {
+            let gains = [("upper_tip", r.ratio), ("vibrometer", 1.0 / r.ratio)];
+            let mut all_t: Vec<usize> = free.clone();
+            all_t.sort_unstable();
+            let whole: Vec<Span> = all_t.iter().map(|&t| Span::whole(t)).collect();
+            work.prefetch(
+                gains
+                    .iter()
+                    .map(|&(channel, gain)| {
+                        (with_gain(&work.accepted, channel, gain), whole.clone())
+                    })
+                    .collect(),
+            )?;
+            for (channel, gain) in gains {
                 let ext = with_gain(&work.accepted, channel, gain);
-                let mut all_t: Vec<usize> = free.clone();
-                all_t.sort_unstable();
                 let s = work.scores(&ext, &all_t)?;
                 tried.push((
                     channel,

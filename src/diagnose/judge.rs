@@ -342,15 +342,7 @@ impl Work<'_> {
         c: &Candidate,
         where_fitted: bool,
     ) -> Result<Option<SetError>, DiagnoseError> {
-        let s = match c.where_fitted.as_ref().filter(|_| where_fitted) {
-            Some(w) => self.scores_spans(ext, &w.spans)?,
-            None => {
-                let mut all: Vec<usize> = c.train.iter().chain(&c.validation).copied().collect();
-                all.sort_unstable();
-                all.dedup();
-                self.scores(ext, &all)?
-            }
-        };
+        let s = self.scores_spans(ext, &Self::judged_spans(c, where_fitted))?;
         Ok(
             match (
                 set_error_of(&s, &c.train, c.steps, c.channel.as_deref()),
@@ -362,6 +354,39 @@ impl Work<'_> {
         )
     }
 
+    /// The spans [`Work::errors`] compares: every step of the candidate's tests, or, with
+    /// `where_fitted`, the steps its fit compared.
+    fn judged_spans(c: &Candidate, where_fitted: bool) -> Vec<Span> {
+        match c.where_fitted.as_ref().filter(|_| where_fitted) {
+            Some(w) => w.spans.clone(),
+            None => {
+                let mut all: Vec<usize> = c.train.iter().chain(&c.validation).copied().collect();
+                all.sort_unstable();
+                all.dedup();
+                all.into_iter().map(Span::whole).collect()
+            }
+        }
+    }
+
+    /// [`Work::errors`] of the model `before` and of the candidate's, their runs side by side
+    /// on the runner's threads.
+    fn errors_before_after(
+        &mut self,
+        before: &PhysicsSpec,
+        c: &Candidate,
+        where_fitted: bool,
+    ) -> Result<(Option<SetError>, Option<SetError>), DiagnoseError> {
+        let spans = Self::judged_spans(c, where_fitted);
+        self.prefetch(vec![
+            (before.clone(), spans.clone()),
+            (c.ext.clone(), spans),
+        ])?;
+        Ok((
+            self.errors(before, c, where_fitted)?,
+            self.errors(&c.ext, c, where_fitted)?,
+        ))
+    }
+
     /// Judges candidate `c` against the accepted model; accepts it if it predicts its
     /// validation tests better beyond the null spread. Returns whether accepted.
     ///
@@ -371,7 +396,9 @@ impl Work<'_> {
     /// over-counts contact"), and a smaller clearance or a tilt can absorb part of that
     /// excess (on `identify.toml` with nothing hidden, a tilt of -0.012 rad lowered the
     /// validation error 3x at the twin's step). What passes at the finer step as well is
-    /// missing physics; what does not is the twin's own discretisation.
+    /// missing physics; what does not is the twin's own discretisation. A candidate with wear
+    /// runs each validation test there from its lead-in, worn as the run at the twin's step
+    /// left it ([`ModelRunner::set_wear_from`]).
     ///
     /// A candidate that also names where it was fitted ([`Candidate::judged_where_fitted`])
     /// and is not accepted so is judged there as well ([`Work::judge_where_fitted`]).
@@ -396,14 +423,15 @@ impl Work<'_> {
         c: &mut Candidate,
     ) -> Result<(bool, Option<SetError>, Option<SetError>, String), DiagnoseError> {
         let accepted = self.accepted.clone();
-        let before = self.errors(&accepted, c, false)?;
-        let after = self.errors(&c.ext, c, false)?;
+        let (before, after) = self.errors_before_after(&accepted, c, false)?;
         let (ok, reason) = self.assess(c, before, after);
         if !ok || c.steps != Steps::All {
             return Ok((ok, before, after, reason));
         }
         let own = self.runner.refinement();
         self.runner.set_refinement(own * CONFIRM_REFINEMENT);
+        // With wear: each validation test from its lead-in, worn as the twin's step left it.
+        self.runner.set_wear_from(Some(own));
         let (line, cand_ext) = (
             format!(
                 "{} again at a {CONFIRM_REFINEMENT}x finer twin step on {}",
@@ -418,9 +446,15 @@ impl Work<'_> {
             let s = w.scores(ext, &validation)?;
             Ok(set_error_of(&s, &validation, steps, channel.as_deref()))
         };
-        let fb = fine(self, &accepted);
+        let whole: Vec<Span> = validation.iter().map(|&t| Span::whole(t)).collect();
+        let both = self.prefetch(vec![
+            (accepted.clone(), whole.clone()),
+            (cand_ext.clone(), whole),
+        ]);
+        let fb = both.and_then(|()| fine(self, &accepted));
         let fa = fb.as_ref().ok().map(|_| fine(self, &cand_ext));
         self.runner.set_refinement(own);
+        self.runner.set_wear_from(None);
         let (fb, fa) = (fb?, fa.transpose()?.flatten());
         let as_set = |v: Option<f64>, train: Option<SetError>| {
             v.zip(train).map(|(validation, t)| SetError {
@@ -466,9 +500,7 @@ impl Work<'_> {
         let accepted = self.accepted.clone();
         let own = self.runner.refinement();
         self.runner.set_refinement(own * w.refinement);
-        let fitted_step = self
-            .errors(&accepted, &c, true)
-            .and_then(|b| Ok((b, self.errors(&c.ext, &c, true)?)));
+        let fitted_step = self.errors_before_after(&accepted, &c, true);
         self.runner.set_refinement(own);
         let (before, after) = fitted_step?;
         let (ok, reason) = self.assess_with(&c, before, after, true);

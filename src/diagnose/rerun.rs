@@ -15,7 +15,7 @@
 //! results do not depend on the number of threads. A hypothesis that changes the clearance
 //! over the session (wear) runs the whole session in one stretch.
 
-use std::collections::VecDeque;
+use std::collections::{BTreeMap, HashMap, VecDeque};
 
 use crate::config::PhysicsSpec;
 use crate::control::{EventKind, StepInfo, StepSummary};
@@ -311,6 +311,17 @@ struct OpenStart {
     state: crate::twin::TwinState,
 }
 
+/// Where a stretch of tests starts.
+enum Start {
+    /// From rest at the lead-in of its first span.
+    Rest,
+    /// From a captured state of open contact (an index into the runner's open starts).
+    Open(usize),
+    /// From rest at the lead-in of its one span, with the contact's geometry (clearance and
+    /// wear so far) of a state recorded there ([`ModelRunner::set_wear_from`]).
+    Worn(Box<crate::twin::TwinState>),
+}
+
 /// What a model run did.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct RunCost {
@@ -337,13 +348,20 @@ pub struct ModelRunner<'a> {
     jobs: usize,
     /// What the runs cost so far.
     pub cost: RunCost,
-    /// Per test of the session: the normal contact impulse accumulated at its start in the
-    /// last run, N s (`None`: not run, or no wear in the model).
-    last_contact_impulse: Vec<Option<f64>>,
+    /// Per run of the last [`ModelRunner::run_many`], per test of the session: the normal
+    /// contact impulse accumulated at its start, N s (`None`: not run, or no wear in the
+    /// model).
+    last_contact_impulse: Vec<Vec<Option<f64>>>,
     /// States of open contact that can start runs ([`ModelRunner::capture_open`]).
     open_starts: Vec<OpenStart>,
     /// Every capture tried: (test, step, extensions and refinement) and whether it was kept.
     captures: std::collections::HashMap<(usize, usize, String), bool>,
+    /// The states of the runs of models with wear at each test's lead-in, per (extensions,
+    /// refinement): test index -> state ([`ModelRunner::set_wear_from`]).
+    worn: HashMap<(String, u32), BTreeMap<usize, crate::twin::TwinState>>,
+    /// Whether runs of models with wear start each test from the state recorded at its lead-in
+    /// by a run at this refinement ([`ModelRunner::set_wear_from`]).
+    wear_from: Option<u32>,
 }
 
 /// What one stretch of tests gave.
@@ -353,6 +371,8 @@ struct GroupRun {
     /// (test index, accumulated normal contact impulse at its start, N s), with wear in the
     /// model.
     impulse: Vec<(usize, f64)>,
+    /// (test index, the twin's state at its lead-in), with wear in the model.
+    lead_ins: Vec<(usize, crate::twin::TwinState)>,
 }
 
 impl<'a> ModelRunner<'a> {
@@ -383,7 +403,25 @@ impl<'a> ModelRunner<'a> {
             last_contact_impulse: Vec::new(),
             open_starts: Vec::new(),
             captures: std::collections::HashMap::new(),
+            worn: HashMap::new(),
+            wear_from: None,
         }
+    }
+
+    /// From now on, with `Some(r)`, a run of a model with wear runs each test it is asked for
+    /// on its own, from rest at the test's lead-in with the clearance and wear so far that a
+    /// run of the same model at refinement `r` had there (where such a run went through the
+    /// test; else from the session's start as usual); `None`: every run with wear goes from
+    /// the session's start.
+    ///
+    // NOTE: for the finer twin step's confirmation of a wear candidate. Its coefficient was
+    // fitted against the impulse of the twin at its own step, so the clearance it predicts at a
+    // test's start is that twin's; the finer twin then runs the test (and its lead-in step)
+    // with wear going on, so the contact compared is the finer twin's. It spares the run of
+    // the session from its start at the finer step, one thread for 129 s of a 798 s diagnosis
+    // of `identify.toml` with wear and a sensor gain (BENCHMARKS.md, "The diagnosis' time").
+    pub fn set_wear_from(&mut self, refinement: Option<u32>) {
+        self.wear_from = refinement;
     }
 
     /// Runs from now on at a twin step `refinement` (>= 1) times finer than the given one (1:
@@ -432,22 +470,34 @@ impl<'a> ModelRunner<'a> {
 
     /// Several [`ModelRunner::run_spans`] at once, their stretches of tests spread over the
     /// `jobs` threads together (the points of a fit's grid run side by side, where one run of
-    /// a single test would keep one thread busy). Results in the order of `runs`; the contact
-    /// impulse ([`ModelRunner::contact_impulse`]) is the last run's.
+    /// a single test would keep one thread busy). Results in the order of `runs`.
     pub fn run_many(
         &mut self,
         runs: &[(PhysicsSpec, Vec<Span>)],
     ) -> Result<Vec<Vec<StepScores>>, DiagnoseError> {
         let mut wanted_of: Vec<Vec<Span>> = Vec::with_capacity(runs.len());
-        // (run, stretch of consecutive tests, the captured state it starts from); the whole
-        // session for wear.
-        let mut groups: Vec<(usize, Vec<Span>, Option<usize>)> = Vec::new();
+        // (run, stretch of consecutive tests, where it starts); the whole session for wear.
+        let mut groups: Vec<(usize, Vec<Span>, Start)> = Vec::new();
         for (r, (ext, spans)) in runs.iter().enumerate() {
             let mut wanted: Vec<Span> = spans.clone();
             wanted.sort_unstable();
             wanted.dedup_by_key(|s| s.test);
             let first = groups.len();
-            if ext.wear.is_some() {
+            let worn = self
+                .wear_from
+                .filter(|_| ext.wear.is_some())
+                .and_then(|f| self.worn.get(&(ext.to_json(), f)))
+                .filter(|w| wanted.iter().all(|s| w.contains_key(&s.test)));
+            if let Some(worn) = worn {
+                for &span in &wanted {
+                    let span = Span {
+                        lead_in: LeadIn::Test,
+                        ..span
+                    };
+                    let state = Box::new(worn[&span.test].clone());
+                    groups.push((r, vec![span], Start::Worn(state)));
+                }
+            } else if ext.wear.is_some() {
                 // From the session's start through the last test asked for.
                 let last = wanted.last().map_or(0, |s| s.test);
                 let group = (0..=last)
@@ -459,7 +509,7 @@ impl<'a> ModelRunner<'a> {
                             .unwrap_or(Span::whole(t))
                     })
                     .collect();
-                groups.push((r, group, None));
+                groups.push((r, group, Start::Rest));
             } else {
                 for &span in &wanted {
                     let start = self.open_start_for(ext, &span);
@@ -468,7 +518,7 @@ impl<'a> ModelRunner<'a> {
                     // A span run from its own lead-in starts a stretch of its own.
                     let own_lead_in = span.from > 0 && span.lead_in == LeadIn::Span;
                     match groups.last_mut() {
-                        Some((_, g, None))
+                        Some((_, g, Start::Rest))
                             if own
                                 && start.is_none()
                                 && !own_lead_in
@@ -478,7 +528,7 @@ impl<'a> ModelRunner<'a> {
                         {
                             g.push(span)
                         }
-                        _ => groups.push((r, vec![span], start)),
+                        _ => groups.push((r, vec![span], start.map_or(Start::Rest, Start::Open))),
                     }
                 }
             }
@@ -492,7 +542,7 @@ impl<'a> ModelRunner<'a> {
         let mut order: Vec<usize> = (0..groups.len()).collect();
         order.sort_by_key(|&k| {
             let (_, g, start) = &groups[k];
-            std::cmp::Reverse(this.extent(g, start.map(|i| &this.open_starts[i])))
+            std::cmp::Reverse(this.extent(g, start))
         });
         let next = std::sync::atomic::AtomicUsize::new(0);
         // Every stretch is taken by exactly one thread: with none panicked, `done` holds one
@@ -509,7 +559,6 @@ impl<'a> ModelRunner<'a> {
                                 break done;
                             };
                             let (r, spans, start) = &groups[g];
-                            let start = start.map(|i| &this.open_starts[i]);
                             done.push((g, this.run_group(&models[*r], spans, start)));
                         }
                     })
@@ -527,11 +576,17 @@ impl<'a> ModelRunner<'a> {
         let results = done.into_iter().map(|(_, r)| r);
         let mut out: Vec<Vec<StepScores>> = vec![Vec::new(); runs.len()];
         let mut impulse = vec![vec![None; self.steps.tests.len()]; runs.len()];
-        for ((r, _, _), g) in groups.iter().zip(results) {
+        for ((r, _, start), g) in groups.iter().zip(results) {
             let g = g?;
             self.cost.runs += 1;
             self.cost.rig_seconds += g.rig_seconds;
             out[*r].extend(g.scores);
+            if matches!(start, Start::Rest) && !g.lead_ins.is_empty() {
+                self.worn
+                    .entry((runs[*r].0.to_json(), self.refinement))
+                    .or_default()
+                    .extend(g.lead_ins);
+            }
             for (t, p) in g.impulse {
                 if let Some(slot) = impulse[*r].get_mut(t) {
                     *slot = Some(p);
@@ -543,7 +598,7 @@ impl<'a> ModelRunner<'a> {
             o.retain(|s| wanted.iter().any(|w| w.test == s.test_index));
         }
         self.cost.wall_seconds += wall.elapsed().as_secs_f64();
-        self.last_contact_impulse = impulse.pop().unwrap_or_default();
+        self.last_contact_impulse = impulse;
         Ok(out)
     }
 
@@ -713,27 +768,49 @@ impl<'a> ModelRunner<'a> {
         ext: &PhysicsSpec,
         through: usize,
     ) -> Result<Vec<Option<f64>>, DiagnoseError> {
-        let mut ext = ext.clone();
-        if ext.wear.is_none() {
-            ext.wear = Some(crate::config::WearSpec {
-                coefficient: 0.0,
-                max_growth: None,
-            });
-        }
-        let spans = [Span::of_test(through, 0, Some(0))];
-        self.run_spans(&ext, &spans)?;
-        Ok(self.last_contact_impulse.clone())
+        let mut all = self.contact_impulses(std::slice::from_ref(ext), through)?;
+        Ok(all.pop().unwrap_or_default())
+    }
+
+    /// [`ModelRunner::contact_impulse`] of several models, run side by side on the runner's
+    /// threads; in the order of `exts`.
+    pub fn contact_impulses(
+        &mut self,
+        exts: &[PhysicsSpec],
+        through: usize,
+    ) -> Result<Vec<Vec<Option<f64>>>, DiagnoseError> {
+        let spans = vec![Span::of_test(through, 0, Some(0))];
+        let runs: Vec<(PhysicsSpec, Vec<Span>)> = exts
+            .iter()
+            .map(|ext| {
+                let mut ext = ext.clone();
+                if ext.wear.is_none() {
+                    ext.wear = Some(crate::config::WearSpec {
+                        coefficient: 0.0,
+                        max_growth: None,
+                    });
+                }
+                (ext, spans.clone())
+            })
+            .collect();
+        self.run_many(&runs)?;
+        Ok(std::mem::take(&mut self.last_contact_impulse))
+    }
+
+    /// The threads the runs are spread over.
+    pub fn jobs(&self) -> usize {
+        self.jobs
     }
 
     /// The samples a run of `group` from rest at its lead-in, or from `start`, covers (to
     /// order the stretches by length).
-    fn extent(&self, group: &[Span], start: Option<&OpenStart>) -> u64 {
+    fn extent(&self, group: &[Span], start: &Start) -> u64 {
         let Some(first) = group.first() else {
             return 0;
         };
         let begin = match start {
-            Some(o) => o.state.next_sample,
-            None => self.steps.lead_in_of(first).unwrap_or(0),
+            Start::Open(i) => self.open_starts[*i].state.next_sample,
+            Start::Rest | Start::Worn(_) => self.steps.lead_in_of(first).unwrap_or(0),
         };
         let end = self
             .steps
@@ -752,13 +829,14 @@ impl<'a> ModelRunner<'a> {
         &self,
         model: &TwinModel<'_>,
         group: &[Span],
-        start: Option<&OpenStart>,
+        start: &Start,
     ) -> Result<GroupRun, DiagnoseError> {
         let rec = self.rec;
         let empty = GroupRun {
             scores: Vec::new(),
             rig_seconds: 0.0,
             impulse: Vec::new(),
+            lead_ins: Vec::new(),
         };
         if group.is_empty() {
             return Ok(empty);
@@ -781,15 +859,34 @@ impl<'a> ModelRunner<'a> {
             }
         }
         let mut impulse = Vec::new();
+        // With wear, where each test's lead-in is (to keep the state there, for
+        // `ModelRunner::set_wear_from`).
+        let mut lead_in_at: VecDeque<(usize, u64)> = VecDeque::new();
+        if model.extensions.wear.is_some() && matches!(start, Start::Rest) {
+            lead_in_at = tests
+                .iter()
+                .filter_map(|&t| Some((t, self.steps.lead_in(t)?)))
+                .collect();
+        }
+        let mut lead_ins = Vec::new();
         let end = last.info.record_end_sample();
         let (mut twin, start, mut clearances) = match start {
-            None => self.twin_at(model, self.steps.lead_in_of(&group[0]))?,
-            Some(o) => {
+            Start::Rest => self.twin_at(model, self.steps.lead_in_of(&group[0]))?,
+            Start::Open(i) => {
+                let o = &self.open_starts[*i];
                 // NOTE: the state was captured before the block at its `next_sample`, which
                 // `twin_at` finds; no test starts after it in this one-test group.
                 let (mut twin, k, clearances) = self.twin_at(model, Some(o.state.next_sample))?;
                 twin.set_open_state(&o.state, &o.captured_with)?;
                 test_starts.clear();
+                (twin, k, clearances)
+            }
+            Start::Worn(state) => {
+                // The state was kept before the block that holds the lead-in, where `twin_at`
+                // starts.
+                let (mut twin, k, clearances) =
+                    self.twin_at(model, self.steps.lead_in_of(&group[0]))?;
+                twin.reset_keeping_geometry(state)?;
                 (twin, k, clearances)
             }
         };
@@ -807,6 +904,19 @@ impl<'a> ModelRunner<'a> {
             }
             while let Some(c) = clearances.next_due(b.first_sample) {
                 twin.set_clearance(c)?;
+            }
+            // NOTE: the block `twin_at` starts a run from this lead-in at (the first that ends
+            // past it).
+            while lead_in_at
+                .front()
+                .is_some_and(|&(_, s)| s < b.first_sample + b.len as u64)
+            {
+                let Some((t, _)) = lead_in_at.pop_front() else {
+                    break;
+                };
+                if let Some(state) = twin.state() {
+                    lead_ins.push((t, state));
+                }
             }
             while test_starts
                 .front()
@@ -854,6 +964,7 @@ impl<'a> ModelRunner<'a> {
             scores,
             rig_seconds,
             impulse,
+            lead_ins,
         })
     }
 }

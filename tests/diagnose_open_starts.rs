@@ -20,7 +20,7 @@ mod diagnose_support;
 use diagnose_support::sim_session;
 use rigtwin::config::{ClearanceSpec, PhysicsSpec, RigConfig, TiltSpec, WearSpec};
 use rigtwin::diagnose::rerun::{ModelRunner, SessionSteps, Span};
-use rigtwin::session::replay::replay;
+use rigtwin::session::replay::{replay, Replay};
 use rigtwin::twin::TwinModel;
 
 /// 2e-5 l down from 1.03 omega_2 in 0.01 steps into the band: the first steps impact-free.
@@ -41,6 +41,23 @@ omega_end = 0.98
 steps = 6
 "#;
 
+/// A runner of the default rig's model over `r` on `jobs` threads.
+fn runner_of<'a>(
+    r: &'a Replay,
+    steps: &'a SessionSteps,
+    cfg: &'a RigConfig,
+    jobs: usize,
+) -> ModelRunner<'a> {
+    ModelRunner::new(
+        &r.recording,
+        steps,
+        TwinModel::of_config(default_rom::default_rom(), cfg),
+        &cfg.twin,
+        cfg.rig.beam_length,
+        jobs,
+    )
+}
+
 fn offset(o: f64) -> PhysicsSpec {
     PhysicsSpec {
         clearance: Some(ClearanceSpec {
@@ -57,18 +74,8 @@ fn runs_from_an_open_state_compare_what_runs_from_rest_do() {
     let (log, _) = sim_session(dir.path(), "down", "[safety]\ndaq_timeout_s = 30\n", PLAN);
     let r = replay(&log).unwrap();
     let cfg = RigConfig::default_rig();
-    let rom = default_rom::default_rom();
     let steps = SessionSteps::of(&r.recording, &r.summary);
-    let runner = || {
-        ModelRunner::new(
-            &r.recording,
-            &steps,
-            TwinModel::of_config(rom, &cfg),
-            &cfg.twin,
-            cfg.rig.beam_length,
-            1,
-        )
-    };
+    let runner = || runner_of(&r, &steps, &cfg, 1);
     let first = steps.first_contact(0).expect("the sweep reaches the band");
     assert!(
         first >= 3,
@@ -122,14 +129,7 @@ fn runs_from_an_open_state_compare_what_runs_from_rest_do() {
 
     // The same runs side by side on two threads (a fit's grid, `ModelRunner::run_many`):
     // the same results, in order.
-    let mut side_by_side = ModelRunner::new(
-        &r.recording,
-        &steps,
-        TwinModel::of_config(rom, &cfg),
-        &cfg.twin,
-        cfg.rig.beam_length,
-        2,
-    );
+    let mut side_by_side = runner_of(&r, &steps, &cfg, 2);
     assert!(side_by_side.capture_open(&closest, 0, from).unwrap());
     let runs: Vec<(PhysicsSpec, Vec<Span>)> = cases
         .iter()
@@ -142,23 +142,9 @@ fn runs_from_an_open_state_compare_what_runs_from_rest_do() {
     assert!(!touching.capture_open(&offset(-6.5e-4), 0, from).unwrap());
 }
 
-/// Into the band, a rest at a low level far below the resonance, into the band again.
-const WORN_PLAN: &str = r#"
-name = "worn-starts"
-[defaults]
-clearance = 2.33e-3
-settle_periods = 40
-record_periods = 30
-steps_per_period = 1000
-
-[[test]]
-name = "down"
-level = 2e-5
-direction = "down"
-omega_start = 1.03
-omega_end = 0.98
-steps = 6
-
+/// After [`PLAN`]'s test into the band: a rest at a low level far below the resonance, and
+/// into the band again.
+const WORN_TESTS: &str = r#"
 [[test]]
 name = "quiet"
 level = 3e-6
@@ -188,20 +174,12 @@ fn a_run_with_wear_starts_a_test_worn_as_the_twins_step_left_it() {
         dir.path(),
         "worn",
         "[safety]\ndaq_timeout_s = 30\n",
-        WORN_PLAN,
+        &format!("{PLAN}{WORN_TESTS}"),
     );
     let r = replay(&log).unwrap();
     let cfg = RigConfig::default_rig();
-    let rom = default_rom::default_rom();
     let steps = SessionSteps::of(&r.recording, &r.summary);
-    let mut runner = ModelRunner::new(
-        &r.recording,
-        &steps,
-        TwinModel::of_config(rom, &cfg),
-        &cfg.twin,
-        cfg.rig.beam_length,
-        1,
-    );
+    let mut runner = runner_of(&r, &steps, &cfg, 1);
     let wear = PhysicsSpec {
         wear: Some(WearSpec {
             coefficient: 2e-5,

@@ -279,13 +279,23 @@ impl Work<'_> {
         ext: &PhysicsSpec,
         spans: &[Span],
     ) -> Result<Vec<StepScores>, DiagnoseError> {
-        let key = (ext.to_json(), spans.to_vec(), self.runner.refinement());
+        let key = self.cache_key(ext, spans);
         if let Some(s) = self.cache.get(&key) {
             return Ok(s.clone());
         }
         let s = self.runner.run_spans(ext, spans)?;
         self.cache.insert(key, s.clone());
         Ok(s)
+    }
+
+    /// What a run of `ext` over `spans` is remembered by: the model, the steps, the twin step's
+    /// refinement, and, with wear, where its tests start ([`ModelRunner::set_wear_from`]).
+    fn cache_key(&self, ext: &PhysicsSpec, spans: &[Span]) -> (String, Vec<Span>, u32) {
+        let mut model = ext.to_json();
+        if let Some(r) = self.runner.wear_from().filter(|_| ext.wear.is_some()) {
+            model.push_str(&format!(" worn as at x{r}"));
+        }
+        (model, spans.to_vec(), self.runner.refinement())
     }
 
     /// Runs the model for every `(ext, spans)` of `runs` not run before, side by side on the
@@ -295,10 +305,9 @@ impl Work<'_> {
         &mut self,
         runs: Vec<(PhysicsSpec, Vec<Span>)>,
     ) -> Result<(), DiagnoseError> {
-        let refinement = self.runner.refinement();
         let (mut keys, mut todo) = (Vec::new(), Vec::new());
         for (ext, spans) in runs {
-            let key = (ext.to_json(), spans.clone(), refinement);
+            let key = self.cache_key(&ext, &spans);
             if self.cache.contains_key(&key) || keys.contains(&key) {
                 continue;
             }

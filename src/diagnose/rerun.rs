@@ -13,7 +13,9 @@
 //! damping) before the first compared record window. Groups run on the runner's threads, the
 //! longest first, each thread taking the next one left; the
 //! results do not depend on the number of threads. A hypothesis that changes the clearance
-//! over the session (wear) runs the whole session in one stretch.
+//! over the session (wear) runs the whole session in one stretch, unless a run of it at another
+//! twin step left the clearance and wear at each test's lead-in to start from
+//! ([`ModelRunner::set_wear_from`]).
 
 use std::collections::{BTreeMap, HashMap, VecDeque};
 
@@ -351,7 +353,7 @@ pub struct ModelRunner<'a> {
     /// Per run of the last [`ModelRunner::run_many`], per test of the session: the normal
     /// contact impulse accumulated at its start, N s (`None`: not run, or no wear in the
     /// model).
-    last_contact_impulse: Vec<Vec<Option<f64>>>,
+    last_impulses: Vec<Vec<Option<f64>>>,
     /// States of open contact that can start runs ([`ModelRunner::capture_open`]).
     open_starts: Vec<OpenStart>,
     /// Every capture tried: (test, step, extensions and refinement) and whether it was kept.
@@ -400,7 +402,7 @@ impl<'a> ModelRunner<'a> {
             beam_length,
             jobs: jobs.max(1),
             cost: RunCost::default(),
-            last_contact_impulse: Vec::new(),
+            last_impulses: Vec::new(),
             open_starts: Vec::new(),
             captures: std::collections::HashMap::new(),
             worn: HashMap::new(),
@@ -422,6 +424,11 @@ impl<'a> ModelRunner<'a> {
     // of `identify.toml` with wear and a sensor gain (BENCHMARKS.md, "The diagnosis' time").
     pub fn set_wear_from(&mut self, refinement: Option<u32>) {
         self.wear_from = refinement;
+    }
+
+    /// What [`ModelRunner::set_wear_from`] set.
+    pub fn wear_from(&self) -> Option<u32> {
+        self.wear_from
     }
 
     /// Runs from now on at a twin step `refinement` (>= 1) times finer than the given one (1:
@@ -598,7 +605,7 @@ impl<'a> ModelRunner<'a> {
             o.retain(|s| wanted.iter().any(|w| w.test == s.test_index));
         }
         self.cost.wall_seconds += wall.elapsed().as_secs_f64();
-        self.last_contact_impulse = impulse;
+        self.last_impulses = impulse;
         Ok(out)
     }
 
@@ -794,7 +801,7 @@ impl<'a> ModelRunner<'a> {
             })
             .collect();
         self.run_many(&runs)?;
-        Ok(std::mem::take(&mut self.last_contact_impulse))
+        Ok(std::mem::take(&mut self.last_impulses))
     }
 
     /// The threads the runs are spread over.

@@ -426,8 +426,8 @@ pub(super) fn wear_stage(
     // the line's fixed point over every run. The slope is chaotic at a few percent (runs
     // 5 % apart in the coefficient gave slopes 12 % apart on `identify.toml` with a hidden
     // 3e-5 m/(N s)), so runs spread out and a line through all of them settle it where
-    // re-running the last slope wandered: four rounds, still 3 % apart, 472 s of a 798 s
-    // diagnosis (BENCHMARKS.md, "The diagnosis' time").
+    // re-running the last slope wandered: four rounds one after the other, still 3 % apart,
+    // 144 s of one thread in a 798 s diagnosis (BENCHMARKS.md, "The diagnosis' time").
     let slope_with = |impulse: &[Option<f64>]| -> Option<f64> {
         let tr: Vec<(f64, f64)> = points
             .iter()
@@ -477,7 +477,9 @@ pub(super) fn wear_stage(
         if round + 1 == rounds {
             break;
         }
-        let Some(k) = fixed_point(&slopes) else {
+        // Without a line yet (one run and an offset): the last run's slope, as plain
+        // iteration would.
+        let Some(k) = fixed_point(&slopes).or_else(|| runs.last().map(|r| r.1)) else {
             break;
         };
         next = if side_by_side {

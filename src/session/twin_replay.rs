@@ -7,6 +7,10 @@
 //! original except the recorded twin's topics (`/twin/...`), then the re-run twin's
 //! `/twin/blocks` and `/twin/steps`, and a `twin_replay` metadata record naming the model;
 //! `rigtwin report NEW.mcap` draws the re-run twin beside the measurement.
+//!
+//! With an ensemble the twin runs on a thread of its own, ahead of the ensemble's runs of the
+//! windows behind it, and hands on its states, blocks and windows through a bounded channel;
+//! the sink and the ensemble take them in the order a single thread would.
 
 use std::collections::{HashMap, HashSet, VecDeque};
 use std::path::Path;

@@ -11,8 +11,8 @@
 //!   whole run, with every model extension on;
 //! - the diagnosis' runs: an ensemble in the windows with contact only
 //!   (`EnsembleOptions::contact_windows_only`), and the comparison before the ensemble joins it
-//!   (`TwinSink::pointwise`) equal to the run without an ensemble; with an ensemble (the
-//!   twin on a thread of its own) a failing sink stops the replay with its own error.
+//!   (`TwinSink::pointwise`) equal to the run without an ensemble; with an ensemble, a
+//!   failing sink stops the replay with its own error.
 
 mod cli_support;
 mod default_rom;
@@ -675,8 +675,7 @@ fn an_ensemble_in_the_contact_windows_only_keeps_the_pointwise_comparison() {
         "every window had contact: the impact-free one was not exercised"
     );
 
-    // With an ensemble the twin runs on a thread of its own: a sink that fails stops it, and
-    // its error is the one reported.
+    // With an ensemble, a sink that fails stops the replay, and its error is the one reported.
     let mut failing = FailsAtSecondStep(0);
     let mut again = r.summary.clone();
     let err = replay_twin(

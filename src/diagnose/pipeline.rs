@@ -114,9 +114,6 @@ impl TwinSink for Pointwise {
     fn block(&mut self, _: &TwinBlock) -> Result<(), TwinReplayError> {
         Ok(())
     }
-    fn wants_blocks(&self) -> bool {
-        false
-    }
     fn step(&mut self, _: &StepInfo, _: Option<&TwinComparison>) -> Result<(), TwinReplayError> {
         Ok(())
     }

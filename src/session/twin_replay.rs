@@ -7,10 +7,6 @@
 //! original except the recorded twin's topics (`/twin/...`), then the re-run twin's
 //! `/twin/blocks` and `/twin/steps`, and a `twin_replay` metadata record naming the model;
 //! `rigtwin report NEW.mcap` draws the re-run twin beside the measurement.
-//!
-//! With an ensemble the twin runs on a thread of its own, ahead of the ensemble's runs of the
-//! windows behind it, and hands on its states, blocks and windows through a bounded channel;
-//! the sink and the ensemble take them in the order a single thread would.
 
 use std::collections::{HashMap, HashSet, VecDeque};
 use std::path::Path;
@@ -81,10 +77,6 @@ pub enum TwinReplayError {
         /// Rig time missing, s.
         seconds: f64,
     },
-    /// The twin's run stopped because what takes its output failed (that failure is the
-    /// one reported).
-    #[error("twin replay: stopped")]
-    Stopped,
     /// Steps asked for that the recording does not have.
     #[error("--steps: the recording has no step {steps} (its tests and steps: {have})")]
     NoSuchSteps {
@@ -452,11 +444,6 @@ fn run_window(
 pub trait TwinSink {
     /// The twin's prediction for one block, in block order.
     fn block(&mut self, block: &TwinBlock) -> Result<(), TwinReplayError>;
-    /// Whether [`TwinSink::block`] does anything with the blocks: if not, they are not held
-    /// for it (a replay with an ensemble lets the twin run ahead further then).
-    fn wants_blocks(&self) -> bool {
-        true
-    }
     /// A step's comparison as its record window completes (`None`: the twin missed part of
     /// the window).
     fn step(
@@ -484,32 +471,10 @@ impl TwinSink for () {
     fn block(&mut self, _: &TwinBlock) -> Result<(), TwinReplayError> {
         Ok(())
     }
-    fn wants_blocks(&self) -> bool {
-        false
-    }
     fn step(&mut self, _: &StepInfo, _: Option<&TwinComparison>) -> Result<(), TwinReplayError> {
         Ok(())
     }
 }
-
-/// What the twin's run hands on, in session order ([`replay_twin`]).
-enum Produced {
-    /// Its state at a step's start.
-    State(TwinStateMessage),
-    /// One block: its contact-solve failures, and its prediction where the sink wants it.
-    Block(u64, Option<TwinBlock>),
-    /// The record windows the block completed.
-    Windows(Vec<Completed>),
-}
-
-/// How far (messages: blocks, states, windows) the twin may run ahead of the ensemble when the
-/// sink keeps the blocks: 4096 blocks are about 100 s of rig time at the default rig's blocks,
-/// about 64 MB.
-const RUN_AHEAD_MESSAGES: usize = 4096;
-
-/// [`RUN_AHEAD_MESSAGES`] when the blocks are not held ([`TwinSink::wants_blocks`]): about
-/// 1600 s of rig time, past a whole band test's ensemble work, in a few MB.
-const RUN_AHEAD_LIGHT_MESSAGES: usize = 65536;
 
 /// Runs the twin (`model`: ROM, `[model]` extensions, contact observation; settings `spec`;
 /// beam length `beam_length` m for the plan's clearances) over the recording `rec` and writes each step's comparison into `summary`
@@ -551,8 +516,6 @@ pub fn replay_twin(
     let mut out = TwinWindows::new(o, spec.tolerance);
     let mut stats = TwinReplayStats::default();
     let mut members = Ensemble::new(rec, model, spec, &clearances, ensemble)?;
-    let with_members = !members.twins.is_empty();
-    let wants_blocks = sink.wants_blocks();
     let after_contact = after_contact(rec, summary);
     let mut starts: HashMap<(String, usize), TwinState> = HashMap::new();
     let mut take = |done: Vec<Completed>,
@@ -585,78 +548,29 @@ pub fn replay_twin(
         }
         Ok(())
     };
-    // The twin's run, in session order: its state at each step's start, its blocks and the
-    // record windows it completes.
-    let mut produce = |send: &mut dyn FnMut(Produced) -> Result<(), TwinReplayError>| {
-        for b in rec.base_blocks(0) {
-            while let Some(c) = clearances.next_due(b.first_sample) {
-                twin.set_clearance(c)?;
-            }
-            if let Some((test, step)) = step_starts.next_due(b.first_sample) {
-                if let Some(state) = twin.state() {
-                    send(Produced::State(TwinStateMessage { test, step, state }))?;
-                }
-            }
-            let tb = twin.push_block(&b)?;
-            out.push(&tb);
-            let done = out.complete(&mut pending, dt, false);
-            let failures = tb.solver_failure_count();
-            send(Produced::Block(failures, wants_blocks.then_some(tb)))?;
-            if !done.is_empty() {
-                send(Produced::Windows(done))?;
-            }
+    for b in rec.base_blocks(0) {
+        while let Some(c) = clearances.next_due(b.first_sample) {
+            twin.set_clearance(c)?;
         }
-        send(Produced::Windows(out.complete(&mut pending, dt, true)))
-    };
-    // The sink's and the ensemble's part, in the same order.
-    let mut consume = |p: Produced| -> Result<(), TwinReplayError> {
-        match p {
-            Produced::State(message) => {
+        if let Some((test, step)) = step_starts.next_due(b.first_sample) {
+            if let Some(state) = twin.state() {
+                let message = TwinStateMessage { test, step, state };
                 sink.state(&message)?;
                 if ensemble.members > 0 {
                     starts.insert((message.test, message.step), message.state);
                 }
             }
-            Produced::Block(failures, tb) => {
-                stats.blocks += 1;
-                stats.solver_failures += failures;
-                if let Some(tb) = tb {
-                    sink.block(&tb)?;
-                }
-            }
-            Produced::Windows(done) => take(done, &starts, &mut results, sink)?,
         }
-        Ok(())
-    };
-    if !with_members {
-        produce(&mut consume)?;
-    } else {
-        // NOTE: with an ensemble, the twin runs ahead on a thread of its own while the
-        // ensemble's runs of the windows behind it take the others: the twin's run no longer
-        // waits for them, nor they for it. Everything reaches the sink and the ensemble in
-        // the same order as in one thread, so the results are the same bit for bit; the
-        // channel's bound keeps the blocks held in memory to a few seconds of rig time.
-        std::thread::scope(|scope| {
-            let bound = if wants_blocks {
-                RUN_AHEAD_MESSAGES
-            } else {
-                RUN_AHEAD_LIGHT_MESSAGES
-            };
-            let (tx, rx) = std::sync::mpsc::sync_channel::<Produced>(bound);
-            let twin_run = scope
-                .spawn(move || produce(&mut |p| tx.send(p).map_err(|_| TwinReplayError::Stopped)));
-            let mut consumed = Ok(());
-            for p in rx {
-                consumed = consume(p);
-                if consumed.is_err() {
-                    break;
-                }
-            }
-            let produced = twin_run.join().expect("the twin's thread panicked");
-            // The consumer's error first: the twin's thread then only saw the channel close.
-            consumed.and(produced)
-        })?;
+        let tb = twin.push_block(&b)?;
+        stats.blocks += 1;
+        stats.solver_failures += tb.solver_failure_count();
+        sink.block(&tb)?;
+        out.push(&tb);
+        let done = out.complete(&mut pending, dt, false);
+        take(done, &starts, &mut results, sink)?;
     }
+    let done = out.complete(&mut pending, dt, true);
+    take(done, &starts, &mut results, sink)?;
     stats.steps_compared = summary.attach_twin(results);
     stats.wall_per_rig_second =
         wall.elapsed().as_secs_f64() / rec.rig_seconds().max(f64::MIN_POSITIVE);

@@ -31,7 +31,7 @@
 mod cli_support;
 mod diagnose_support;
 
-use diagnose_support::{accepted, diagnose, sim_session};
+use diagnose_support::{accepted, diagnose, sim_session, validation_with_spread};
 
 /// 1FU 0.98-1.02 and 1FL 0.90-0.94 omega_2 at 0.1e-5 l, then at 0.4e-5 / 0.3e-5 l, 1FU low
 /// again (9 steps), then 2e-5 l down 1.02 -> 0.97 and up (6 steps): about 210 s of rig time.
@@ -259,6 +259,10 @@ fn clearance_is_found(offset: f64, plan: &str) {
         c[0]["error_after"]["validation"].as_f64().unwrap(),
     );
     assert!(b >= 3.0 * a, "validation {b} -> {a}");
+    // With the comparison's spread as well, where the model as given was beyond it.
+    if let Some((b, a)) = validation_with_spread(&d) {
+        assert!(b >= 3.0 * a, "validation with the spread {b} -> {a}");
+    }
     // Nothing else is taken for it.
     assert_eq!(
         d["effects"]

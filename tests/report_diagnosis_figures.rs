@@ -281,6 +281,7 @@ fn empty() -> Diagnosis {
         model_after: PhysicsSpec::default(),
         model: None,
         validation_tests: Vec::new(),
+        validation_with_spread: None,
         sensors: None,
         linear: None,
         clearance: None,

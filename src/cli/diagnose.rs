@@ -255,6 +255,15 @@ fn print_diagnosis(d: &Diagnosis) {
     for u in &d.undecided {
         println!("  cannot decide {}: {}", u.effect, u.reason);
     }
+    if let Some(v) = &d.validation_with_spread {
+        println!(
+            "  Validation with the comparison's spread ({}): {:.3} -> {:.3} ({:.1}x), the model as given -> the fixed model",
+            v.tests.join(", "),
+            v.before,
+            v.after,
+            v.before / v.after.max(1e-12)
+        );
+    }
     println!(
         "model runs: {} ({:.0} s of rig time in {:.1} s), {:.1} s in all",
         d.cost.model_runs, d.cost.model_rig_seconds, d.cost.model_wall_seconds, d.wall_seconds

@@ -144,6 +144,23 @@ pub struct BandStep {
     pub max_score: f64,
 }
 
+/// The validation error of the whole diagnosis with the comparison's spread: the RMS score
+/// of every compared feature of the accepted effects' validation tests, the impact band's
+/// windows compared with the ensemble and the finer model ([`BandSpread`]), the others
+/// pointwise. The judge's own errors ([`EffectResult::error_before`]) are pointwise at the
+/// twin's step, where the band's chaos and the twin's own step (it over-counts contact)
+/// leave a floor that a right model does not go below (BENCHMARKS.md, "The validation error
+/// with the comparison's spread").
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ValidationWithSpread {
+    /// The tests.
+    pub tests: Vec<String>,
+    /// The model as given, -.
+    pub before: f64,
+    /// The fixed model, -.
+    pub after: f64,
+}
+
 /// An error on a set of steps: the RMS of the compared features' scores.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct SetError {
@@ -254,6 +271,10 @@ pub struct Diagnosis {
     pub model: Option<String>,
     /// Tests any effect was validated on (the before/after figures' tests).
     pub validation_tests: Vec<String>,
+    /// Their error with the comparison's spread, the model as given and the fixed one (None
+    /// where the band was not run with the spread for both: no effect accepted, no
+    /// ensemble, or the model as given within the spread).
+    pub validation_with_spread: Option<ValidationWithSpread>,
     /// The sensor-sensitivity evidence (None: the session has no record window for it).
     pub sensors: Option<SensorEvidence>,
     /// The linear fits of 1FL and 1FU per test and their amplitude dependence.

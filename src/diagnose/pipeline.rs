@@ -24,7 +24,9 @@
 //!    (`validation`) by model runs with and without it ([`ModelRunner`]); the error is the RMS
 //!    of the compared features' scores over the regime the effect shows in. It is accepted
 //!    only if the validation error falls by more than the null spread plus a penalty per
-//!    parameter; rejected candidates are reported with the reason.
+//!    parameter; rejected candidates are reported with the reason. The accepted effects'
+//!    validation tests are reported with the comparison's spread as well
+//!    (`validation_with_spread`, from the locate and show runs).
 //! 4. **Verdict**: a mismatch when an effect was accepted, or when a regime's typical step
 //!    (the median of the steps' largest scores) lies above the threshold: the impact-free
 //!    regimes compared pointwise, the impact band with the comparison's own spread (the
@@ -52,12 +54,12 @@ use super::clearance::{clearance_per_test_of, ClearanceOptions};
 use super::clearance_fit::clearance_stage;
 use super::evidence::session_evidence;
 use super::gains::{sensor_stage, unpartnered_gains, GainSplit};
-use super::judge::{DiagnoseOptions, DiagnoseProgress, Work};
+use super::judge::{set_error, DiagnoseOptions, DiagnoseProgress, Steps, Work};
 use super::linear::{linear_modes_of, LinearOptions};
 use super::modes::linear_stage;
 use super::outcome::{
     BandSpread, BandStep, Diagnosis, DiagnosisCost, EffectResult, Located, Regime, RegimeScores,
-    StageCost, StepScores, Verdict,
+    StageCost, StepScores, ValidationWithSpread, Verdict,
 };
 use super::rerun::{ModelRunner, SessionSteps};
 use super::{DiagnoseError, EvidenceError};
@@ -128,6 +130,15 @@ impl TwinSink for Pointwise {
     }
 }
 
+/// A model's run over the whole session ([`whole_session`]).
+struct WholeSession {
+    /// Every step compared pointwise (the twin's own spread).
+    plain: Vec<StepScores>,
+    /// The impact band with the comparison's spread, and every step so compared (the
+    /// windows without contact as pointwise); None without a band run.
+    band: Option<(BandSpread, Vec<StepScores>)>,
+}
+
 /// One run of the model with extensions `ext` over the whole session: every step compared
 /// pointwise (the twin's own spread: `rigtwin replay --twin --ensemble 0` of that model), and,
 /// `with_band`, the impact band with the comparison's spread ([`BandSpread`]; None without a
@@ -140,7 +151,7 @@ fn whole_session(
     ext: &PhysicsSpec,
     opts: &DiagnoseOptions,
     with_band: bool,
-) -> Result<(Vec<StepScores>, Option<BandSpread>), DiagnoseError> {
+) -> Result<WholeSession, DiagnoseError> {
     let spec = &input.cfg.twin;
     let mut model = TwinModel::of_config(input.rom, input.cfg);
     model.extensions = ext.clone();
@@ -185,7 +196,7 @@ fn whole_session(
     };
     let plain = scores_of(pointwise.0);
     if members == 0 {
-        return Ok((plain, None));
+        return Ok(WholeSession { plain, band: None });
     }
     let spread = scores_of(
         summary
@@ -201,7 +212,7 @@ fn whole_session(
         .into_iter()
         .find(|r| r.regime == Regime::Impacts)
     else {
-        return Ok((plain, None));
+        return Ok(WholeSession { plain, band: None });
     };
     let band = BandSpread {
         members,
@@ -220,7 +231,33 @@ fn whole_session(
             })
             .collect(),
     };
-    Ok((plain, Some(band)))
+    Ok(WholeSession {
+        plain,
+        band: Some((band, spread)),
+    })
+}
+
+/// The validation error of the model as given (`before`) and of the fixed model (`after`)
+/// on `tests`, every step compared with the comparison's spread (the impact band's windows
+/// with the ensemble and the finer model, the others pointwise); None where a side has no
+/// compared step.
+fn validation_with_spread(
+    steps: &SessionSteps,
+    tests: &[String],
+    before: &[StepScores],
+    after: &[StepScores],
+) -> Option<ValidationWithSpread> {
+    let indices: Vec<usize> = (steps.tests.iter().enumerate())
+        .filter(|(_, t)| tests.contains(t))
+        .map(|(i, _)| i)
+        .collect();
+    let b = set_error(before, &indices, Steps::All)?;
+    let a = set_error(after, &indices, Steps::All)?;
+    Some(ValidationWithSpread {
+        tests: tests.to_vec(),
+        before: b,
+        after: a,
+    })
 }
 
 /// The `discretisation` effect of a band whose steps score above the threshold pointwise
@@ -319,7 +356,10 @@ pub fn diagnose(
         }
     )));
     let t0 = std::time::Instant::now();
-    let (before, band_before) = whole_session(input, &steps, &given, opts, true)?;
+    let WholeSession {
+        plain: before,
+        band: band_before,
+    } = whole_session(input, &steps, &given, opts, true)?;
     let mut stages = vec![StageCost {
         stage: "locate".into(),
         model_runs: 1,
@@ -458,7 +498,7 @@ pub fn diagnose(
         let t = std::time::Instant::now();
         // The band once more where the model as given was beyond its spread: whether the
         // accepted effects bring it within.
-        let band = band_before.as_ref().is_some_and(|b| b.beyond);
+        let band = band_before.as_ref().is_some_and(|(b, _)| b.beyond);
         let s = whole_session(input, &steps, &work.accepted, opts, band)?;
         stages.push(StageCost {
             stage: "show".into(),
@@ -466,10 +506,22 @@ pub fn diagnose(
             model_rig_seconds: rec.rig_seconds(),
             model_wall_seconds: t.elapsed().as_secs_f64(),
         });
-        s
+        (s.plain, s.band)
     } else {
         (before.clone(), None)
     };
+    let mut validation_tests: Vec<String> = (work.effects.iter())
+        .filter(|e| e.accepted)
+        .flat_map(|e| e.validation_tests.clone())
+        .collect();
+    validation_tests.sort();
+    validation_tests.dedup();
+    let with_spread = match (&band_before, &band_after) {
+        (Some((_, b)), Some((_, a))) => validation_with_spread(&steps, &validation_tests, b, a),
+        _ => None,
+    };
+    let band_before = band_before.map(|(b, _)| b);
+    let band_after = band_after.map(|(b, _)| b);
     let regimes_before = regimes(&before, opts.threshold);
     let regimes_after = regimes(&after, opts.threshold);
     // The impact band is judged with the comparison's spread: pointwise, its steps score
@@ -514,13 +566,6 @@ pub fn diagnose(
     for (i, e) in effects.iter_mut().enumerate() {
         e.rank = i + 1;
     }
-    let mut validation_tests: Vec<String> = effects
-        .iter()
-        .filter(|e| e.accepted)
-        .flat_map(|e| e.validation_tests.clone())
-        .collect();
-    validation_tests.sort();
-    validation_tests.dedup();
     let cost = DiagnosisCost {
         model_runs: stages.iter().map(|c| c.model_runs).sum(),
         model_rig_seconds: stages.iter().map(|c| c.model_rig_seconds).sum(),
@@ -543,6 +588,7 @@ pub fn diagnose(
         model_after: work.accepted,
         model: None,
         validation_tests,
+        validation_with_spread: with_spread,
         sensors,
         linear,
         clearance,

@@ -220,9 +220,18 @@ pub fn accepted<'a>(d: &'a serde_json::Value, effect: &str) -> Vec<&'a serde_jso
         .collect()
 }
 
-/// Asserts the null verdict of diagnosis `d`: `no_significant_mismatch`, nothing accepted.
+/// The validation error of diagnosis `d` with the comparison's spread: (the model as given,
+/// the fixed model), or None where the band was not run with the spread for both.
+pub fn validation_with_spread(d: &serde_json::Value) -> Option<(f64, f64)> {
+    let v = &d["validation_with_spread"];
+    Some((v["before"].as_f64()?, v["after"].as_f64()?))
+}
+
+/// Asserts the null verdict of diagnosis `d`: `no_significant_mismatch`, nothing accepted
+/// (so no validation error with the spread either).
 pub fn assert_null(d: &serde_json::Value) {
     assert_eq!(d["verdict"], "no_significant_mismatch", "{d:#}");
+    assert!(d["validation_with_spread"].is_null(), "{d:#}");
     let accepted: Vec<&serde_json::Value> = d["effects"]
         .as_array()
         .unwrap()

@@ -259,9 +259,14 @@ fn clearance_is_found(offset: f64, plan: &str) {
         c[0]["error_after"]["validation"].as_f64().unwrap(),
     );
     assert!(b >= 3.0 * a, "validation {b} -> {a}");
-    // With the comparison's spread as well, where the model as given was beyond it.
-    if let Some((b, a)) = validation_with_spread(&d) {
-        assert!(b >= 3.0 * a, "validation with the spread {b} -> {a}");
+    // Where both bands ran with the comparison's spread, those are its errors (accepted
+    // alone), and the judge's pointwise ones are kept as evidence.
+    if let Some(spread) = validation_with_spread(&d) {
+        assert_eq!(spread, (b, a), "{d:#}");
+        assert!(
+            c[0]["evidence"]["pointwise"]["error_after"].is_object(),
+            "{d:#}"
+        );
     }
     // Nothing else is taken for it.
     assert_eq!(

@@ -150,7 +150,7 @@ pub struct BandStep {
 /// pointwise. The judge's own errors ([`EffectResult::error_before`]) are pointwise at the
 /// twin's step, where the band's chaos and the twin's own step (it over-counts contact)
 /// leave a floor that a right model does not go below (BENCHMARKS.md, "The validation error
-/// with the comparison's spread").
+/// with the comparison's spread"); a lone accepted band effect reports these instead.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ValidationWithSpread {
     /// The tests.
@@ -194,7 +194,10 @@ pub struct EffectResult {
     pub train_tests: Vec<String>,
     /// Tests validated on.
     pub validation_tests: Vec<String>,
-    /// Error of the model without the effect (with the effects accepted before it).
+    /// Error of the model without the effect (with the effects accepted before it): the
+    /// judge's, pointwise at the twin's step; for the one accepted effect when it is a band
+    /// effect, with the comparison's spread (the locate and show runs; the pointwise ones in
+    /// `evidence.pointwise`), where both runs had the band's spread.
     pub error_before: Option<SetError>,
     /// Error of the model with the effect.
     pub error_after: Option<SetError>,

@@ -59,7 +59,7 @@ use super::linear::{linear_modes_of, LinearOptions};
 use super::modes::linear_stage;
 use super::outcome::{
     BandSpread, BandStep, Diagnosis, DiagnosisCost, EffectResult, Located, Regime, RegimeScores,
-    StageCost, StepScores, ValidationWithSpread, Verdict,
+    SetError, StageCost, StepScores, ValidationWithSpread, Verdict,
 };
 use super::rerun::{ModelRunner, SessionSteps};
 use super::{DiagnoseError, EvidenceError};
@@ -235,6 +235,59 @@ fn whole_session(
         plain,
         band: Some((band, spread)),
     })
+}
+
+/// The effects judged on every step, the impact band's with the others ([`Steps::All`]).
+const BAND_EFFECTS: [&str; 3] = ["clearance", "wear", "tilt"];
+
+/// Where the one accepted effect is a band effect, it was judged against the model as given
+/// and the fixed model is the model with it: its errors are reported with the comparison's
+/// spread, from the locate and show runs' scores (`before`, `after`; no extra runs), and the
+/// judge's pointwise errors move to its evidence (`pointwise`). Pointwise at the twin's step
+/// the band keeps a floor a right model does not go below (the twin's own step at the band's
+/// edges, its chaos; BENCHMARKS.md, "The validation error with the comparison's spread").
+fn lone_band_effect_with_spread(
+    effects: &mut [EffectResult],
+    steps: &SessionSteps,
+    before: &[StepScores],
+    after: &[StepScores],
+) {
+    let mut accepted = effects.iter_mut().filter(|e| e.accepted);
+    let (Some(e), None) = (accepted.next(), accepted.next()) else {
+        return;
+    };
+    if !BAND_EFFECTS.contains(&e.effect.as_str()) {
+        return;
+    }
+    let indices = |names: &[String]| -> Vec<usize> {
+        (steps.tests.iter().enumerate())
+            .filter(|(_, t)| names.contains(t))
+            .map(|(i, _)| i)
+            .collect()
+    };
+    let (train, validation) = (indices(&e.train_tests), indices(&e.validation_tests));
+    let error = |s: &[StepScores]| -> Option<SetError> {
+        Some(SetError {
+            train: set_error(s, &train, Steps::All)?,
+            validation: set_error(s, &validation, Steps::All)?,
+        })
+    };
+    let (Some(b), Some(a)) = (error(before), error(after)) else {
+        return;
+    };
+    e.evidence["pointwise"] = json!({
+        "error_before": e.error_before,
+        "error_after": e.error_after,
+    });
+    e.reason = format!(
+        "{}; with the comparison's spread (the locate and show runs, reported as its error) the validation error falls {:.1}x ({:.3} -> {:.3})",
+        e.reason,
+        b.validation / a.validation.max(1e-12),
+        b.validation,
+        a.validation
+    );
+    e.error_before = Some(b);
+    e.error_after = Some(a);
 }
 
 /// The validation error of the model as given (`before`) and of the fixed model (`after`)
@@ -510,6 +563,9 @@ pub fn diagnose(
     } else {
         (before.clone(), None)
     };
+    if let (Some((_, b)), Some((_, a))) = (&band_before, &band_after) {
+        lone_band_effect_with_spread(&mut work.effects, &steps, b, a);
+    }
     let mut validation_tests: Vec<String> = (work.effects.iter())
         .filter(|e| e.accepted)
         .flat_map(|e| e.validation_tests.clone())

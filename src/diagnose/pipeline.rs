@@ -259,13 +259,10 @@ fn lone_band_effect_with_spread(
     if !BAND_EFFECTS.contains(&e.effect.as_str()) {
         return;
     }
-    let indices = |names: &[String]| -> Vec<usize> {
-        (steps.tests.iter().enumerate())
-            .filter(|(_, t)| names.contains(t))
-            .map(|(i, _)| i)
-            .collect()
-    };
-    let (train, validation) = (indices(&e.train_tests), indices(&e.validation_tests));
+    let (train, validation) = (
+        steps.indices_of(&e.train_tests),
+        steps.indices_of(&e.validation_tests),
+    );
     let error = |s: &[StepScores]| -> Option<SetError> {
         Some(SetError {
             train: set_error(s, &train, Steps::All)?,
@@ -300,10 +297,7 @@ fn validation_with_spread(
     before: &[StepScores],
     after: &[StepScores],
 ) -> Option<ValidationWithSpread> {
-    let indices: Vec<usize> = (steps.tests.iter().enumerate())
-        .filter(|(_, t)| tests.contains(t))
-        .map(|(i, _)| i)
-        .collect();
+    let indices = steps.indices_of(tests);
     let b = set_error(before, &indices, Steps::All)?;
     let a = set_error(after, &indices, Steps::All)?;
     Some(ValidationWithSpread {

@@ -78,7 +78,14 @@ pub struct SessionSteps {
 }
 
 impl SessionSteps {
-    /// The steps of recording `rec` whose replayed summary is `summary`.
+    /// The indices of the tests named in `names`, in session order.
+    pub fn indices_of(&self, names: &[String]) -> Vec<usize> {
+        (self.tests.iter().enumerate())
+            .filter(|(_, t)| names.contains(t))
+            .map(|(i, _)| i)
+            .collect()
+    }
+
     /// Tests (indices) with at least one step of regime other than `Impacts` (`impact_free`)
     /// or of `Impacts`.
     pub fn tests_with(&self, impact_free: bool) -> Vec<usize> {
@@ -92,6 +99,7 @@ impl SessionSteps {
         t
     }
 
+    /// The steps of recording `rec` whose replayed summary is `summary`.
     pub fn of(rec: &Recording, summary: &SessionSummary) -> SessionSteps {
         let mut tests: Vec<String> = Vec::new();
         let mut levels: Vec<f64> = Vec::new();

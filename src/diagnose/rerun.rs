@@ -321,6 +321,17 @@ struct OpenStart {
     state: crate::twin::TwinState,
 }
 
+/// The tests of `queue` ((test, sample), in sample order) whose sample comes before `end`,
+/// taken off it in order.
+fn due_before(queue: &mut VecDeque<(usize, u64)>, end: u64) -> impl Iterator<Item = usize> + '_ {
+    std::iter::from_fn(move || {
+        (queue.front().is_some_and(|&(_, s)| s < end))
+            .then(|| queue.pop_front())
+            .flatten()
+            .map(|(t, _)| t)
+    })
+}
+
 /// Where a stretch of tests starts.
 enum Start {
     /// From rest at the lead-in of its first span.
@@ -920,26 +931,15 @@ impl<'a> ModelRunner<'a> {
             while let Some(c) = clearances.next_due(b.first_sample) {
                 twin.set_clearance(c)?;
             }
+            let block_end = b.first_sample + b.len as u64;
             // NOTE: the block `twin_at` starts a run from this lead-in at (the first that ends
             // past it).
-            while lead_in_at
-                .front()
-                .is_some_and(|&(_, s)| s < b.first_sample + b.len as u64)
-            {
-                let Some((t, _)) = lead_in_at.pop_front() else {
-                    break;
-                };
+            for t in due_before(&mut lead_in_at, block_end) {
                 if let Some(state) = twin.state() {
                     lead_ins.push((t, state));
                 }
             }
-            while test_starts
-                .front()
-                .is_some_and(|&(_, s)| s < b.first_sample + b.len as u64)
-            {
-                let Some((t, _)) = test_starts.pop_front() else {
-                    break;
-                };
+            for t in due_before(&mut test_starts, block_end) {
                 // NOTE: read at the block holding the test's first sample (blocks are a few
                 // ms; no contact happens across a test's start, the sweep starts off the band).
                 if let Some(w) = twin.state().and_then(|s| s.effects.wear) {

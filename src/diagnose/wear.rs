@@ -445,12 +445,19 @@ pub(super) fn wear_stage(
         slope(&tr).filter(|k| *k > 0.0 && k.is_finite())
     };
     let side_by_side = work.runner.jobs() > 1;
-    let mut slopes: Vec<(f64, f64)> = Vec::new();
-    if offset == 0.0 {
-        slopes.push((0.0, k0));
-    }
     // (coefficient, the train tests' slope with its impulse, its impulse per test).
     let mut runs: Vec<(f64, f64, Vec<Option<f64>>)> = Vec::new();
+    // The coefficient the runs give: their slopes' line's fixed point (with the start's
+    // slope at a zero coefficient where no offset comes with the wear), else, without a line
+    // yet (one run and an offset), the last run's slope, as plain iteration would.
+    let start = (offset == 0.0).then_some((0.0, k0));
+    let estimate = |runs: &[(f64, f64, Vec<Option<f64>>)]| -> Option<f64> {
+        let slopes: Vec<(f64, f64)> = start
+            .into_iter()
+            .chain(runs.iter().map(|r| (r.0, r.1)))
+            .collect();
+        fixed_point(&slopes).or_else(|| runs.last().map(|r| r.1))
+    };
     let mut next = if side_by_side {
         vec![k0, 1.6 * k0]
     } else {
@@ -471,15 +478,12 @@ pub(super) fn wear_stage(
             (work.progress)(DiagnoseProgress::Evaluation(format!(
                 "wear coefficient {k:.3e} m/(N s): the model's impulse with it gives the train tests' slope {g:.3e} m/(N s)"
             )));
-            slopes.push((k, g));
             runs.push((k, g, impulse));
         }
         if round + 1 == rounds {
             break;
         }
-        // Without a line yet (one run and an offset): the last run's slope, as plain
-        // iteration would.
-        let Some(k) = fixed_point(&slopes).or_else(|| runs.last().map(|r| r.1)) else {
+        let Some(k) = estimate(&runs) else {
             break;
         };
         next = if side_by_side {
@@ -488,9 +492,7 @@ pub(super) fn wear_stage(
             vec![k]
         };
     }
-    let k = fixed_point(&slopes)
-        .or_else(|| runs.last().map(|r| r.1))
-        .unwrap_or(k0);
+    let k = estimate(&runs).unwrap_or(k0);
     // The points against the impulse of the run nearest the coefficient.
     if let Some((_, _, impulse)) = runs
         .iter()

@@ -94,13 +94,9 @@ pub(crate) fn run(a: DiagnoseArgs) -> anyhow::Result<()> {
     );
     // The impact band's verdict compares with the discretisation member's spread: its finer
     // ROM, only for a session with contact.
-    let d = &cfg.twin.discretisation;
-    let contact = r
-        .summary
-        .steps()
-        .any(|s| s.measured.metrics.contact_fraction > 0.0);
-    let finer = if contact && d.enabled && cfg.twin.ensemble_members > 0 {
-        Some(models::finer_rom(&cfg, d.cutoff_ratio, a.rebuild, a.quiet)?)
+    let finer = if crate::diagnose::needs_finer_rom(&r.summary, &cfg) {
+        let cutoff = cfg.twin.discretisation.cutoff_ratio;
+        Some(models::finer_rom(&cfg, cutoff, a.rebuild, a.quiet)?)
     } else {
         None
     };

@@ -13,7 +13,7 @@ use levenberg_marquardt::LevenbergMarquardt;
 use nalgebra::DVector;
 use serde_json::json;
 
-use crate::config::{Beam, ClampFrictionSpec};
+use crate::config::{Beam, ClampFrictionSpec, PhysicsSpec};
 
 use super::judge::{set_error, Candidate, Steps, Work};
 use super::linear::{AmplitudeDependence, LinearEvidence, ModeFit};
@@ -125,6 +125,14 @@ fn clamp_lm(
     Ok(fit.runs.runs.into_inner())
 }
 
+/// The model `accepted` with the clamp's joint `joint`.
+fn with_joint(accepted: &PhysicsSpec, joint: ClampFrictionSpec) -> PhysicsSpec {
+    PhysicsSpec {
+        clamp_friction: Some(joint),
+        ..accepted.clone()
+    }
+}
+
 impl ClampFit<'_, '_, '_> {
     /// The share and the share per slip amplitude (1/m) at `x`.
     fn point(&self, x: &DVector<f64>) -> (f64, f64) {
@@ -144,8 +152,7 @@ impl RunResiduals for ClampFit<'_, '_, '_> {
             return None;
         }
         let mut work = self.work.borrow_mut();
-        let mut ext = work.accepted.clone();
-        ext.clamp_friction = Some((self.spec)(sf, r));
+        let ext = with_joint(&work.accepted, (self.spec)(sf, r));
         let scores = match work.scores_spans(&ext, self.spans) {
             Ok(s) => s,
             Err(e) => {
@@ -306,20 +313,16 @@ pub(super) fn clamp_stage(work: &mut Work<'_>, lin: &LinearEvidence) -> Result<(
         work.names(&train).join(", ")
     );
     (work.progress)(DiagnoseProgress::Evaluation(line));
-    let with_joint = |work: &Work<'_>, sf: f64, r: f64| {
-        let mut ext = work.accepted.clone();
-        ext.clamp_friction = Some(spec(sf, r));
-        ext
-    };
+    let joint = |work: &Work<'_>, sf: f64, r: f64| with_joint(&work.accepted, spec(sf, r));
     // Each grid's points side by side on the runner's threads.
     let ratio_exts: Vec<_> = RATIO_GRID
         .iter()
-        .map(|m| (with_joint(work, RATIO_SHARE, rho * m), fitted_spans.clone()))
+        .map(|m| (joint(work, RATIO_SHARE, rho * m), fitted_spans.clone()))
         .collect();
     work.prefetch(ratio_exts)?;
     let mut ratio_runs: Vec<(f64, f64, f64)> = Vec::new();
     for m in RATIO_GRID {
-        let ext = with_joint(work, RATIO_SHARE, rho * m);
+        let ext = joint(work, RATIO_SHARE, rho * m);
         let s = work.scores_spans(&ext, &fitted_spans)?;
         if let Some(e) = set_error(&s, &fitted, Steps::ImpactFree) {
             ratio_runs.push((RATIO_SHARE, rho * m, e));
@@ -332,12 +335,12 @@ pub(super) fn clamp_stage(work: &mut Work<'_>, lin: &LinearEvidence) -> Result<(
     let scan = |work: &mut Work<'_>, shares: &[f64], r: f64| -> Result<Vec<Run>, DiagnoseError> {
         let exts = shares
             .iter()
-            .map(|&sf| (with_joint(work, sf, r), train_spans.clone()))
+            .map(|&sf| (joint(work, sf, r), train_spans.clone()))
             .collect();
         work.prefetch(exts)?;
         let mut v = Vec::new();
         for &sf in shares {
-            let ext = with_joint(work, sf, r);
+            let ext = joint(work, sf, r);
             let s = work.scores_spans(&ext, &train_spans)?;
             let res = signed_scores(&s, &train);
             if !res.is_empty() && res.iter().all(|x| x.is_finite()) {
@@ -414,11 +417,9 @@ pub(super) fn clamp_stage(work: &mut Work<'_>, lin: &LinearEvidence) -> Result<(
         ratio_runs.len() + tried.len()
     )));
     let a_h = sf / r;
-    let mut ext = work.accepted.clone();
-    ext.clamp_friction = Some(spec(sf, r));
     let cand = Candidate::new(
         "clamp_friction",
-        ext,
+        with_joint(&work.accepted, spec(sf, r)),
         json!({"stiffness_fraction": sf, "half_slip_tip_amplitude": a_h, "beams": beams}),
         2,
         json!({"modes": with.iter().map(|d| &d.mode).collect::<Vec<_>>(), "stiffness_fraction_over_half_slip_amplitude_per_m": r, "from_slopes_per_m": rho, "slopes_damping_and_frequency_per_m": ratios, "runs": ratio_runs.len() + tried.len(), "ratio_fitted_on": work.names(&fitted), "share_fitted_on": work.names(&train), "share_scan": share_scan, "shares_not_told_apart": [lo, hi]}),
@@ -501,15 +502,14 @@ fn clamp_by_runs(work: &mut Work<'_>, lin: &LinearEvidence) -> Result<Vec<String
         }
         // The linear tip amplitude at the top level, from the low level's resonance.
         let a_ref = low.peak_tip_amplitude_m * top / low.level;
-        let with_joint = |sf: f64, a_h: f64| {
-            let mut ext = accepted.clone();
-            ext.clamp_friction = Some(ClampFrictionSpec {
+        let joint = |sf: f64, a_h: f64| {
+            let spec = ClampFrictionSpec {
                 stiffness_fraction: sf,
                 half_slip_tip_amplitude: a_h,
                 sliders: 64,
                 beams: vec![beam],
-            });
-            ext
+            };
+            with_joint(&accepted, spec)
         };
         let line = format!(
             "clamp_friction of {mode} by model runs on {} (error {e0:.2}; its one fit at {:.2e} l predicts a tip amplitude of {a_ref:.2e} m there): 20 runs, stiffness share 0.05-0.4, half-slip amplitude 0.25-4 x that",
@@ -527,7 +527,7 @@ fn clamp_by_runs(work: &mut Work<'_>, lin: &LinearEvidence) -> Result<Vec<String
                 if tried.iter().any(|p| p.0 == sf && p.1 == a_h) || !(sf > 0.0 && sf < 1.0) {
                     continue;
                 }
-                let s = work.scores(&with_joint(sf, a_h), &train)?;
+                let s = work.scores(&joint(sf, a_h), &train)?;
                 if let Some(e) = set_error(&s, &train, Steps::ImpactFree) {
                     tried.push((sf, a_h, e));
                 }
@@ -555,7 +555,7 @@ fn clamp_by_runs(work: &mut Work<'_>, lin: &LinearEvidence) -> Result<Vec<String
         };
         let cand = Candidate::new(
             "clamp_friction",
-            with_joint(sf, a_h),
+            joint(sf, a_h),
             json!({"stiffness_fraction": sf, "half_slip_tip_amplitude": a_h, "beams": [beam]}),
             2,
             json!({

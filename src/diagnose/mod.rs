@@ -45,5 +45,5 @@ pub use evidence::{session_evidence, SessionEvidence, WindowEvidence};
 pub use judge::{DiagnoseOptions, DiagnoseProgress};
 pub use linear::{linear_modes, LinearEvidence, LinearOptions, ModeFit};
 pub use outcome::{Diagnosis, Verdict};
-pub use pipeline::{diagnose, DiagnoseInput};
+pub use pipeline::{diagnose, needs_finer_rom, DiagnoseInput};
 pub use sensors::{sensor_sensitivities, SensorEvidence, SensorOptions};

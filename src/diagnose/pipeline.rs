@@ -61,7 +61,7 @@ use super::outcome::{
     BandSpread, BandStep, Diagnosis, DiagnosisCost, EffectResult, Located, Regime, RegimeScores,
     SetError, StageCost, StepScores, ValidationWithSpread, Verdict,
 };
-use super::rerun::{ModelRunner, SessionSteps};
+use super::rerun::{had_contact, ModelRunner, SessionSteps};
 use super::{DiagnoseError, EvidenceError};
 
 /// What a diagnosis works on.
@@ -77,6 +77,15 @@ pub struct DiagnoseInput<'a> {
     /// The finer ROM of the comparison's discretisation member (`[twin.discretisation]`),
     /// for the impact band's verdict ([`BandSpread`]); None: the ensemble's spread alone.
     pub finer: Option<&'a Rom>,
+}
+
+/// Whether a diagnosis of the session `summary` with the rig description `cfg` compares its
+/// impact band with the discretisation member, so needs its finer ROM
+/// ([`DiagnoseInput::finer`]): the rig had contact in some step, and `[twin]` has an
+/// ensemble and the member enabled. A caller builds that ROM only then.
+pub fn needs_finer_rom(summary: &SessionSummary, cfg: &RigConfig) -> bool {
+    let spec = &cfg.twin;
+    spec.discretisation.enabled && spec.ensemble_members > 0 && summary.steps().any(had_contact)
 }
 
 /// Per regime: steps, steps above the threshold, median largest score.

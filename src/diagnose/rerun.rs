@@ -23,7 +23,7 @@ use crate::config::PhysicsSpec;
 use crate::control::{EventKind, StepInfo, StepSummary};
 use crate::rom::Rom;
 use crate::session::replay::Recording;
-use crate::session::summary::SessionSummary;
+use crate::session::summary::{SessionSummary, StepResult};
 use crate::twin::{ClearanceSchedule, FeatureComparison, TwinModel, TwinSpec, TwinWindows};
 
 use super::outcome::{Regime, StepScores};
@@ -77,6 +77,11 @@ pub struct SessionSteps {
     starts: Vec<(usize, usize, u64)>,
 }
 
+/// Whether the rig had contact in step `s`'s record window (its regime is the impact band).
+pub fn had_contact(s: &StepResult) -> bool {
+    s.measured.metrics.contact_fraction > 0.0
+}
+
 impl SessionSteps {
     /// The indices of the tests named in `names`, in session order.
     pub fn indices_of(&self, names: &[String]) -> Vec<usize> {
@@ -124,7 +129,7 @@ impl SessionSteps {
             .map(|(info, s)| {
                 let test_index = tests.iter().rposition(|t| *t == info.test).unwrap_or(0);
                 let level = levels.get(test_index).copied().unwrap_or(0.0);
-                let regime = if s.measured.metrics.contact_fraction > 0.0 {
+                let regime = if had_contact(s) {
                     Regime::Impacts
                 } else if level <= lowest * (1.0 + 1e-9) {
                     Regime::ImpactFreeLow
@@ -831,22 +836,28 @@ impl<'a> ModelRunner<'a> {
     /// The samples a run of `group` from rest at its lead-in, or from `start`, covers (to
     /// order the stretches by length).
     fn extent(&self, group: &[Span], start: &Start) -> u64 {
-        let Some(first) = group.first() else {
+        if group.is_empty() {
             return 0;
-        };
-        let begin = match start {
-            Start::Open(i) => self.open_starts[*i].state.next_sample,
-            Start::Rest | Start::Worn(_) => self.steps.lead_in_of(first).unwrap_or(0),
-        };
-        let end = self
-            .steps
-            .steps
-            .iter()
-            .filter(|s| group.iter().any(|g| g.covers(s)))
-            .map(|s| s.info.record_end_sample())
-            .max()
-            .unwrap_or(begin);
+        }
+        let begin = self.start_sample(group, start).unwrap_or(0);
+        let end = (self.windows_of(group).last()).map_or(begin, |s| s.info.record_end_sample());
         end.saturating_sub(begin)
+    }
+
+    /// The record windows the steps `group` names, in session order.
+    fn windows_of(&self, group: &[Span]) -> Vec<&SessionStep> {
+        (self.steps.steps.iter())
+            .filter(|s| group.iter().any(|g| g.covers(s)))
+            .collect()
+    }
+
+    /// Where a run of `group` from `start` starts: the open state's next sample, or the
+    /// group's lead-in (None: the recording's start).
+    fn start_sample(&self, group: &[Span], start: &Start) -> Option<u64> {
+        match start {
+            Start::Open(i) => Some(self.open_starts[*i].state.next_sample),
+            Start::Rest | Start::Worn(_) => self.steps.lead_in_of(group.first()?),
+        }
     }
 
     /// One stretch of consecutive tests (the steps `group` names), from rest at its lead-in
@@ -867,12 +878,7 @@ impl<'a> ModelRunner<'a> {
         if group.is_empty() {
             return Ok(empty);
         }
-        let windows: Vec<&SessionStep> = self
-            .steps
-            .steps
-            .iter()
-            .filter(|s| group.iter().any(|g| g.covers(s)))
-            .collect();
+        let windows = self.windows_of(group);
         let tests: Vec<usize> = group.iter().map(|r| r.test).collect();
         let Some(last) = windows.last() else {
             return Ok(empty);
@@ -896,26 +902,21 @@ impl<'a> ModelRunner<'a> {
         }
         let mut lead_ins = Vec::new();
         let end = last.info.record_end_sample();
-        let (mut twin, start, mut clearances) = match start {
-            Start::Rest => self.twin_at(model, self.steps.lead_in_of(&group[0]))?,
+        let (mut twin, first_block, mut clearances) =
+            self.twin_at(model, self.start_sample(group, start))?;
+        match start {
+            Start::Rest => {}
             Start::Open(i) => {
-                let o = &self.open_starts[*i];
                 // NOTE: the state was captured before the block at its `next_sample`, which
                 // `twin_at` finds; no test starts after it in this one-test group.
-                let (mut twin, k, clearances) = self.twin_at(model, Some(o.state.next_sample))?;
+                let o = &self.open_starts[*i];
                 twin.set_open_state(&o.state, &o.captured_with)?;
                 test_starts.clear();
-                (twin, k, clearances)
             }
-            Start::Worn(state) => {
-                // The state was kept before the block that holds the lead-in, where `twin_at`
-                // starts.
-                let (mut twin, k, clearances) =
-                    self.twin_at(model, self.steps.lead_in_of(&group[0]))?;
-                twin.reset_keeping_geometry(state)?;
-                (twin, k, clearances)
-            }
-        };
+            // The state was kept before the block that holds the lead-in, where `twin_at`
+            // starts.
+            Start::Worn(state) => twin.reset_keeping_geometry(state)?,
+        }
         let dt = rec.layout.dt();
         let mut pending: VecDeque<(StepInfo, StepSummary)> = windows
             .iter()
@@ -924,7 +925,7 @@ impl<'a> ModelRunner<'a> {
         let mut out = TwinWindows::new(twin.observation(), self.spec.tolerance);
         let mut compared = Vec::new();
         let mut rig_seconds = 0.0;
-        for b in rec.base_blocks(start) {
+        for b in rec.base_blocks(first_block) {
             if b.first_sample >= end {
                 break;
             }

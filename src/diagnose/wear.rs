@@ -199,6 +199,8 @@ fn split(
 pub struct WearPoint {
     /// Test name.
     pub test: String,
+    /// Index of the test in the session, from 0.
+    pub test_index: usize,
     /// The model's accumulated normal contact impulse before the test, N s (the model without
     /// wear in the trend's points; with the fitted coefficient in an accepted candidate's).
     pub contact_impulse_ns: f64,
@@ -275,15 +277,14 @@ pub(super) fn wear_stage(
             .join(", ")
     )));
     let mut points: Vec<WearPoint> = Vec::new();
-    let mut index_of: Vec<usize> = Vec::new();
     for t in &bracketed {
         let (Some(p), Some(lo), Some(hi)) = (p_of(t), t.lower_bound_m, t.upper_bound_m) else {
             continue;
         };
         if let Some(r) = test_clearance_by_runs(work, t)? {
-            index_of.push(t.test_index);
             points.push(WearPoint {
                 test: t.test.clone(),
+                test_index: t.test_index,
                 contact_impulse_ns: p,
                 clearance_m: measured_clearance(r.clearance_m, t.onset_clearance_m),
                 run_clearance_m: r.clearance_m,
@@ -345,14 +346,13 @@ pub(super) fn wear_stage(
         .filter(|t| t.onsets > 0 && !is_bracketed(t))
         .filter_map(|t| Some((t.test_index, p_of(t)?)))
         .collect();
-    let at: Vec<(usize, f64)> = index_of
+    let at: Vec<(usize, f64)> = points
         .iter()
-        .zip(&points)
-        .map(|(&i, p)| (i, p.contact_impulse_ns))
+        .map(|p| (p.test_index, p.contact_impulse_ns))
         .collect();
     let (train, validation) = split(&at, &contact_tests, k_all, plan);
-    for (p, i) in points.iter_mut().zip(&index_of) {
-        p.train = train.contains(i);
+    for p in &mut points {
+        p.train = train.contains(&p.test_index);
     }
     if validation.is_empty() {
         work.undecided(
@@ -431,11 +431,10 @@ pub(super) fn wear_stage(
     let slope_with = |impulse: &[Option<f64>]| -> Option<f64> {
         let tr: Vec<(f64, f64)> = points
             .iter()
-            .zip(&index_of)
-            .filter(|(p, _)| p.train)
-            .map(|(p, &i)| {
+            .filter(|p| p.train)
+            .map(|p| {
                 let x = impulse
-                    .get(i)
+                    .get(p.test_index)
                     .copied()
                     .flatten()
                     .unwrap_or(p.contact_impulse_ns);
@@ -498,8 +497,8 @@ pub(super) fn wear_stage(
         .iter()
         .min_by(|a, b| (a.0 - k).abs().total_cmp(&(b.0 - k).abs()))
     {
-        for (p, &i) in points.iter_mut().zip(&index_of) {
-            if let Some(x) = impulse.get(i).copied().flatten() {
+        for p in &mut points {
+            if let Some(x) = impulse.get(p.test_index).copied().flatten() {
                 p.contact_impulse_ns = x;
             }
         }

@@ -636,6 +636,28 @@ fn an_ensemble_in_the_contact_windows_only_keeps_the_pointwise_comparison() {
     )
     .unwrap();
 
+    // On two threads into a sink that takes the steps in any order (the twin runs on while
+    // each window's ensemble runs): the same bits.
+    let mut overlapped = r.summary.clone();
+    replay_twin(
+        &r.recording,
+        &mut overlapped,
+        &model,
+        &spec,
+        l,
+        EnsembleOptions {
+            jobs: 2,
+            ..ensemble
+        },
+        &mut (),
+    )
+    .unwrap();
+    assert_eq!(
+        serde_json::to_string(&overlapped).unwrap(),
+        serde_json::to_string(&with).unwrap(),
+        "the ensemble's result depends on neither the threads nor the sink's order"
+    );
+
     let bare: Vec<&TwinComparison> = bare.steps().filter_map(|s| s.twin.as_ref()).collect();
     let measured: Vec<f64> = (r.summary.steps())
         .map(|s| s.measured.metrics.contact_fraction)

@@ -125,6 +125,9 @@ impl TwinSink for Pointwise {
     fn block(&mut self, _: &TwinBlock) -> Result<(), TwinReplayError> {
         Ok(())
     }
+    fn steps_in_time_order(&self) -> bool {
+        false
+    }
     fn step(&mut self, _: &StepInfo, _: Option<&TwinComparison>) -> Result<(), TwinReplayError> {
         Ok(())
     }

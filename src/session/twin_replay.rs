@@ -175,16 +175,19 @@ pub struct DiscretisationMember<'a> {
     pub spec: TwinSpec,
 }
 
-/// The ensemble's runner: one twin per thread, the recording, the clearances from the start,
-/// and the discretisation member's twin, if any.
+/// The ensemble's runners: a pool of worker threads, each with a twin of the model (and of the
+/// discretisation member's model), that run the members and the discretisation member of every
+/// window submitted ([`EnsembleQueue`]). A window's runs go on beside each other and beside
+/// the twin's own run of the next steps, so that the long discretisation run of one window does
+/// not hold the others up.
 struct Ensemble<'r> {
     rec: &'r Recording,
     schedule: ClearanceSchedule,
     observation: Observation,
     tolerance: ComparisonTolerance,
     options: EnsembleOptions<'r>,
-    twins: Vec<Twin>,
-    fine: Option<Twin>,
+    /// Per worker: its twin, and its discretisation member's twin.
+    twins: Vec<(Twin, Option<Twin>)>,
 }
 
 impl<'r> Ensemble<'r> {
@@ -195,25 +198,25 @@ impl<'r> Ensemble<'r> {
         schedule: &ClearanceSchedule,
         options: EnsembleOptions<'r>,
     ) -> Result<Ensemble<'r>, TwinReplayError> {
-        let threads = if options.members == 0 {
+        let runs = options.members + usize::from(options.discretisation.is_some());
+        let workers = if options.members == 0 {
             0
         } else {
-            options.jobs.clamp(1, options.members)
+            options.jobs.clamp(1, runs)
         };
-        let twins = (0..threads)
-            .map(|_| Twin::new(model, spec, &rec.layout, schedule.first().unwrap_or(0.0)))
-            .collect::<Result<Vec<_>, _>>()?;
-        let fine = match options.discretisation {
-            Some(m) if threads > 0 => Some(Twin::new(
-                &m.model,
-                &m.spec,
-                &rec.layout,
-                schedule.first().unwrap_or(0.0),
-            )?),
-            _ => None,
-        };
+        let clearance = schedule.first().unwrap_or(0.0);
+        let twins = (0..workers)
+            .map(|_| {
+                let twin = Twin::new(model, spec, &rec.layout, clearance)?;
+                let fine = match options.discretisation {
+                    Some(m) => Some(Twin::new(&m.model, &m.spec, &rec.layout, clearance)?),
+                    None => None,
+                };
+                Ok((twin, fine))
+            })
+            .collect::<Result<Vec<_>, TwinReplayError>>()?;
         let observation = match twins.first() {
-            Some(t) => t.observation().clone(),
+            Some((t, _)) => t.observation().clone(),
             None => Observation::nominal(&model.circuit, model.contact_threshold_v),
         };
         Ok(Ensemble {
@@ -223,119 +226,380 @@ impl<'r> Ensemble<'r> {
             tolerance: spec.tolerance,
             options,
             twins,
-            fine,
         })
     }
 
-    /// `c` (the twin's comparison over the record window of `info`) with the model spread of
-    /// the ensemble started from `state`, and, in a window with contact (measured or
-    /// modelled) or right after one (`after_contact`: the measured window before had contact;
-    /// the response there still carries the state the contact left), the discretisation
-    /// member's difference, the member run from rest at `lead_in` (the twin's state at the
-    /// start of the step before; `None`: the recording's start).
-    fn apply(
-        &mut self,
-        info: &StepInfo,
-        (state, lead_in): (&TwinState, Option<&TwinState>),
-        after_contact: bool,
-        c: TwinComparison,
-    ) -> Result<TwinComparison, TwinReplayError> {
-        if self.twins.is_empty() {
-            return Ok(c);
-        }
-        let measured_contact = c.metrics.contact_fraction - c.contact_fraction_error;
-        let contact_window =
-            after_contact || c.metrics.contact_fraction > 0.0 || measured_contact > 0.0;
-        if self.options.contact_windows_only && !contact_window {
-            return Ok(c);
-        }
-        let fine = self.fine.as_mut().filter(|_| contact_window);
-        let mut channels: Vec<&str> = Vec::new();
-        for f in &c.features {
-            if f.channel != CONTACT_CHANNEL && !channels.contains(&f.channel.as_str()) {
-                channels.push(&f.channel);
-            }
-        }
-        let threads = self.twins.len();
-        let members = self.options.members;
-        let (rec, schedule, o, tolerance, relative) = (
-            self.rec,
-            &self.schedule,
-            &self.observation,
-            self.tolerance,
-            self.options.perturbation,
-        );
-        let window = &Window {
-            info,
-            observation: o,
+    /// Runs `body` with the workers started; they stop when it returns (the runs still queued
+    /// then are dropped).
+    fn run<T>(
+        self,
+        body: impl FnOnce(&mut EnsembleQueue) -> Result<T, TwinReplayError>,
+    ) -> Result<T, TwinReplayError> {
+        let Ensemble {
+            rec,
+            schedule,
+            observation,
             tolerance,
-            channels: &channels,
-            noise: c.observation_noise.as_slice(),
+            options,
+            twins,
+        } = self;
+        let tasks = Tasks::default();
+        let (send, receive) = std::sync::mpsc::channel();
+        let mut queue = EnsembleQueue {
+            active: !twins.is_empty(),
+            fine: options.discretisation.is_some(),
+            members: options.members,
+            contact_windows_only: options.contact_windows_only,
+            tolerance,
+            windows: VecDeque::new(),
+            next: 0,
+            done: receive,
+            tasks: &tasks,
         };
-        let (runs, fine): (Vec<Result<Vec<MemberRun>, TwinReplayError>>, _) =
-            std::thread::scope(|scope| {
-                let fine = fine.map(|twin| {
-                    scope.spawn(move || {
-                        let Some(start) = lead_in_start(twin, rec, schedule, lead_in)? else {
-                            return Ok(None);
-                        };
-                        run_window(twin, rec, start, window)
-                    })
+        let context = RunContext {
+            rec,
+            schedule: &schedule,
+            observation: &observation,
+            tolerance,
+            relative: options.perturbation,
+        };
+        std::thread::scope(|scope| {
+            for (mut twin, mut fine) in twins {
+                let (context, tasks, send) = (&context, &tasks, send.clone());
+                scope.spawn(move || {
+                    while let Some(task) = tasks.next() {
+                        let result = context.run(&mut twin, fine.as_mut(), &task);
+                        if send.send((task.window, task.run, result)).is_err() {
+                            break;
+                        }
+                    }
                 });
-                let handles: Vec<_> = self
-                    .twins
-                    .iter_mut()
-                    .enumerate()
-                    .map(|(j, twin)| {
-                        scope.spawn(move || {
-                            (1..=members)
-                                .skip(j)
-                                .step_by(threads)
-                                .map(|m| {
-                                    let s = state.perturbed(
-                                        &info.test,
-                                        info.step,
-                                        info.record_attempt,
-                                        m,
-                                        relative,
-                                    );
-                                    let f = run_member(twin, rec, schedule, &s, window)?;
-                                    Ok((m, f))
-                                })
-                                .collect()
-                        })
-                    })
-                    .collect();
-                let runs = handles
-                    .into_iter()
-                    .map(|h| h.join().expect("an ensemble thread panicked"))
-                    .collect();
-                let fine: Result<Option<Vec<Feature>>, TwinReplayError> = match fine {
-                    Some(h) => h
-                        .join()
-                        .expect("the discretisation member's thread panicked"),
-                    None => Ok(None),
-                };
-                (runs, fine)
-            });
-        let mut all = Vec::with_capacity(members);
-        for r in runs {
-            all.extend(r?);
-        }
-        // Member order, whatever thread ran it: the result does not depend on `jobs`.
-        all.sort_by_key(|(m, _)| *m);
-        let features: Vec<Vec<Feature>> = all.into_iter().filter_map(|(_, f)| f).collect();
-        let c = c.with_ensemble(&features, &self.tolerance);
-        Ok(match fine? {
-            Some(f) => c.with_discretisation(&f, &self.tolerance),
-            None => c,
+            }
+            drop(send);
+            let out = body(&mut queue);
+            tasks.close();
+            out
         })
     }
 }
 
-/// An ensemble member (1, 2, ...) and its features over the window (`None`: the recording
-/// does not hold the block its state starts at).
-type MemberRun = (usize, Option<Vec<Feature>>);
+/// What a worker needs besides its twins: the recording, the clearances from its start, how
+/// the model is observed and compared, the members' perturbation.
+struct RunContext<'a> {
+    rec: &'a Recording,
+    schedule: &'a ClearanceSchedule,
+    observation: &'a Observation,
+    tolerance: ComparisonTolerance,
+    relative: f64,
+}
+
+impl RunContext<'_> {
+    /// Runs `task` on `twin` (a member) or `fine` (the discretisation member): its features
+    /// over the window (`None`: the recording does not hold the block its state starts at).
+    fn run(
+        &self,
+        twin: &mut Twin,
+        fine: Option<&mut Twin>,
+        task: &Task,
+    ) -> Result<Option<Vec<Feature>>, TwinReplayError> {
+        let job = &task.job;
+        let channels: Vec<&str> = job.channels.iter().map(String::as_str).collect();
+        let window = &Window {
+            info: &job.info,
+            observation: self.observation,
+            tolerance: self.tolerance,
+            channels: &channels,
+            noise: &job.noise,
+        };
+        match task.run {
+            EnsembleRun::Member(m) => {
+                let info = &job.info;
+                let s = (job.state).perturbed(
+                    &info.test,
+                    info.step,
+                    info.record_attempt,
+                    m,
+                    self.relative,
+                );
+                run_member(twin, self.rec, self.schedule, &s, window)
+            }
+            EnsembleRun::Discretisation => {
+                let Some(fine) = fine else { return Ok(None) };
+                match lead_in_start(fine, self.rec, self.schedule, job.lead_in.as_ref())? {
+                    Some(start) => run_window(fine, self.rec, start, window),
+                    None => Ok(None),
+                }
+            }
+        }
+    }
+}
+
+/// One run of a window's ensemble.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum EnsembleRun {
+    /// Member `m` (1, 2, ...) from the step's start with its perturbation.
+    Member(usize),
+    /// The discretisation member, from rest at the lead-in.
+    Discretisation,
+}
+
+/// A window's ensemble, as its runs need it: the step, the twin's state at its start and at
+/// the lead-in, the compared channels and the measurement's noise floor.
+struct Job {
+    info: StepInfo,
+    state: TwinState,
+    lead_in: Option<TwinState>,
+    channels: Vec<String>,
+    noise: Vec<NoiseFloor>,
+}
+
+/// One run to make: which window (in submission order), which run.
+struct Task {
+    window: u64,
+    run: EnsembleRun,
+    job: std::sync::Arc<Job>,
+}
+
+/// A run's result, back from a worker.
+type Done = (
+    u64,
+    EnsembleRun,
+    Result<Option<Vec<Feature>>, TwinReplayError>,
+);
+
+/// The runs still to make, shared by the workers.
+#[derive(Default)]
+struct Tasks {
+    queue: std::sync::Mutex<(VecDeque<Task>, bool)>,
+    ready: std::sync::Condvar,
+}
+
+impl Tasks {
+    fn lock(&self) -> std::sync::MutexGuard<'_, (VecDeque<Task>, bool)> {
+        self.queue.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    fn push(&self, tasks: impl IntoIterator<Item = Task>) {
+        self.lock().0.extend(tasks);
+        self.ready.notify_all();
+    }
+
+    /// The next run, waiting for one; `None` once closed.
+    fn next(&self) -> Option<Task> {
+        let mut q = self.lock();
+        loop {
+            if q.1 {
+                return None;
+            }
+            if let Some(t) = q.0.pop_front() {
+                return Some(t);
+            }
+            q = self.ready.wait(q).unwrap_or_else(|e| e.into_inner());
+        }
+    }
+
+    fn close(&self) {
+        let mut q = self.lock();
+        q.0.clear();
+        q.1 = true;
+        drop(q);
+        self.ready.notify_all();
+    }
+}
+
+/// The windows submitted to the ensemble, released in submission order with their spread as
+/// their runs complete.
+struct EnsembleQueue<'t> {
+    /// Whether the ensemble has workers (members).
+    active: bool,
+    /// Whether a discretisation member runs.
+    fine: bool,
+    members: usize,
+    contact_windows_only: bool,
+    tolerance: ComparisonTolerance,
+    windows: VecDeque<Pending>,
+    /// The next window's number.
+    next: u64,
+    done: std::sync::mpsc::Receiver<Done>,
+    tasks: &'t Tasks,
+}
+
+/// A window released: the step and the twin's comparison with its spread (`None`: the twin
+/// missed part of the window).
+type Released = (StepInfo, Option<TwinComparison>);
+
+/// A window submitted and not yet released.
+struct Pending {
+    window: u64,
+    /// A window not re-run ([`EnsembleQueue::skip`]).
+    skipped: bool,
+    info: StepInfo,
+    c: Option<TwinComparison>,
+    /// Runs not yet back.
+    waiting: usize,
+    members: Vec<(usize, Option<Vec<Feature>>)>,
+    fine: Option<Vec<Feature>>,
+    error: Option<TwinReplayError>,
+}
+
+impl EnsembleQueue<'_> {
+    /// Submits the window of `info` with the twin's comparison `c` (`None`: the twin missed
+    /// part of it) and the twin's state at the step's start and at the lead-in (`start`;
+    /// `None`: no ensemble for it). The ensemble runs where there is one and the window asks
+    /// for it: with `contact_windows_only`, where contact was measured or modelled, or right
+    /// after a measured one (`after_contact`: the response still carries the state the
+    /// contact left); the discretisation member only there.
+    fn submit(
+        &mut self,
+        info: &StepInfo,
+        start: Option<(&TwinState, Option<&TwinState>)>,
+        after_contact: bool,
+        c: Option<TwinComparison>,
+    ) {
+        let window = self.next;
+        self.next += 1;
+        let mut runs = Vec::new();
+        if let (Some(c), Some((state, lead_in)), true) = (&c, start, self.active) {
+            let measured_contact = c.metrics.contact_fraction - c.contact_fraction_error;
+            let contact_window =
+                after_contact || c.metrics.contact_fraction > 0.0 || measured_contact > 0.0;
+            if contact_window || !self.contact_windows_only {
+                if self.fine && contact_window {
+                    runs.push(EnsembleRun::Discretisation);
+                }
+                runs.extend((1..=self.members).map(EnsembleRun::Member));
+            }
+            if !runs.is_empty() {
+                let mut channels: Vec<String> = Vec::new();
+                for f in &c.features {
+                    if f.channel != CONTACT_CHANNEL && !channels.contains(&f.channel) {
+                        channels.push(f.channel.clone());
+                    }
+                }
+                let job = std::sync::Arc::new(Job {
+                    info: info.clone(),
+                    state: state.clone(),
+                    lead_in: lead_in.cloned(),
+                    channels,
+                    noise: c.observation_noise.clone(),
+                });
+                // The discretisation member first: the longest run.
+                self.tasks.push(runs.iter().map(|&run| Task {
+                    window,
+                    run,
+                    job: job.clone(),
+                }));
+            }
+        }
+        self.windows.push_back(Pending {
+            window,
+            skipped: false,
+            info: info.clone(),
+            c,
+            waiting: runs.len(),
+            members: Vec::new(),
+            fine: None,
+            error: None,
+        });
+    }
+
+    /// Submits a window that is not run at all (a warm-start replay's step not selected): it
+    /// is released in its place as `None`.
+    fn skip(&mut self, info: &StepInfo) {
+        self.submit(info, None, false, None);
+        if let Some(w) = self.windows.back_mut() {
+            w.skipped = true;
+        }
+    }
+
+    /// Releases the windows ready ([`EnsembleQueue::ready`]; with `all`, every window) into
+    /// `sink` and `results`, a skipped one into `results` alone (as `None`).
+    fn release(
+        &mut self,
+        all: bool,
+        sink: &mut dyn TwinSink,
+        results: &mut Vec<Option<TwinComparison>>,
+    ) -> Result<(), TwinReplayError> {
+        for r in self.ready(all)? {
+            match r {
+                Some((info, c)) => {
+                    sink.step(&info, c.as_ref())?;
+                    results.push(c);
+                }
+                None => results.push(None),
+            }
+        }
+        Ok(())
+    }
+
+    /// The windows whose runs are all back, in submission order, with the ensemble's spread
+    /// and the discretisation member's difference (`None`: a window skipped); with `all`,
+    /// waits for every window submitted.
+    fn ready(&mut self, all: bool) -> Result<Vec<Option<Released>>, TwinReplayError> {
+        let mut out = Vec::new();
+        loop {
+            while self.windows.front().is_some_and(|w| w.waiting == 0) {
+                if let Some(w) = self.windows.pop_front() {
+                    out.push(
+                        (!w.skipped)
+                            .then(|| w.release(&self.tolerance))
+                            .transpose()?,
+                    );
+                }
+            }
+            if self.windows.is_empty() {
+                break;
+            }
+            let done = if all {
+                // NOTE: the workers hold the senders; all gone with runs still out means one
+                // panicked, which the scope's join raises.
+                Some(self.done.recv().expect("an ensemble thread panicked"))
+            } else {
+                self.done.try_recv().ok()
+            };
+            let Some((window, run, result)) = done else {
+                break;
+            };
+            let Some(w) = self.windows.iter_mut().find(|w| w.window == window) else {
+                continue;
+            };
+            w.waiting -= 1;
+            match (result, run) {
+                (Ok(f), EnsembleRun::Member(m)) => w.members.push((m, f)),
+                (Ok(f), EnsembleRun::Discretisation) => w.fine = f,
+                (Err(e), _) => {
+                    w.error.get_or_insert(e);
+                }
+            }
+        }
+        Ok(out)
+    }
+}
+
+impl Pending {
+    /// The window's comparison with its spread.
+    fn release(self, tolerance: &ComparisonTolerance) -> Result<Released, TwinReplayError> {
+        if let Some(e) = self.error {
+            return Err(e);
+        }
+        let Some(c) = self.c else {
+            return Ok((self.info, None));
+        };
+        if self.members.is_empty() && self.fine.is_none() {
+            return Ok((self.info, Some(c)));
+        }
+        let mut members = self.members;
+        // Member order, whatever worker ran it: the result does not depend on `jobs`.
+        members.sort_by_key(|(m, _)| *m);
+        let features: Vec<Vec<Feature>> = members.into_iter().filter_map(|(_, f)| f).collect();
+        let c = c.with_ensemble(&features, tolerance);
+        let c = match self.fine {
+            Some(f) => c.with_discretisation(&f, tolerance),
+            None => c,
+        };
+        Ok((self.info, Some(c)))
+    }
+}
 
 /// The record window an ensemble run is compared over: the step, how the model is observed,
 /// the compared beam channels and the measurement's noise floor laid on them.
@@ -455,6 +719,13 @@ pub trait TwinSink {
     fn state(&mut self, _state: &TwinStateMessage) -> Result<(), TwinReplayError> {
         Ok(())
     }
+    /// Whether [`TwinSink::step`] must come in time order with the blocks (a log copy): each
+    /// window's ensemble is then waited for as the window completes; else (a sink that keeps
+    /// no log) the twin runs on while the ensemble runs, and the steps come later, still in
+    /// record-window order.
+    fn steps_in_time_order(&self) -> bool {
+        true
+    }
     /// A step's comparison with the twin's own spread only (its sub-windows), before the
     /// ensemble's joins it ([`TwinSink::step`] has it after): the `--ensemble 0` comparison,
     /// got from the same run.
@@ -470,6 +741,9 @@ pub trait TwinSink {
 impl TwinSink for () {
     fn block(&mut self, _: &TwinBlock) -> Result<(), TwinReplayError> {
         Ok(())
+    }
+    fn steps_in_time_order(&self) -> bool {
+        false
     }
     fn step(&mut self, _: &StepInfo, _: Option<&TwinComparison>) -> Result<(), TwinReplayError> {
         Ok(())
@@ -511,29 +785,24 @@ pub fn replay_twin(
         .cloned()
         .zip(summary.steps().map(|s| s.measured.clone()))
         .collect();
-    let mut results: Vec<Option<TwinComparison>> = Vec::new();
     let o = twin.observation();
     let mut out = TwinWindows::new(o, spec.tolerance);
     let mut stats = TwinReplayStats::default();
-    let mut members = Ensemble::new(rec, model, spec, &clearances, ensemble)?;
+    let members = Ensemble::new(rec, model, spec, &clearances, ensemble)?;
     let after_contact = after_contact(rec, summary);
     let mut starts: HashMap<(String, usize), TwinState> = HashMap::new();
-    let mut take = |done: Vec<Completed>,
-                    starts: &HashMap<(String, usize), TwinState>,
-                    results: &mut Vec<Option<TwinComparison>>,
-                    sink: &mut dyn TwinSink|
+    // With a sink that takes the steps in time order, each window's ensemble is waited for
+    // as it completes; else the twin runs on while it runs.
+    let wait = sink.steps_in_time_order();
+    let submit = |done: Vec<Completed>,
+                  queue: &mut EnsembleQueue,
+                  starts: &HashMap<(String, usize), TwinState>,
+                  sink: &mut dyn TwinSink|
      -> Result<(), TwinReplayError> {
         for (info, c) in done {
             sink.pointwise(&info, c.as_ref().and_then(|c| c.as_ref().ok()))?;
             let c = match c {
-                Some(Ok(c)) => match starts.get(&(info.test.clone(), info.step)) {
-                    Some(state) => {
-                        let lead_in = lead_in(starts.values(), state);
-                        let after = after_contact.contains(&(info.test.clone(), info.step));
-                        Some(members.apply(&info, (state, lead_in), after, c)?)
-                    }
-                    None => Some(c),
-                },
+                Some(Ok(c)) => Some(c),
                 Some(Err(source)) => {
                     return Err(TwinReplayError::Metrics {
                         test: info.test,
@@ -543,34 +812,45 @@ pub fn replay_twin(
                 }
                 None => None,
             };
-            sink.step(&info, c.as_ref())?;
-            results.push(c);
+            let start = starts
+                .get(&(info.test.clone(), info.step))
+                .map(|state| (state, lead_in(starts.values(), state)));
+            let after = after_contact.contains(&(info.test.clone(), info.step));
+            queue.submit(&info, start, after, c);
         }
         Ok(())
     };
-    for b in rec.base_blocks(0) {
-        while let Some(c) = clearances.next_due(b.first_sample) {
-            twin.set_clearance(c)?;
-        }
-        if let Some((test, step)) = step_starts.next_due(b.first_sample) {
-            if let Some(state) = twin.state() {
-                let message = TwinStateMessage { test, step, state };
-                sink.state(&message)?;
-                if ensemble.members > 0 {
-                    starts.insert((message.test, message.step), message.state);
+    let results = members.run(|queue| {
+        let mut results: Vec<Option<TwinComparison>> = Vec::new();
+        for b in rec.base_blocks(0) {
+            while let Some(c) = clearances.next_due(b.first_sample) {
+                twin.set_clearance(c)?;
+            }
+            if let Some((test, step)) = step_starts.next_due(b.first_sample) {
+                if let Some(state) = twin.state() {
+                    let message = TwinStateMessage { test, step, state };
+                    sink.state(&message)?;
+                    if ensemble.members > 0 {
+                        starts.insert((message.test, message.step), message.state);
+                    }
                 }
             }
+            let tb = twin.push_block(&b)?;
+            stats.blocks += 1;
+            stats.solver_failures += tb.solver_failure_count();
+            sink.block(&tb)?;
+            out.push(&tb);
+            let done = out.complete(&mut pending, dt, false);
+            if !done.is_empty() {
+                submit(done, queue, &starts, sink)?;
+                queue.release(wait, sink, &mut results)?;
+            }
         }
-        let tb = twin.push_block(&b)?;
-        stats.blocks += 1;
-        stats.solver_failures += tb.solver_failure_count();
-        sink.block(&tb)?;
-        out.push(&tb);
-        let done = out.complete(&mut pending, dt, false);
-        take(done, &starts, &mut results, sink)?;
-    }
-    let done = out.complete(&mut pending, dt, true);
-    take(done, &starts, &mut results, sink)?;
+        let done = out.complete(&mut pending, dt, true);
+        submit(done, queue, &starts, sink)?;
+        queue.release(true, sink, &mut results)?;
+        Ok(results)
+    })?;
     stats.steps_compared = summary.attach_twin(results);
     stats.wall_per_rig_second =
         wall.elapsed().as_secs_f64() / rec.rig_seconds().max(f64::MIN_POSITIVE);
@@ -714,85 +994,90 @@ pub fn replay_twin_steps(
     )?;
     let dt = rec.layout.dt();
     let o = twin.observation().clone();
-    let mut members = Ensemble::new(rec, model, spec, &first_schedule, ensemble)?;
+    let members = Ensemble::new(rec, model, spec, &first_schedule, ensemble)?;
     let after_contact = after_contact(rec, summary);
     let mut stats = TwinReplayStats::default();
     let mut rig_seconds = 0.0;
-    let mut results = Vec::new();
     let first_block = rec.blocks.first().map_or(0, |b| b.first_sample);
-    for (info, measured) in rec
-        .record_windows()
-        .zip(summary.steps().map(|s| &s.measured))
-    {
-        if !select.contains(&info.test, info.step) {
-            results.push(None);
-            continue;
-        }
-        let logged = rec
-            .twin_states
-            .iter()
-            .rev()
-            .find(|m| m.test == info.test && m.step == info.step);
-        let mut clearances = first_schedule.clone();
-        twin.reset();
-        let from = match logged {
-            Some(m) => {
-                twin.set_state(&m.state)?;
-                // The clearances due up to the state are in it.
-                while clearances.next_due(m.state.next_sample).is_some() {}
-                Some(m.state.next_sample)
+    // As in `replay_twin`: the ensemble waited for per window only for a sink in time order.
+    let wait = sink.steps_in_time_order();
+    let results = members.run(|queue| {
+        let mut results = Vec::new();
+        for (info, measured) in rec
+            .record_windows()
+            .zip(summary.steps().map(|s| &s.measured))
+        {
+            if !select.contains(&info.test, info.step) {
+                queue.skip(info);
+                continue;
             }
-            None if step_start(rec, info).is_some_and(|s| s <= first_block) => {
-                twin.set_clearance(first_schedule.first().unwrap_or(0.0))?;
-                Some(first_block)
-            }
-            None => None,
-        };
-        let start = from.and_then(|from| rec.blocks.iter().position(|b| b.first_sample == from));
-        let Some(start) = start else {
-            return Err(TwinReplayError::NoState {
-                test: info.test.clone(),
-                step: info.step + 1,
-                states: rec.twin_states.len(),
-            });
-        };
-        let mut out = TwinWindows::new(&o, spec.tolerance);
-        for b in rec.base_blocks(start) {
-            if b.first_sample >= info.record_end_sample() {
-                break;
-            }
-            while let Some(c) = clearances.next_due(b.first_sample) {
-                twin.set_clearance(c)?;
-            }
-            let tb = twin.push_block(&b)?;
-            stats.blocks += 1;
-            rig_seconds += b.len as f64 * dt;
-            stats.solver_failures += tb.solver_failure_count();
-            out.push(&tb);
-        }
-        let c = out.compare(info, measured, dt);
-        sink.pointwise(info, c.as_ref().and_then(|c| c.as_ref().ok()))?;
-        let c = match c {
-            Some(Ok(c)) => match logged {
+            let logged = rec
+                .twin_states
+                .iter()
+                .rev()
+                .find(|m| m.test == info.test && m.step == info.step);
+            let mut clearances = first_schedule.clone();
+            twin.reset();
+            let from = match logged {
                 Some(m) => {
-                    let lead_in = lead_in(rec.twin_states.iter().map(|m| &m.state), &m.state);
-                    let after = after_contact.contains(&(info.test.clone(), info.step));
-                    Some(members.apply(info, (&m.state, lead_in), after, c)?)
+                    twin.set_state(&m.state)?;
+                    // The clearances due up to the state are in it.
+                    while clearances.next_due(m.state.next_sample).is_some() {}
+                    Some(m.state.next_sample)
                 }
-                None => Some(c),
-            },
-            Some(Err(source)) => {
-                return Err(TwinReplayError::Metrics {
+                None if step_start(rec, info).is_some_and(|s| s <= first_block) => {
+                    twin.set_clearance(first_schedule.first().unwrap_or(0.0))?;
+                    Some(first_block)
+                }
+                None => None,
+            };
+            let start =
+                from.and_then(|from| rec.blocks.iter().position(|b| b.first_sample == from));
+            let Some(start) = start else {
+                return Err(TwinReplayError::NoState {
                     test: info.test.clone(),
-                    step: info.step,
-                    source,
-                })
+                    step: info.step + 1,
+                    states: rec.twin_states.len(),
+                });
+            };
+            let mut out = TwinWindows::new(&o, spec.tolerance);
+            for b in rec.base_blocks(start) {
+                if b.first_sample >= info.record_end_sample() {
+                    break;
+                }
+                while let Some(c) = clearances.next_due(b.first_sample) {
+                    twin.set_clearance(c)?;
+                }
+                let tb = twin.push_block(&b)?;
+                stats.blocks += 1;
+                rig_seconds += b.len as f64 * dt;
+                stats.solver_failures += tb.solver_failure_count();
+                out.push(&tb);
             }
-            None => None,
-        };
-        sink.step(info, c.as_ref())?;
-        results.push(c);
-    }
+            let c = out.compare(info, measured, dt);
+            sink.pointwise(info, c.as_ref().and_then(|c| c.as_ref().ok()))?;
+            let c = match c {
+                Some(Ok(c)) => Some(c),
+                Some(Err(source)) => {
+                    return Err(TwinReplayError::Metrics {
+                        test: info.test.clone(),
+                        step: info.step,
+                        source,
+                    })
+                }
+                None => None,
+            };
+            let start = logged.map(|m| {
+                let lead_in = lead_in(rec.twin_states.iter().map(|m| &m.state), &m.state);
+                (&m.state, lead_in)
+            });
+            let after = after_contact.contains(&(info.test.clone(), info.step));
+            queue.submit(info, start, after, c);
+            queue.release(wait, sink, &mut results)?;
+        }
+        queue.release(true, sink, &mut results)?;
+        Ok(results)
+    })?;
     stats.steps_compared = summary.attach_twin(results);
     stats.wall_per_rig_second = wall.elapsed().as_secs_f64() / rig_seconds.max(f64::MIN_POSITIVE);
     Ok(stats)

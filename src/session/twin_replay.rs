@@ -267,6 +267,7 @@ impl<'r> Ensemble<'r> {
             for (mut twin, mut fine) in twins {
                 let (context, tasks, send) = (&context, &tasks, send.clone());
                 scope.spawn(move || {
+                    let _close = CloseOnPanic(tasks);
                     while let Some(task) = tasks.next() {
                         let result = context.run(&mut twin, fine.as_mut(), &task);
                         if send.send((task.window, task.run, result)).is_err() {
@@ -404,6 +405,19 @@ impl Tasks {
         q.1 = true;
         drop(q);
         self.ready.notify_all();
+    }
+}
+
+/// Closes the runs still to make if its worker panics: the other workers then stop, and a
+/// wait for their results ends (and the scope raises the panic) instead of waiting for a run
+/// that no worker will return.
+struct CloseOnPanic<'a>(&'a Tasks);
+
+impl Drop for CloseOnPanic<'_> {
+    fn drop(&mut self) {
+        if std::thread::panicking() {
+            self.0.close();
+        }
     }
 }
 

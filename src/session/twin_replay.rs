@@ -246,7 +246,6 @@ impl<'r> Ensemble<'r> {
         let tasks = Tasks::default();
         let (send, receive) = std::sync::mpsc::channel();
         let mut queue = EnsembleQueue {
-            active: !twins.is_empty(),
             fine: options.discretisation.is_some(),
             members: options.members,
             contact_windows_only: options.contact_windows_only,
@@ -371,17 +370,24 @@ type Done = (
 /// The runs still to make, shared by the workers.
 #[derive(Default)]
 struct Tasks {
-    queue: std::sync::Mutex<(VecDeque<Task>, bool)>,
+    queue: std::sync::Mutex<TaskQueue>,
     ready: std::sync::Condvar,
 }
 
+/// The runs queued, and whether the queue is closed (the workers stop).
+#[derive(Default)]
+struct TaskQueue {
+    runs: VecDeque<Task>,
+    closed: bool,
+}
+
 impl Tasks {
-    fn lock(&self) -> std::sync::MutexGuard<'_, (VecDeque<Task>, bool)> {
+    fn lock(&self) -> std::sync::MutexGuard<'_, TaskQueue> {
         self.queue.lock().unwrap_or_else(|e| e.into_inner())
     }
 
     fn push(&self, tasks: impl IntoIterator<Item = Task>) {
-        self.lock().0.extend(tasks);
+        self.lock().runs.extend(tasks);
         self.ready.notify_all();
     }
 
@@ -389,20 +395,21 @@ impl Tasks {
     fn next(&self) -> Option<Task> {
         let mut q = self.lock();
         loop {
-            if q.1 {
+            if q.closed {
                 return None;
             }
-            if let Some(t) = q.0.pop_front() {
+            if let Some(t) = q.runs.pop_front() {
                 return Some(t);
             }
             q = self.ready.wait(q).unwrap_or_else(|e| e.into_inner());
         }
     }
 
+    /// Drops the runs still queued and stops the workers.
     fn close(&self) {
         let mut q = self.lock();
-        q.0.clear();
-        q.1 = true;
+        q.runs.clear();
+        q.closed = true;
         drop(q);
         self.ready.notify_all();
     }
@@ -424,10 +431,9 @@ impl Drop for CloseOnPanic<'_> {
 /// The windows submitted to the ensemble, released in submission order with their spread as
 /// their runs complete.
 struct EnsembleQueue<'t> {
-    /// Whether the ensemble has workers (members).
-    active: bool,
     /// Whether a discretisation member runs.
     fine: bool,
+    /// Members per window (0: no ensemble, and no workers).
     members: usize,
     contact_windows_only: bool,
     tolerance: ComparisonTolerance,
@@ -473,7 +479,7 @@ impl EnsembleQueue<'_> {
         let window = self.next;
         self.next += 1;
         let mut runs = Vec::new();
-        if let (Some(c), Some((state, lead_in)), true) = (&c, start, self.active) {
+        if let (Some(c), Some((state, lead_in)), true) = (&c, start, self.members > 0) {
             let measured_contact = c.metrics.contact_fraction - c.contact_fraction_error;
             let contact_window =
                 after_contact || c.metrics.contact_fraction > 0.0 || measured_contact > 0.0;

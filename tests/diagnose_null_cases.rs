@@ -5,6 +5,8 @@
 //! short plans of `tests/diagnose_command.rs` (noise seeds 1 and 2):
 //! - the demo plan (the high level through the impact band, down and up; no impact-free
 //!   resonance): no mismatch, and it says that the linear and clamp effects cannot be decided;
+//!   per step (issue 14's null case), at most a third of the band's steps above the threshold
+//!   with the comparison's spread, fewer than pointwise (1 of 11 against 9 of 11 when written);
 //! - `rig-config/plans/identify.toml` (every effect's evidence, 733 s of rig time; behind
 //!   `--ignored`: about 35 min on this shared machine, BENCHMARKS.md "identify.toml after the
 //!   wear and tilt stages").
@@ -27,12 +29,56 @@ fn undecided(d: &Value) -> Vec<String> {
         .collect()
 }
 
+/// Issue 14's null case, per step: with nothing hidden, the impact band's steps compared with
+/// the comparison's spread (the ensemble and the discretisation member, `band_before`) stay
+/// within the threshold but for a few (a chaotic step on another attractor than the rig's:
+/// BENCHMARKS.md, "The discretisation member"), where compared pointwise (the twin alone,
+/// `regimes_before`) most of them are above it.
+fn band_within_the_spread(d: &Value) {
+    let threshold = d["threshold"].as_f64().unwrap();
+    let band = &d["band_before"];
+    let steps = band["steps"].as_array().unwrap();
+    assert!(!steps.is_empty(), "no band steps: {band}");
+    let above = steps
+        .iter()
+        .filter(|s| s["max_score"].as_f64().unwrap() > threshold)
+        .count();
+    assert_eq!(
+        above,
+        band["scores"]["steps_above"].as_u64().unwrap() as usize
+    );
+    assert!(
+        3 * above <= steps.len(),
+        "{above} of {} band steps above {threshold} with the spread: {band}",
+        steps.len()
+    );
+    let pointwise = d["regimes_before"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|r| r["regime"] == "impacts")
+        .unwrap();
+    let share = |r: &Value| r["steps_above"].as_f64().unwrap() / r["steps"].as_f64().unwrap();
+    eprintln!(
+        "band steps above {threshold}: {above} of {} with the spread, {} of {} pointwise",
+        steps.len(),
+        pointwise["steps_above"],
+        pointwise["steps"]
+    );
+    assert!(
+        share(pointwise) > share(&band["scores"]),
+        "pointwise {pointwise} against the spread's {}",
+        band["scores"]
+    );
+}
+
 #[test]
 fn the_demo_plan_on_the_nominal_rig_is_no_mismatch_and_says_what_it_cannot_decide() {
     let dir = tempfile::tempdir().unwrap();
     let (_, stripped) = sim_session(dir.path(), "demo", "", &repo_plan("demo.toml"));
     let d = diagnose(&stripped, dir.path(), "demo", &[]);
     assert_null(&d);
+    band_within_the_spread(&d);
     let u = undecided(&d);
     for effect in ["linear_frequency", "clamp_friction"] {
         assert!(

@@ -127,7 +127,7 @@ pub struct TwinReplayStats {
 /// `perturbation` of their norm ([`TwinState::perturbed`]), through the end of the step's
 /// record window, on `jobs` threads. A step that starts with the recording (from rest) gets
 /// no ensemble; with `contact_windows_only`, neither does a window without contact.
-#[derive(Clone, Copy)]
+#[derive(Clone, Copy, Debug)]
 pub struct EnsembleOptions<'a> {
     /// Members besides the twin's own run (0: none).
     pub members: usize,
@@ -168,6 +168,7 @@ impl<'a> EnsembleOptions<'a> {
 /// The comparison's discretisation member (`[twin.discretisation]`): a finer model than the
 /// twin's (more modes, a finer step; the same extensions and contact observation), run beside
 /// the ensemble in every record window with contact.
+#[derive(Debug)]
 pub struct DiscretisationMember<'a> {
     /// The finer model.
     pub model: TwinModel<'a>,

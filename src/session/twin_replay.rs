@@ -713,15 +713,22 @@ fn run_window(
         }
         out.push(&twin.push_block(&b)?);
     }
-    match out.features(info, rec.layout.dt(), channels, noise) {
-        Some(Ok(f)) => Ok(Some(f)),
-        Some(Err(source)) => Err(TwinReplayError::Metrics {
+    checked(info, out.features(info, rec.layout.dt(), channels, noise))
+}
+
+/// The model's result over the record window of `info` (`None`: the model missed part of
+/// it), a failure of its metrics as the replay's error naming the step.
+fn checked<T>(
+    info: &StepInfo,
+    result: Option<Result<T, SignalError>>,
+) -> Result<Option<T>, TwinReplayError> {
+    result
+        .transpose()
+        .map_err(|source| TwinReplayError::Metrics {
             test: info.test.clone(),
             step: info.step,
             source,
-        }),
-        None => Ok(None),
-    }
+        })
 }
 
 /// Where a twin replay's output goes besides the summary (e.g. a copy of the session log,
@@ -822,17 +829,7 @@ pub fn replay_twin(
      -> Result<(), TwinReplayError> {
         for (info, c) in done {
             sink.pointwise(&info, c.as_ref().and_then(|c| c.as_ref().ok()))?;
-            let c = match c {
-                Some(Ok(c)) => Some(c),
-                Some(Err(source)) => {
-                    return Err(TwinReplayError::Metrics {
-                        test: info.test,
-                        step: info.step,
-                        source,
-                    })
-                }
-                None => None,
-            };
+            let c = checked(&info, c)?;
             let start = starts
                 .get(&(info.test.clone(), info.step))
                 .map(|state| (state, lead_in(starts.values(), state)));
@@ -1077,17 +1074,7 @@ pub fn replay_twin_steps(
             }
             let c = out.compare(info, measured, dt);
             sink.pointwise(info, c.as_ref().and_then(|c| c.as_ref().ok()))?;
-            let c = match c {
-                Some(Ok(c)) => Some(c),
-                Some(Err(source)) => {
-                    return Err(TwinReplayError::Metrics {
-                        test: info.test.clone(),
-                        step: info.step,
-                        source,
-                    })
-                }
-                None => None,
-            };
+            let c = checked(info, c)?;
             let start = logged.map(|m| {
                 let lead_in = lead_in(rec.twin_states.iter().map(|m| &m.state), &m.state);
                 (&m.state, lead_in)

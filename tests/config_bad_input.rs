@@ -576,6 +576,43 @@ fn model_table_round_trips_and_is_not_hashed() {
     );
 }
 
+/// The twin's discretisation written by `diagnose --write-config` (the `discretisation`
+/// effect accepted): `[reduction]` replaced, the twin's step set by steps per 1FU period with
+/// `steps_per_sample` removed, everything else as it was.
+#[test]
+fn discretisation_is_written_into_reduction_and_twin() {
+    use rigtwin::config::{with_discretisation, ReductionSpec, DEFAULT_RIG_TOML};
+    let coarse = DEFAULT_RIG_TOML.replace("cutoff_ratio = 180.0", "modes = 8")
+        + "\n[twin]\nsteps_per_sample = 1\nqueue_blocks = 80\n";
+    let given = RigConfig::from_str(&coarse, "coarse").unwrap();
+    assert_eq!(given.reduction.modes, Some(8));
+    assert_eq!(given.twin.steps_per_sample, Some(1));
+    let reference = ReductionSpec {
+        cutoff_ratio: Some(180.0),
+        ..ReductionSpec::default()
+    };
+    let text = with_discretisation(&coarse, "coarse", Some(&reference), Some(1000.0)).unwrap();
+    let fixed = RigConfig::from_str(&text, "fixed").unwrap();
+    assert_eq!(fixed.reduction, reference);
+    assert_eq!(fixed.twin.steps_per_sample, None);
+    assert_eq!(fixed.twin.steps_per_reference_period, 1000.0);
+    assert_eq!(fixed.twin.queue_blocks, 80);
+    // The reference reduction is the default rig's: the same ROM.
+    assert_eq!(
+        fixed.model().canonical_hash(),
+        RigConfig::default_rig().model().canonical_hash()
+    );
+    // The step alone: [reduction] kept, a [twin] table made where there was none.
+    let text = with_discretisation(DEFAULT_RIG_TOML, "default", None, Some(2000.0)).unwrap();
+    let step = RigConfig::from_str(&text, "step").unwrap();
+    assert_eq!(step.reduction, RigConfig::default_rig().reduction);
+    assert_eq!(step.twin.steps_per_reference_period, 2000.0);
+    // A `twin` key that is not a table is a clear error naming the file.
+    let bad = format!("twin = 3\n{DEFAULT_RIG_TOML}");
+    let e = with_discretisation(&bad, "bad.toml", None, Some(1000.0)).unwrap_err();
+    assert!(e.to_string().contains("bad.toml"), "{e}");
+}
+
 /// Bad `[model]` values name the file and the key.
 #[test]
 fn bad_model_values_name_the_file_and_key() {

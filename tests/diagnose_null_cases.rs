@@ -7,6 +7,9 @@
 //!   resonance): no mismatch, and it says that the linear and clamp effects cannot be decided;
 //!   per step (issue 14's null case), at most a third of the band's steps above the threshold
 //!   with the comparison's spread, fewer than pointwise (1 of 11 against 9 of 11 when written);
+//! - the demo plan's session against a twin coarser than the reference (8 modes, one twin
+//!   step per sample): the mismatch is the twin's own, `discretisation` accepted alone and
+//!   written out;
 //! - `rig-config/plans/identify.toml` (every effect's evidence, 733 s of rig time; behind
 //!   `--ignored`: about 35 min on this shared machine, BENCHMARKS.md "identify.toml after the
 //!   wear and tilt stages").
@@ -16,7 +19,11 @@
 mod cli_support;
 mod diagnose_support;
 
-use diagnose_support::{assert_null, diagnose, repo_plan, sim_session};
+use std::path::PathBuf;
+use std::sync::OnceLock;
+
+use diagnose_support::{accepted, assert_null, diagnose, repo_plan, sim_session};
+use rigtwin::config::RigConfig;
 use serde_json::Value;
 
 /// The effects a diagnosis says it cannot decide.
@@ -72,12 +79,35 @@ fn band_within_the_spread(d: &Value) {
     );
 }
 
+/// The demo plan on the nominal rig, recorded once for the tests of this file that diagnose
+/// it (in cargo's folder for integration tests' files, made afresh by each run of this test
+/// binary): (its folder, the stripped log).
+fn demo_session() -> &'static (PathBuf, PathBuf) {
+    static SESSION: OnceLock<(PathBuf, PathBuf)> = OnceLock::new();
+    SESSION.get_or_init(|| {
+        let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("diagnose_null_cases-demo");
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let (_, stripped) = sim_session(&dir, "demo", "", &repo_plan("demo.toml"));
+        (dir, stripped)
+    })
+}
+
 #[test]
 fn the_demo_plan_on_the_nominal_rig_is_no_mismatch_and_says_what_it_cannot_decide() {
-    let dir = tempfile::tempdir().unwrap();
-    let (_, stripped) = sim_session(dir.path(), "demo", "", &repo_plan("demo.toml"));
-    let d = diagnose(&stripped, dir.path(), "demo", &[]);
+    let (dir, stripped) = demo_session();
+    let d = diagnose(stripped, dir, "demo", &[]);
     assert_null(&d);
+    // The twin as given is the reference discretisation: the stage does not run.
+    assert!(
+        !d["cost"]["stages"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|s| s["stage"] == "discretisation"),
+        "{:#}",
+        d["cost"]
+    );
     band_within_the_spread(&d);
     let u = undecided(&d);
     for effect in ["linear_frequency", "clamp_friction"] {
@@ -103,4 +133,66 @@ fn identify_plan_on_the_nominal_rig_is_no_mismatch() {
         d["cost"]["model_wall_seconds"].as_f64().unwrap_or(f64::NAN),
     );
     assert_null(&d);
+}
+
+/// The same nominal session against a twin coarser than the reference: 8 modes (up to 17 x
+/// f(1FU)) at one twin step per DAQ sample (about 200 per 1FU period, where the reference
+/// is 1000). Nothing is hidden on the rig; the mismatch is the twin's own: `discretisation`
+/// named first and accepted (here the step refined, 5.5 -> 1.8 on the validation test when
+/// written), nothing else accepted (no clearance, tilt or wear absorbs the coarse twin's
+/// impacts), and `--write-config` writes the refined step into `[twin]`.
+#[test]
+fn a_coarse_twin_is_named_as_its_own_discretisation_and_refined() {
+    let (dir, stripped) = demo_session();
+    let coarse = dir.join("coarse.toml");
+    let text = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/rig-config/two-beam.toml"
+    ))
+    .unwrap()
+    .replace("cutoff_ratio = 180.0", "modes = 8")
+        + "\n[twin]\nsteps_per_sample = 1\n";
+    std::fs::write(&coarse, text).unwrap();
+    let fixed = dir.join("fixed.toml");
+    let d = diagnose(
+        stripped,
+        dir,
+        "coarse",
+        &[
+            "--config",
+            coarse.to_str().unwrap(),
+            "--write-config",
+            fixed.to_str().unwrap(),
+        ],
+    );
+    assert_eq!(d["verdict"], "mismatch", "{d:#}");
+    let e = accepted(&d, "discretisation");
+    assert_eq!(e.len(), 1, "{:#}", d["effects"]);
+    assert_eq!(e[0]["rank"], 1, "{:#}", d["effects"]);
+    let all_accepted = d["effects"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|e| e["accepted"] == true)
+        .count();
+    assert_eq!(all_accepted, 1, "{:#}", d["effects"]);
+    let (b, a) = (
+        e[0]["error_before"]["validation"].as_f64().unwrap(),
+        e[0]["error_after"]["validation"].as_f64().unwrap(),
+    );
+    assert!(a < b, "validation {b} -> {a}");
+    // The refinement, as the effect and the fixed model name it.
+    let twin = &e[0]["evidence"]["twin"];
+    assert_eq!(twin["modes"], 8, "{twin}");
+    assert_eq!(twin["steps_per_sample"], 1, "{twin}");
+    let after = &d["discretisation_after"];
+    assert_eq!(after["steps_per_reference_period"], 1000.0, "{after}");
+    let written = RigConfig::from_path(&fixed).unwrap();
+    assert_eq!(written.twin.steps_per_sample, None);
+    assert_eq!(written.twin.steps_per_reference_period, 1000.0);
+    if after["reduction"].is_null() {
+        assert_eq!(written.reduction.modes, Some(8));
+    } else {
+        assert_eq!(written.reduction.cutoff_ratio, Some(180.0));
+    }
 }

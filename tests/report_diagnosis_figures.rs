@@ -279,6 +279,7 @@ fn empty() -> Diagnosis {
         undecided: Vec::new(),
         model_before: PhysicsSpec::default(),
         model_after: PhysicsSpec::default(),
+        discretisation_after: None,
         model: None,
         validation_tests: Vec::new(),
         validation_with_spread: None,

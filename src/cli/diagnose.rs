@@ -100,6 +100,15 @@ pub(crate) fn run(a: DiagnoseArgs) -> anyhow::Result<()> {
     } else {
         None
     };
+    // The discretisation stage re-runs a twin coarser than the reference on the reference
+    // ROM: built (or loaded) only for a session with contact.
+    let refined = match crate::diagnose::refined_reduction(&cfg, &rom) {
+        Some(reference) if r.summary.steps().any(crate::diagnose::rerun::had_contact) => {
+            let (rom, _, _) = models::cached_rom(&reference, a.rebuild, a.quiet)?;
+            Some(rom)
+        }
+        _ => None,
+    };
     let jobs = a.jobs.map_or_else(
         || std::thread::available_parallelism().map_or(1, |n| n.get()),
         usize::from,
@@ -146,12 +155,21 @@ pub(crate) fn run(a: DiagnoseArgs) -> anyhow::Result<()> {
         cfg: &cfg,
         rom: &rom,
         finer: finer.as_ref(),
+        refined: refined.as_ref(),
     };
     let mut d = diagnose(&input, &opts, &mut progress)
         .with_context(|| format!("diagnosis of {}", a.file.display()))?;
     bar.finish_and_clear();
     if let Some(p) = &a.write_config {
-        let fixed = crate::config::with_model(&text, &source, &d.model_after)?;
+        let mut fixed = crate::config::with_model(&text, &source, &d.model_after)?;
+        if let Some(refinement) = &d.discretisation_after {
+            fixed = crate::config::with_discretisation(
+                &fixed,
+                &source,
+                refinement.reduction.as_ref(),
+                refinement.steps_per_reference_period,
+            )?;
+        }
         std::fs::write(p, fixed).with_context(|| format!("--write-config {}", p.display()))?;
         d.model = Some(p.display().to_string());
     }

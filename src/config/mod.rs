@@ -132,6 +132,44 @@ pub fn with_model(
     write_table(&table, source_name)
 }
 
+/// The rig description `text` with the twin's discretisation changed (`diagnose
+/// --write-config` where the `discretisation` effect was accepted): its `[reduction]` table
+/// replaced by `reduction` where given, and its `[twin] steps_per_reference_period` set to
+/// `steps_per_reference_period` where given, `[twin] steps_per_sample` removed (the step
+/// then follows the ROM). The other tables are kept as parsed, as by [`with_model`].
+pub fn with_discretisation(
+    text: &str,
+    source_name: &str,
+    reduction: Option<&ReductionSpec>,
+    steps_per_reference_period: Option<f64>,
+) -> Result<String, ConfigError> {
+    let mut table = parse_table(text, source_name)?;
+    if let Some(r) = reduction {
+        let value = toml::Value::try_from(r).map_err(|e| ConfigError::Service {
+            file: source_name.to_string(),
+            message: format!("reduction: cannot write it as TOML: {e}"),
+        })?;
+        table.insert("reduction".to_string(), value);
+    }
+    if let Some(s) = steps_per_reference_period {
+        let twin = table
+            .entry("twin")
+            .or_insert_with(|| toml::Value::Table(toml::Table::new()));
+        let Some(twin) = twin.as_table_mut() else {
+            return Err(ConfigError::Service {
+                file: source_name.to_string(),
+                message: "twin: not a table".to_string(),
+            });
+        };
+        twin.remove("steps_per_sample");
+        twin.insert(
+            "steps_per_reference_period".to_string(),
+            toml::Value::Float(s),
+        );
+    }
+    write_table(&table, source_name)
+}
+
 /// The rig description `text` without its `[truth]` tables (the simulated rig's truth model
 /// and hidden physics), for a program that must not see them (`diagnose`). The other tables
 /// are kept as parsed (comments and key order are not).

@@ -241,7 +241,7 @@ impl<'a> Work<'a> {
     }
 }
 
-impl Work<'_> {
+impl<'a> Work<'a> {
     /// Stage `stage` begins (`line` on the terminal); the stage before ends.
     pub(super) fn stage(&mut self, stage: &'static str, line: impl Into<String>) {
         self.end_stage();
@@ -259,6 +259,22 @@ impl Work<'_> {
                 model_rig_seconds: c.rig_seconds - at.rig_seconds,
                 model_wall_seconds: c.wall_seconds - at.wall_seconds,
             });
+        }
+    }
+
+    /// From now on the model runs are `runner`'s (the twin's discretisation refined): the
+    /// runs remembered are forgotten, and the cost goes on from the runner's so far.
+    pub(super) fn replace_runner(&mut self, runner: ModelRunner<'a>) {
+        let cost = self.runner.cost;
+        self.runner = runner;
+        self.runner.cost.add(cost);
+        self.cache.clear();
+    }
+
+    /// The cost of the runs of `runners` (runners of other models) joins the diagnosis'.
+    pub(super) fn absorb_cost(&mut self, runners: impl IntoIterator<Item = ModelRunner<'a>>) {
+        for r in runners {
+            self.runner.cost.add(r.cost);
         }
     }
 

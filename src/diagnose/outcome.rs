@@ -10,6 +10,7 @@ use crate::twin::FeatureComparison;
 
 use super::clearance::ClearanceEvidence;
 use super::linear::LinearEvidence;
+use super::resolution::Refinement;
 use super::sensors::SensorEvidence;
 
 /// The verdict of a diagnosis.
@@ -229,7 +230,7 @@ pub struct DiagnosisCost {
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct StageCost {
     /// The stage (`locate`, `sensor_gain`, `linear`, `clamp_friction`, `sensor_gain_again`,
-    /// `wear`, `clearance`, `tilt`, `show`).
+    /// `discretisation`, `wear`, `clearance`, `tilt`, `show`).
     pub stage: String,
     /// Model runs (whole or per test).
     pub model_runs: usize,
@@ -270,13 +271,18 @@ pub struct Diagnosis {
     pub model_before: PhysicsSpec,
     /// The model's extensions with the accepted effects (`[model]` of the fixed model).
     pub model_after: PhysicsSpec,
+    /// The twin's discretisation of the fixed model where the `discretisation` effect was
+    /// accepted (`[reduction]` and `[twin]` of the written rig description); None: the given
+    /// one.
+    pub discretisation_after: Option<Refinement>,
     /// Path of the written rig description (set by the caller).
     pub model: Option<String>,
     /// Tests any effect was validated on (the before/after figures' tests).
     pub validation_tests: Vec<String>,
     /// Their error with the comparison's spread, the model as given and the fixed one (None
     /// where the band was not run with the spread for both: no effect accepted, no
-    /// ensemble, or the model as given within the spread).
+    /// ensemble, or the model as given within the spread; or where the twin's discretisation
+    /// was refined: the model as given's spread then holds its own discretisation error).
     pub validation_with_spread: Option<ValidationWithSpread>,
     /// The sensor-sensitivity evidence (None: the session has no record window for it).
     pub sensors: Option<SensorEvidence>,

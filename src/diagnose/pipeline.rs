@@ -62,6 +62,7 @@ use super::outcome::{
     SetError, StageCost, StepScores, ValidationWithSpread, Verdict,
 };
 use super::rerun::{had_contact, ModelRunner, SessionSteps};
+use super::resolution::Resolution;
 use super::{DiagnoseError, EvidenceError};
 
 /// What a diagnosis works on.
@@ -77,6 +78,10 @@ pub struct DiagnoseInput<'a> {
     /// The finer ROM of the comparison's discretisation member (`[twin.discretisation]`),
     /// for the impact band's verdict ([`BandSpread`]); None: the ensemble's spread alone.
     pub finer: Option<&'a Rom>,
+    /// The reference ROM where the twin's modal basis is coarser than it
+    /// ([`super::refined_reduction`]), for the discretisation stage; None: not coarser (or
+    /// the caller did not build it).
+    pub refined: Option<&'a Rom>,
 }
 
 /// Whether a diagnosis of the session `summary` with the rig description `cfg` compares its
@@ -151,7 +156,7 @@ struct WholeSession {
     band: Option<(BandSpread, Vec<StepScores>)>,
 }
 
-/// One run of the model with extensions `ext` over the whole session: every step compared
+/// One run of the model with extensions `ext` (at `resolution`) over the whole session: every step compared
 /// pointwise (the twin's own spread: `rigtwin replay --twin --ensemble 0` of that model), and,
 /// `with_band`, the impact band with the comparison's spread ([`BandSpread`]; None without a
 /// step with contact or without an ensemble, `[twin] ensemble_members = 0`). The band's
@@ -159,13 +164,14 @@ struct WholeSession {
 /// `input.finer`), run in the windows with contact only.
 fn whole_session(
     input: &DiagnoseInput<'_>,
+    resolution: &Resolution<'_>,
     steps: &SessionSteps,
     ext: &PhysicsSpec,
     opts: &DiagnoseOptions,
     with_band: bool,
 ) -> Result<WholeSession, DiagnoseError> {
-    let spec = &input.cfg.twin;
-    let mut model = TwinModel::of_config(input.rom, input.cfg);
+    let spec = &resolution.spec;
+    let mut model = TwinModel::of_config(resolution.rom, input.cfg);
     model.extensions = ext.clone();
     let band = with_band && steps.steps.iter().any(|s| s.regime == Regime::Impacts);
     let members = if band { spec.ensemble_members } else { 0 };
@@ -398,6 +404,10 @@ pub fn diagnose(
     }
     let steps = SessionSteps::of(rec, input.summary);
     let given = input.cfg.model.clone();
+    let as_given = Resolution {
+        rom: input.rom,
+        spec: input.cfg.twin.clone(),
+    };
 
     let band_steps = (steps.steps.iter())
         .filter(|s| s.regime == Regime::Impacts)
@@ -418,7 +428,7 @@ pub fn diagnose(
     let WholeSession {
         plain: before,
         band: band_before,
-    } = whole_session(input, &steps, &given, opts, true)?;
+    } = whole_session(input, &as_given, &steps, &given, opts, true)?;
     let mut stages = vec![StageCost {
         stage: "locate".into(),
         model_runs: 1,
@@ -515,6 +525,10 @@ pub fn diagnose(
         unpartnered_gains(&mut work, &scores, &free_train, &free_validation)?;
     }
 
+    // 3. The twin's own discretisation, before the contact effects that would absorb it.
+    let refined = super::resolution::resolution_stage(&mut work, &as_given, input.refined)?;
+    let resolution = refined.as_ref().map_or(&as_given, |r| &r.1);
+
     // 4. Clearance per test.
     work.stage(
         "clearance_per_test",
@@ -542,7 +556,8 @@ pub fn diagnose(
             "tilt",
             "identify: tilt against the clearance (contact-regime statistics)",
         );
-        super::tilt::tilt_stage(&mut work, input.rom, &before_contact, &ce)?;
+        let rom = work.runner.rom();
+        super::tilt::tilt_stage(&mut work, rom, &before_contact, &ce)?;
     }
     let clearance = Some(ce);
 
@@ -556,9 +571,10 @@ pub fn diagnose(
         ));
         let t = std::time::Instant::now();
         // The band once more where the model as given was beyond its spread: whether the
-        // accepted effects bring it within.
-        let band = band_before.as_ref().is_some_and(|(b, _)| b.beyond);
-        let s = whole_session(input, &steps, &work.accepted, opts, band)?;
+        // accepted effects bring it within; and with the twin's discretisation refined: the
+        // discretisation member's part of the spread was the coarse twin's own error.
+        let band = band_before.as_ref().is_some_and(|(b, _)| b.beyond) || refined.is_some();
+        let s = whole_session(input, resolution, &steps, &work.accepted, opts, band)?;
         stages.push(StageCost {
             stage: "show".into(),
             model_runs: 1,
@@ -569,6 +585,7 @@ pub fn diagnose(
     } else {
         (before.clone(), None)
     };
+    let refined_twin = refined.map(|r| r.0);
     if let (Some((_, b)), Some((_, a))) = (&band_before, &band_after) {
         lone_band_effect_with_spread(&mut work.effects, &steps, b, a);
     }
@@ -578,8 +595,12 @@ pub fn diagnose(
         .collect();
     validation_tests.sort();
     validation_tests.dedup();
+    // With the twin's discretisation refined, the model as given's spread holds that
+    // twin's own discretisation error (its discretisation member's difference): no before.
     let with_spread = match (&band_before, &band_after) {
-        (Some((_, b)), Some((_, a))) => validation_with_spread(&steps, &validation_tests, b, a),
+        (Some((_, b)), Some((_, a))) if refined_twin.is_none() => {
+            validation_with_spread(&steps, &validation_tests, b, a)
+        }
         _ => None,
     };
     let band_before = band_before.map(|(b, _)| b);
@@ -604,8 +625,24 @@ pub fn diagnose(
     if let Some(r) = regimes_after.iter().find(|r| r.regime == Regime::Impacts) {
         if r.steps_above > 0 && free_ok {
             let given = any && band_after.is_none();
-            work.effects
-                .push(discretisation(r, band, given, opts.threshold));
+            let note = discretisation(r, band, given, opts.threshold);
+            match work
+                .effects
+                .iter_mut()
+                .find(|e| e.effect == "discretisation")
+            {
+                // The stage judged the twin refined: the band's note joins its result.
+                Some(e) => {
+                    e.evidence["impact_band"] = note.evidence;
+                    let whose = if e.accepted {
+                        "the fixed model's"
+                    } else {
+                        "the"
+                    };
+                    e.reason = format!("{}; {whose} impact band: {}", e.reason, note.reason);
+                }
+                None => work.effects.push(note),
+            }
         }
     }
 
@@ -648,6 +685,7 @@ pub fn diagnose(
         undecided: work.undecided,
         model_before: given,
         model_after: work.accepted,
+        discretisation_after: refined_twin,
         model: None,
         validation_tests,
         validation_with_spread: with_spread,

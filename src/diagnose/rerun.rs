@@ -359,6 +359,15 @@ pub struct RunCost {
     pub wall_seconds: f64,
 }
 
+impl RunCost {
+    /// Adds `other`'s runs, rig time and wall time.
+    pub fn add(&mut self, other: RunCost) {
+        self.runs += other.runs;
+        self.rig_seconds += other.rig_seconds;
+        self.wall_seconds += other.wall_seconds;
+    }
+}
+
 /// Runs the twin with given extensions over tests of a recording (see the module docs).
 pub struct ModelRunner<'a> {
     rec: &'a Recording,
@@ -432,6 +441,35 @@ impl<'a> ModelRunner<'a> {
             worn: HashMap::new(),
             wear_from: None,
         }
+    }
+
+    /// A runner over the same recording, steps, beam length and threads with another model
+    /// (`base`: another ROM, the twin's discretisation refined) and twin settings `spec`; its
+    /// own cost, captures and states.
+    pub fn with_model(&self, base: TwinModel<'a>, spec: &TwinSpec) -> ModelRunner<'a> {
+        ModelRunner::new(
+            self.rec,
+            self.steps,
+            base,
+            spec,
+            self.beam_length,
+            self.jobs,
+        )
+    }
+
+    /// The model it runs (ROM, contact observation; each run's extensions replace these).
+    pub fn base_model(&self) -> &TwinModel<'a> {
+        &self.base
+    }
+
+    /// The ROM it runs.
+    pub fn rom(&self) -> &'a Rom {
+        self.rom
+    }
+
+    /// The recording's sample rate, Hz.
+    pub fn sample_rate(&self) -> f64 {
+        self.rec.layout.sample_rate
     }
 
     /// From now on, with `Some(r)`, a run of a model with wear runs each test it is asked for

@@ -22,6 +22,7 @@ mod diagnose_support;
 use std::path::PathBuf;
 use std::sync::OnceLock;
 
+use cli_support::{rigtwin, text};
 use diagnose_support::{accepted, assert_null, diagnose, repo_plan, sim_session};
 use rigtwin::config::RigConfig;
 use serde_json::Value;
@@ -145,14 +146,14 @@ fn identify_plan_on_the_nominal_rig_is_no_mismatch() {
 fn a_coarse_twin_is_named_as_its_own_discretisation_and_refined() {
     let (dir, stripped) = demo_session();
     let coarse = dir.join("coarse.toml");
-    let text = std::fs::read_to_string(concat!(
+    let description = std::fs::read_to_string(concat!(
         env!("CARGO_MANIFEST_DIR"),
         "/rig-config/two-beam.toml"
     ))
     .unwrap()
     .replace("cutoff_ratio = 180.0", "modes = 8")
         + "\n[twin]\nsteps_per_sample = 1\n";
-    std::fs::write(&coarse, text).unwrap();
+    std::fs::write(&coarse, description).unwrap();
     let fixed = dir.join("fixed.toml");
     let d = diagnose(
         stripped,
@@ -194,5 +195,32 @@ fn a_coarse_twin_is_named_as_its_own_discretisation_and_refined() {
         assert_eq!(written.reduction.modes, Some(8));
     } else {
         assert_eq!(written.reduction.cutoff_ratio, Some(180.0));
+    }
+
+    // The written description, replayed, gives the "after" comparison of every step.
+    let replayed = dir.join("coarse-replayed.json");
+    let o = rigtwin(&[
+        "replay",
+        stripped.to_str().unwrap(),
+        "--twin",
+        "--config",
+        fixed.to_str().unwrap(),
+        "--ensemble",
+        "0",
+        "--json",
+        replayed.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let r: Value = serde_json::from_str(&std::fs::read_to_string(&replayed).unwrap()).unwrap();
+    let replayed_steps: Vec<&Value> = r["tests"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .flat_map(|t| t["steps"].as_array().unwrap())
+        .collect();
+    let scores_after = d["scores_after"].as_array().unwrap();
+    assert_eq!(scores_after.len(), replayed_steps.len());
+    for (a, s) in scores_after.iter().zip(replayed_steps) {
+        assert_eq!(a["features"], s["twin"]["features"]);
     }
 }

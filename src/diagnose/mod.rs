@@ -9,6 +9,8 @@
 //! - [`linear`]: linear natural frequency and damping of 1FL and 1FU from the impact-free
 //!   steps of each test (reference section 3.2), and their dependence on the amplitude across
 //!   levels (the clamp's friction);
+//! - `resolution`: whether a twin coarser than the reference (modes, contact patch, step) is
+//!   the mismatch itself, judged by re-running it refined before the contact effects;
 //! - [`clearance`]: the clearance per test from the relative tip displacement before the
 //!   first impact (reference section 4, Table 2);
 //! - [`wear`]: the clearance per test against the model's accumulated normal contact

@@ -16,6 +16,9 @@
 //!    - `clamp_friction` (`clamp`): the frequency falling and the damping rising with
 //!      the amplitude; the slopes fix the ratio of the joint's stiffness share to its slip
 //!      amplitude, model runs over a few stiffness shares fix the rest;
+//!    - `discretisation` (`resolution`): only for a twin coarser than the reference (its
+//!      modes, contact patch or step): the tests with contact re-run with it refined; if
+//!      accepted, every later run (and the show run) uses the refined twin;
 //!    - `wear` ([`super::wear`]): the clearance per test ([`super::clearance`], refined by
 //!      model runs, `clearance_fit`) growing with the model's normal contact impulse;
 //!    - `clearance` (`clearance_fit`): as an offset to the plan's when the tests

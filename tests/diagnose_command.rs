@@ -26,7 +26,9 @@ mod diagnose_support;
 use std::path::Path;
 
 use cli_support::{json, rigtwin, text};
-use diagnose_support::{accepted, assert_null, diagnose, sim_session};
+use diagnose_support::{
+    accepted, assert_null, assert_replay_gives_the_after_scores, diagnose, sim_session,
+};
 use serde_json::Value;
 
 /// 1FU impact-free at 0.1e-5 l and 0.4e-5 l, then 0.1e-5 l again: the linear fit, its
@@ -136,31 +138,7 @@ fn a_wrong_linear_1fu_is_found_fitted_validated_and_written_out() {
     );
 
     // The written description, replayed, gives the "after" comparison of every step.
-    let replayed = dir.path().join("replayed.json");
-    let o = rigtwin(&[
-        "replay",
-        stripped.to_str().unwrap(),
-        "--twin",
-        "--config",
-        fixed.to_str().unwrap(),
-        "--ensemble",
-        "0",
-        "--json",
-        replayed.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", text(&o));
-    let r: Value = serde_json::from_str(&std::fs::read_to_string(&replayed).unwrap()).unwrap();
-    let replayed_steps: Vec<&Value> = r["tests"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .flat_map(|t| t["steps"].as_array().unwrap())
-        .collect();
-    let after = d["scores_after"].as_array().unwrap();
-    assert_eq!(after.len(), replayed_steps.len());
-    for (a, s) in after.iter().zip(replayed_steps) {
-        assert_eq!(a["features"], s["twin"]["features"]);
-    }
+    assert_replay_gives_the_after_scores(&stripped, &fixed, dir.path(), &d);
 }
 
 /// The other way from the 1FU above: lower and less damped than the model's (50.9 Hz,

@@ -22,8 +22,9 @@ mod diagnose_support;
 use std::path::PathBuf;
 use std::sync::OnceLock;
 
-use cli_support::{rigtwin, text};
-use diagnose_support::{accepted, assert_null, diagnose, repo_plan, sim_session};
+use diagnose_support::{
+    accepted, assert_null, assert_replay_gives_the_after_scores, diagnose, repo_plan, sim_session,
+};
 use rigtwin::config::RigConfig;
 use serde_json::Value;
 
@@ -198,29 +199,5 @@ fn a_coarse_twin_is_named_as_its_own_discretisation_and_refined() {
     }
 
     // The written description, replayed, gives the "after" comparison of every step.
-    let replayed = dir.join("coarse-replayed.json");
-    let o = rigtwin(&[
-        "replay",
-        stripped.to_str().unwrap(),
-        "--twin",
-        "--config",
-        fixed.to_str().unwrap(),
-        "--ensemble",
-        "0",
-        "--json",
-        replayed.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", text(&o));
-    let r: Value = serde_json::from_str(&std::fs::read_to_string(&replayed).unwrap()).unwrap();
-    let replayed_steps: Vec<&Value> = r["tests"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .flat_map(|t| t["steps"].as_array().unwrap())
-        .collect();
-    let scores_after = d["scores_after"].as_array().unwrap();
-    assert_eq!(scores_after.len(), replayed_steps.len());
-    for (a, s) in scores_after.iter().zip(replayed_steps) {
-        assert_eq!(a["features"], s["twin"]["features"]);
-    }
+    assert_replay_gives_the_after_scores(stripped, &fixed, dir, &d);
 }

@@ -5,12 +5,11 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::config::PhysicsSpec;
+use crate::config::{PhysicsSpec, ReductionSpec};
 use crate::twin::FeatureComparison;
 
 use super::clearance::ClearanceEvidence;
 use super::linear::LinearEvidence;
-use super::resolution::Refinement;
 use super::sensors::SensorEvidence;
 
 /// The verdict of a diagnosis.
@@ -202,6 +201,17 @@ pub struct EffectResult {
     pub error_before: Option<SetError>,
     /// Error of the model with the effect.
     pub error_after: Option<SetError>,
+}
+
+/// The twin's discretisation of the fixed model where the `discretisation` effect was
+/// accepted: what `--write-config` puts into `[reduction]` and `[twin]`.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Refinement {
+    /// `[reduction]` of the fixed model (None: the given one).
+    pub reduction: Option<ReductionSpec>,
+    /// `[twin] steps_per_reference_period` of the fixed model, its `steps_per_sample` removed
+    /// (None: the given step).
+    pub steps_per_reference_period: Option<f64>,
 }
 
 /// What a session cannot decide, and why.

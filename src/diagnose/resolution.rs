@@ -17,7 +17,6 @@
 //! train tests is judged on the validation tests. The modal basis alone is not tried with a
 //! step too coarse for the reference ROM's stability limit: the step is then refined with it.
 
-use serde::Serialize;
 use serde_json::json;
 
 use crate::config::{ReductionSpec, RigConfig};
@@ -26,7 +25,7 @@ use crate::rom::Rom;
 use crate::twin::{TwinModel, TwinSpec};
 
 use super::judge::{alternate, set_error, Candidate, Steps, Work};
-use super::outcome::{SetError, StepScores};
+use super::outcome::{Refinement, SetError, StepScores};
 use super::rerun::{ModelRunner, SessionSteps};
 use super::{DiagnoseError, DiagnoseProgress};
 
@@ -57,32 +56,6 @@ pub fn refined_reduction(cfg: &RigConfig, rom: &Rom) -> Option<RigConfig> {
         reduction: reference_reduction(),
         ..cfg.clone()
     })
-}
-
-/// The twin's discretisation of the fixed model where the `discretisation` effect was
-/// accepted: what `--write-config` puts into `[reduction]` and `[twin]`.
-#[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct Refinement {
-    /// `[reduction]` of the fixed model (None: the given one).
-    pub reduction: Option<ReductionSpec>,
-    /// `[twin] steps_per_reference_period` of the fixed model, its `steps_per_sample` removed
-    /// (None: the given step).
-    pub steps_per_reference_period: Option<f64>,
-}
-
-impl Refinement {
-    /// The rig description `cfg` with the refinement.
-    pub fn applied_to(&self, cfg: &RigConfig) -> RigConfig {
-        let mut out = cfg.clone();
-        if let Some(r) = self.reduction {
-            out.reduction = r;
-        }
-        if let Some(s) = self.steps_per_reference_period {
-            out.twin.steps_per_sample = None;
-            out.twin.steps_per_reference_period = s;
-        }
-        out
-    }
 }
 
 /// The model the diagnosis runs: its ROM and twin settings.

@@ -243,3 +243,43 @@ pub fn assert_null(d: &serde_json::Value) {
         "accepted on a nominal session: {accepted:#?}"
     );
 }
+
+/// Asserts that the rig description `fixed` (written by `diagnose --write-config`), replayed
+/// over `log` with the twin alone (`rigtwin replay LOG --twin --config FIXED --ensemble 0`,
+/// its summary in `dir`), gives diagnosis `d`'s "after" comparison of every step.
+pub fn assert_replay_gives_the_after_scores(
+    log: &Path,
+    fixed: &Path,
+    dir: &Path,
+    d: &serde_json::Value,
+) {
+    let replayed = dir.join(format!(
+        "{}-replayed.json",
+        fixed.file_stem().unwrap().to_str().unwrap()
+    ));
+    let o = crate::cli_support::rigtwin(&[
+        "replay",
+        log.to_str().unwrap(),
+        "--twin",
+        "--config",
+        fixed.to_str().unwrap(),
+        "--ensemble",
+        "0",
+        "--json",
+        replayed.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", crate::cli_support::text(&o));
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&replayed).unwrap()).unwrap();
+    let replayed_steps: Vec<&serde_json::Value> = r["tests"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .flat_map(|t| t["steps"].as_array().unwrap())
+        .collect();
+    let after = d["scores_after"].as_array().unwrap();
+    assert_eq!(after.len(), replayed_steps.len());
+    for (a, s) in after.iter().zip(replayed_steps) {
+        assert_eq!(a["features"], s["twin"]["features"]);
+    }
+}

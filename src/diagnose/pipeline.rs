@@ -159,8 +159,9 @@ struct WholeSession {
     band: Option<(BandSpread, Vec<StepScores>)>,
 }
 
-/// One run of the model with extensions `ext` (at `resolution`) over the whole session: every step compared
-/// pointwise (the twin's own spread: `rigtwin replay --twin --ensemble 0` of that model), and,
+/// One run of the model with extensions `ext` on the twin `resolution` (its ROM and settings)
+/// over the whole session: every step compared pointwise (the twin's own spread: `rigtwin
+/// replay --twin --ensemble 0` of that model), and,
 /// `with_band`, the impact band with the comparison's spread ([`BandSpread`]; None without a
 /// step with contact or without an ensemble, `[twin] ensemble_members = 0`). The band's
 /// spread comes from the `[twin]` ensemble and the discretisation member (with

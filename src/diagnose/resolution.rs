@@ -106,9 +106,8 @@ struct Choice<'a> {
 /// The discretisation stage (module docs) on the model accepted so far, before the contact
 /// stages. `given` is the twin as given, `refined` the reference ROM where the caller found
 /// the twin's modal basis coarser ([`refined_reduction`]). Returns the accepted refinement
-/// and its model,
-/// with which the work's runner runs from then on; None where nothing was tried or the
-/// refinement was rejected.
+/// and its model, with which the work's runner runs from then on; None where nothing was
+/// tried or the refinement was rejected.
 pub(super) fn resolution_stage<'a>(
     work: &mut Work<'a>,
     given: &Resolution<'a>,
@@ -223,12 +222,10 @@ pub(super) fn resolution_stage<'a>(
         tried.push((runner, e));
         failures.push(failure);
     }
-    let best = (0..tried.len())
-        .filter(|&i| tried[i].1.is_some())
-        .min_by(|&a, &b| {
-            let e = |i: usize| tried[i].1.map_or(f64::INFINITY, |e| e.train);
-            e(a).total_cmp(&e(b))
-        });
+    let best = (tried.iter().enumerate())
+        .filter_map(|(i, (_, e))| e.map(|e| (i, e.train)))
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .map(|(i, _)| i);
     let evidence = json!({
         "twin": twin,
         "reference": {

@@ -110,6 +110,7 @@ fn the_demo_plan_on_the_nominal_rig_is_no_mismatch_and_says_what_it_cannot_decid
         "{:#}",
         d["cost"]
     );
+    assert!(d["discretisation"].is_null(), "{}", d["discretisation"]);
     band_within_the_spread(&d);
     let u = undecided(&d);
     for effect in ["linear_frequency", "clamp_friction"] {
@@ -187,6 +188,20 @@ fn a_coarse_twin_is_named_as_its_own_discretisation_and_refined() {
     let twin = &e[0]["evidence"]["twin"];
     assert_eq!(twin["modes"], 8, "{twin}");
     assert_eq!(twin["steps_per_sample"], 1, "{twin}");
+    // Its evidence: the twin as given and the refinements tried, step by step, and its figure.
+    let ev = &d["discretisation"];
+    assert_eq!(ev["given"]["modes"], 8, "{ev}");
+    assert!(!ev["given"]["steps"].as_array().unwrap().is_empty(), "{ev}");
+    let compared = ev["options"].as_array().unwrap().iter().filter(|o| {
+        o["error"]["validation"].is_f64() && !o["steps"].as_array().unwrap().is_empty()
+    });
+    assert!(compared.count() >= 1, "{ev}");
+    for ext in ["png", "svg"] {
+        let f = dir
+            .join("coarse")
+            .join(format!("evidence-discretisation.{ext}"));
+        assert!(f.is_file(), "no {}", f.display());
+    }
     let after = &d["discretisation_after"];
     assert_eq!(after["steps_per_reference_period"], 1000.0, "{after}");
     let written = RigConfig::from_path(&fixed).unwrap();

@@ -14,8 +14,8 @@ use rigtwin::diagnose::clearance::{ClearanceEvidence, ClearanceOptions, Clearanc
 use rigtwin::diagnose::linear::Trend;
 use rigtwin::diagnose::linear::{AmplitudeDependence, LinearEvidence, LinearOptions, ModeFit};
 use rigtwin::diagnose::outcome::{
-    BandSpread, BandStep, Diagnosis, DiagnosisCost, EffectResult, Regime, RegimeScores, SetError,
-    StepScores, Verdict,
+    BandSpread, BandStep, Diagnosis, DiagnosisCost, DiscretisationEvidence, DiscretisedStep,
+    DiscretisedTwin, EffectResult, Regime, RegimeScores, SetError, StepScores, Verdict,
 };
 use rigtwin::diagnose::sensors::SensorOptions;
 use rigtwin::diagnose::sensors::{ChannelSensitivity, SensitivityStatus, SensorEvidence};
@@ -264,6 +264,51 @@ fn band(scores: &[StepScores], widen: f64) -> BandSpread {
     }
 }
 
+/// The discretisation stage's evidence on the tests with impacts of `scores`: the twin as
+/// given scoring `coarse` times the scores, its step refined scoring them as they are, and a
+/// refinement that could not run.
+fn discretisation(scores: &[StepScores], coarse: f64) -> DiscretisationEvidence {
+    let twin = |refined: Option<&str>, factor: f64, modes: usize, steps: f64| {
+        let steps_of: Vec<DiscretisedStep> = (scores.iter())
+            .filter(|s| s.regime == Regime::Impacts)
+            .map(|s| DiscretisedStep {
+                test: s.test.clone(),
+                step: s.step,
+                omega_ratio: s.omega_ratio,
+                score: s.max_score().map(|v| factor * v),
+                contact_measured: Some(0.02 * s.step as f64),
+                contact_model: Some(0.02 * factor * s.step as f64),
+            })
+            .collect();
+        DiscretisedTwin {
+            refined: refined.map(str::to_string),
+            modes,
+            highest_mode_over_1fu: if modes == 8 { 17.1 } else { 178.0 },
+            contact_pairs: 192,
+            steps_per_sample: (steps / 200.0) as u32,
+            steps_per_1fu_period: steps,
+            error: Some(SetError {
+                train: 2.0 * factor,
+                validation: 2.2 * factor,
+            }),
+            failure: None,
+            steps: steps_of,
+        }
+    };
+    let failed = DiscretisedTwin {
+        error: None,
+        failure: Some("the step exceeds the ROM's stability limit".into()),
+        steps: Vec::new(),
+        ..twin(Some("the modal basis and the twin step"), 1.0, 40, 1000.0)
+    };
+    DiscretisationEvidence {
+        train_tests: vec!["mid-up".into()],
+        validation_tests: vec!["high-up".into()],
+        given: twin(None, coarse, 8, 200.0),
+        options: vec![twin(Some("the twin step"), 1.0, 8, 1000.0), failed],
+    }
+}
+
 fn empty() -> Diagnosis {
     Diagnosis {
         verdict: Verdict::NoSignificantMismatch,
@@ -280,6 +325,7 @@ fn empty() -> Diagnosis {
         model_before: PhysicsSpec::default(),
         model_after: PhysicsSpec::default(),
         discretisation_after: None,
+        discretisation: None,
         model: None,
         validation_tests: Vec::new(),
         validation_with_spread: None,
@@ -316,6 +362,7 @@ fn full() -> Diagnosis {
         verdict: Verdict::Mismatch,
         band_before: Some(band(&before, 1.5)),
         band_after: Some(band(&after, 4.0)),
+        discretisation: Some(discretisation(&before, 2.5)),
         scores_before: before,
         scores_after: after,
         effects: vec![effect],
@@ -365,7 +412,7 @@ fn assert_svg(path: &Path, labels: &[&str]) {
 fn a_diagnosis_draws_every_figure_as_png_and_svg() {
     let dir = out_dir("report_diagnosis_figures");
     let written = draw_diagnosis(&full(), &dir).unwrap();
-    let figures: [(&str, &[&str]); 7] = [
+    let figures: [(&str, &[&str]); 8] = [
         (
             "mismatch-map",
             &["Mismatch map", "upper_tip", "contact", "high-up"],
@@ -380,6 +427,16 @@ fn a_diagnosis_draws_every_figure_as_png_and_svg() {
         (
             "evidence-band",
             &["mid-up", "with the spread", "fixed model", "threshold"],
+        ),
+        (
+            "evidence-discretisation",
+            &[
+                "twin as given",
+                "the twin step refined",
+                "could not run",
+                "high-up (validation)",
+                "contact fraction",
+            ],
         ),
         ("before-after", &["high-up", "model as given", "contact"]),
     ];
@@ -420,6 +477,14 @@ fn missing_data_leaves_figures_out() {
     if let Some(c) = &mut d.clearance {
         c.tests.iter_mut().for_each(|t| t.clearance_m = None);
     }
+    if let Some(e) = &mut d.discretisation {
+        for t in std::iter::once(&mut e.given).chain(&mut e.options) {
+            t.steps.iter_mut().for_each(|s| {
+                s.score = None;
+                s.contact_measured = Some(f64::NAN);
+            });
+        }
+    }
     let names: Vec<String> = (draw_diagnosis(&d, dir.path()).unwrap().iter())
         .map(|p| p.file_name().unwrap().to_string_lossy().into_owned())
         .collect();
@@ -443,6 +508,14 @@ fn missing_data_leaves_figures_out() {
     }
     d.linear = None;
     d.clearance = None;
+    if let Some(e) = &mut d.discretisation {
+        for t in std::iter::once(&mut e.given).chain(&mut e.options) {
+            t.steps.iter_mut().for_each(|s| {
+                s.omega_ratio = f64::NAN;
+                s.contact_model = None;
+            });
+        }
+    }
     let dir = tempfile::tempdir().unwrap();
     assert_eq!(
         draw_diagnosis(&d, dir.path()).unwrap(),
@@ -452,9 +525,9 @@ fn missing_data_leaves_figures_out() {
 
 #[test]
 fn single_and_extreme_values_draw() {
-    // One step with an infinite score (and one band step), one fit per mode, one clearance
-    // against contact impulse, a threshold below 1: degenerate ranges are widened, nothing
-    // panics.
+    // One step with an infinite score (and one band step, one step per discretisation), one
+    // fit per mode, one clearance against contact impulse, a threshold below 1: degenerate
+    // ranges are widened, nothing panics.
     let mut d = full();
     d.threshold = 0.5;
     d.scores_before.truncate(1);
@@ -474,9 +547,18 @@ fn single_and_extreme_values_draw() {
         c.tests.retain(|t| t.test_index == 2);
         c.tests[0].accumulated_contact_impulse_ns = Some(12.5);
     }
+    if let Some(e) = &mut d.discretisation {
+        for t in std::iter::once(&mut e.given).chain(&mut e.options) {
+            t.steps.truncate(1);
+            if let Some(s) = t.steps.first_mut() {
+                s.score = Some(4.0);
+                (s.contact_measured, s.contact_model) = (Some(0.0), Some(0.0));
+            }
+        }
+    }
     let dir = out_dir("report_diagnosis_figures_degenerate");
     let written = draw_diagnosis(&d, &dir).unwrap();
-    assert_eq!(written.len(), 14, "{written:?}");
+    assert_eq!(written.len(), 16, "{written:?}");
     for p in written.iter().filter(|p| p.extension().unwrap() == "png") {
         assert_png(p);
     }

@@ -94,6 +94,14 @@ impl StepScores {
     pub fn max_score(&self) -> Option<f64> {
         self.features.iter().map(|f| f.score).reduce(f64::max)
     }
+
+    /// The RMS of the step's feature scores, its share of the judge's error (None: nothing
+    /// compared).
+    pub fn rms_score(&self) -> Option<f64> {
+        let n = self.features.len();
+        let sum: f64 = self.features.iter().map(|f| f.score * f.score).sum();
+        (n > 0).then(|| (sum / n as f64).sqrt())
+    }
 }
 
 /// Scores per regime: how much of the session mismatches and where.
@@ -214,6 +222,60 @@ pub struct Refinement {
     pub steps_per_reference_period: Option<f64>,
 }
 
+/// The discretisation stage's evidence (`evidence-discretisation`): the twin as given and
+/// each refinement tried, step by step over the session's tests with contact.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct DiscretisationEvidence {
+    /// The tests the refinements were compared on (the best on these is judged).
+    pub train_tests: Vec<String>,
+    /// The tests the best refinement was judged on.
+    pub validation_tests: Vec<String>,
+    /// The twin as given.
+    pub given: DiscretisedTwin,
+    /// Each refinement tried, in the order tried.
+    pub options: Vec<DiscretisedTwin>,
+}
+
+/// One discretisation of the twin and how it scores.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct DiscretisedTwin {
+    /// What is refined against the twin as given, in words (None: the twin as given).
+    pub refined: Option<String>,
+    /// Retained modes.
+    pub modes: usize,
+    /// The highest retained mode over f(1FU).
+    pub highest_mode_over_1fu: f64,
+    /// Contact pairs of its patch.
+    pub contact_pairs: usize,
+    /// Twin steps per sample.
+    pub steps_per_sample: u32,
+    /// Twin steps per 1FU period.
+    pub steps_per_1fu_period: f64,
+    /// Its error on the train and validation tests (None: not run, or nothing compared).
+    pub error: Option<SetError>,
+    /// Why it could not run (a step beyond the ROM's stability limit, a model error).
+    pub failure: Option<String>,
+    /// Its steps (empty where it could not run).
+    pub steps: Vec<DiscretisedStep>,
+}
+
+/// A step of a test with contact under one discretisation.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct DiscretisedStep {
+    /// Test name.
+    pub test: String,
+    /// Step, counted from 0.
+    pub step: usize,
+    /// Omega / omega_2.
+    pub omega_ratio: f64,
+    /// RMS of the step's feature scores, the quantity the judge sums (None: not compared).
+    pub score: Option<f64>,
+    /// Fraction of the record window in contact, measured (None: not compared).
+    pub contact_measured: Option<f64>,
+    /// The same by this twin.
+    pub contact_model: Option<f64>,
+}
+
 /// What a session cannot decide, and why.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Undecided {
@@ -285,6 +347,9 @@ pub struct Diagnosis {
     /// accepted (`[reduction]` and `[twin]` of the written rig description); None: the given
     /// one.
     pub discretisation_after: Option<Refinement>,
+    /// The discretisation stage's evidence (None: the twin is the reference's or finer, or
+    /// the stage could not compare).
+    pub discretisation: Option<DiscretisationEvidence>,
     /// Path of the written rig description (set by the caller).
     pub model: Option<String>,
     /// Tests any effect was validated on (the before/after figures' tests).

@@ -530,7 +530,9 @@ pub fn diagnose(
     }
 
     // 3. The twin's own discretisation, before the contact effects that would absorb it.
-    let refined = super::resolution::resolution_stage(&mut work, &as_given, input.refined)?;
+    let staged = super::resolution::resolution_stage(&mut work, &as_given, input.refined)?;
+    let discretisation_evidence = staged.evidence;
+    let refined = staged.accepted;
     let resolution = refined.as_ref().map_or(&as_given, |r| &r.1);
 
     // 4. Clearance per test.
@@ -690,6 +692,7 @@ pub fn diagnose(
         model_before: given,
         model_after: work.accepted,
         discretisation_after: refined_twin,
+        discretisation: discretisation_evidence,
         model: None,
         validation_tests,
         validation_with_spread: with_spread,

@@ -22,10 +22,13 @@ use serde_json::json;
 use crate::config::{ReductionSpec, RigConfig};
 use crate::rom::info::RomInfo;
 use crate::rom::Rom;
-use crate::twin::{TwinModel, TwinSpec};
+use crate::signal::features::CONTACT_CHANNEL;
+use crate::twin::{FeatureComparison, TwinModel, TwinSpec};
 
 use super::judge::{alternate, set_error, Candidate, Steps, Work};
-use super::outcome::{Refinement, SetError, StepScores};
+use super::outcome::{
+    DiscretisationEvidence, DiscretisedStep, DiscretisedTwin, Refinement, SetError, StepScores,
+};
 use super::rerun::{ModelRunner, SessionSteps};
 use super::{DiagnoseError, DiagnoseProgress};
 
@@ -65,15 +68,57 @@ pub(super) struct Resolution<'a> {
     pub(super) spec: TwinSpec,
 }
 
-/// The twin's discretisation in numbers (the effect's evidence).
-fn described(rom: &Rom, spec: &TwinSpec, sample_rate: f64) -> serde_json::Value {
-    let info = RomInfo::new(rom);
+/// The twin's discretisation `rom` and `spec` at `sample_rate` (`refined`: what is refined,
+/// in words) with its run: `scores` on the tests with contact, or why it could not run, and
+/// its error on the train and validation tests.
+fn discretised(
+    refined: Option<&str>,
+    r: &Resolution<'_>,
+    sample_rate: f64,
+    run: Result<&[StepScores], &str>,
+    error: Option<SetError>,
+) -> DiscretisedTwin {
+    fn contact(s: &StepScores) -> Option<&FeatureComparison> {
+        (s.features.iter())
+            .find(|f| f.channel == CONTACT_CHANNEL && f.feature == "contact_fraction")
+    }
+    let steps = run.map_or_else(
+        |_| Vec::new(),
+        |scores| {
+            (scores.iter())
+                .map(|s| DiscretisedStep {
+                    test: s.test.clone(),
+                    step: s.step,
+                    omega_ratio: s.omega_ratio,
+                    score: s.rms_score(),
+                    contact_measured: contact(s).map(|f| f.measured),
+                    contact_model: contact(s).map(|f| f.model),
+                })
+                .collect()
+        },
+    );
+    DiscretisedTwin {
+        refined: refined.map(str::to_string),
+        modes: r.rom.n_modes(),
+        highest_mode_over_1fu: RomInfo::new(r.rom).highest_mode_over_1fu,
+        contact_pairs: r.rom.n_pairs(),
+        steps_per_sample: r.spec.steps_per_sample_for(sample_rate, r.rom.omega_ref()),
+        steps_per_1fu_period: steps_per_period(r.rom, &r.spec, sample_rate),
+        error,
+        failure: run.err().map(str::to_string),
+        steps,
+    }
+}
+
+/// A discretisation in numbers (the effect's evidence; its steps are in the diagnosis'
+/// [`DiscretisationEvidence`]).
+fn described(t: &DiscretisedTwin) -> serde_json::Value {
     json!({
-        "modes": rom.n_modes(),
-        "highest_mode_over_1fu": info.highest_mode_over_1fu,
-        "contact_pairs": rom.n_pairs(),
-        "steps_per_sample": spec.steps_per_sample_for(sample_rate, rom.omega_ref()),
-        "steps_per_1fu_period": steps_per_period(rom, spec, sample_rate),
+        "modes": t.modes,
+        "highest_mode_over_1fu": t.highest_mode_over_1fu,
+        "contact_pairs": t.contact_pairs,
+        "steps_per_sample": t.steps_per_sample,
+        "steps_per_1fu_period": t.steps_per_1fu_period,
     })
 }
 
@@ -94,6 +139,15 @@ fn steps_per_period(rom: &Rom, spec: &TwinSpec, sample_rate: f64) -> f64 {
     f64::from(n) * sample_rate * 2.0 * std::f64::consts::PI / rom.omega_ref()
 }
 
+/// What the stage found: its evidence, and the accepted refinement with its model.
+#[derive(Default)]
+pub(super) struct Staged<'a> {
+    /// The twin as given and each refinement tried (None: nothing tried).
+    pub(super) evidence: Option<DiscretisationEvidence>,
+    /// The accepted refinement and its model, with which the work's runner runs from then on.
+    pub(super) accepted: Option<(Refinement, Resolution<'a>)>,
+}
+
 /// One refinement tried.
 struct Choice<'a> {
     /// Which axes it refines, in words.
@@ -105,14 +159,13 @@ struct Choice<'a> {
 
 /// The discretisation stage (module docs) on the model accepted so far, before the contact
 /// stages. `given` is the twin as given, `refined` the reference ROM where the caller found
-/// the twin's modal basis coarser ([`refined_reduction`]). Returns the accepted refinement
-/// and its model, with which the work's runner runs from then on; None where nothing was
-/// tried or the refinement was rejected.
+/// the twin's modal basis coarser ([`refined_reduction`]). Returns the evidence and the
+/// accepted refinement with its model, with which the work's runner runs from then on.
 pub(super) fn resolution_stage<'a>(
     work: &mut Work<'a>,
     given: &Resolution<'a>,
     refined: Option<&'a Rom>,
-) -> Result<Option<(Refinement, Resolution<'a>)>, DiagnoseError> {
+) -> Result<Staged<'a>, DiagnoseError> {
     let steps: &SessionSteps = work.steps;
     let fs = work.runner.sample_rate();
     let reference_steps = TwinSpec::default().steps_per_reference_period;
@@ -123,9 +176,8 @@ pub(super) fn resolution_stage<'a>(
             || r.n_pairs() > given.rom.n_pairs()
     });
     if refined.is_none() && !coarse_step {
-        return Ok(None);
+        return Ok(Staged::default());
     }
-    let twin = described(given.rom, &given.spec, fs);
     work.stage(
         "discretisation",
         format!(
@@ -143,7 +195,7 @@ pub(super) fn resolution_stage<'a>(
                 tests.len()
             ),
         );
-        return Ok(None);
+        return Ok(Staged::default());
     }
     let step_spec = TwinSpec {
         steps_per_sample: None,
@@ -196,10 +248,10 @@ pub(super) fn resolution_stage<'a>(
             validation: set_error(s, &validation, Steps::All)?,
         })
     };
-    // Per option: its runner, its errors, and why it could not run (a refined twin the
-    // reference ROM's stability limit or the session does not allow: that option is out).
-    let mut tried: Vec<(ModelRunner<'a>, Option<SetError>)> = Vec::new();
-    let mut failures: Vec<Option<String>> = Vec::new();
+    let given_twin = discretised(None, given, fs, Ok(&before), error_of(&before));
+    // Per option: its runner and how it did (a refined twin the reference ROM's stability
+    // limit or the session does not allow could not run: that option is out).
+    let mut tried: Vec<(ModelRunner<'a>, DiscretisedTwin)> = Vec::new();
     let names = work.names(&tests).join(", ");
     for o in &options {
         (work.progress)(DiagnoseProgress::Evaluation(format!(
@@ -215,33 +267,40 @@ pub(super) fn resolution_stage<'a>(
             },
             &o.resolution.spec,
         );
-        let (e, failure) = match runner.run(&accepted, &tests) {
-            Ok(s) => (error_of(&s), None),
-            Err(e) => (None, Some(e.to_string())),
+        let t = match runner.run(&accepted, &tests) {
+            Ok(s) => discretised(Some(o.what), &o.resolution, fs, Ok(&s), error_of(&s)),
+            Err(e) => discretised(Some(o.what), &o.resolution, fs, Err(&e.to_string()), None),
         };
-        tried.push((runner, e));
-        failures.push(failure);
+        tried.push((runner, t));
     }
+    let evidence = DiscretisationEvidence {
+        train_tests: work.names(&train),
+        validation_tests: work.names(&validation),
+        given: given_twin,
+        options: tried.iter().map(|t| t.1.clone()).collect(),
+    };
     let best = (tried.iter().enumerate())
-        .filter_map(|(i, (_, e))| e.map(|e| (i, e.train)))
+        .filter_map(|(i, (_, t))| t.error.map(|e| (i, e.train)))
         .min_by(|a, b| a.1.total_cmp(&b.1))
         .map(|(i, _)| i);
-    let evidence = json!({
-        "twin": twin,
+    let evidence_json = json!({
+        "twin": described(&evidence.given),
         "reference": {
             "cutoff_ratio": REFERENCE_CUTOFF_RATIO,
             "steps_per_reference_period": reference_steps,
         },
-        "options": options.iter().zip(&tried).zip(&failures).map(|((o, (_, e)), f)| json!({
-            "refined": o.what,
-            "model": described(o.resolution.rom, &o.resolution.spec, fs),
-            "error": e,
-            "failure": f,
+        "options": evidence.options.iter().map(|t| json!({
+            "refined": t.refined,
+            "model": described(t),
+            "error": t.error,
+            "failure": t.failure,
         })).collect::<Vec<_>>(),
     });
     let Some(best) = best else {
+        let failed: Vec<String> = (evidence.options.iter())
+            .filter_map(|t| t.failure.clone())
+            .collect();
         work.absorb_cost(tried.into_iter().map(|t| t.0));
-        let failed: Vec<String> = failures.into_iter().flatten().collect();
         work.undecided(
             "discretisation",
             if failed.is_empty() {
@@ -250,7 +309,10 @@ pub(super) fn resolution_stage<'a>(
                 format!("the refined twin could not run: {}", failed.join("; "))
             },
         );
-        return Ok(None);
+        return Ok(Staged {
+            evidence: Some(evidence),
+            accepted: None,
+        });
     };
     let o = &options[best];
     let mut parameters = json!({});
@@ -260,37 +322,39 @@ pub(super) fn resolution_stage<'a>(
     }
     if let Some(s) = o.refinement.steps_per_reference_period {
         parameters["twin"] = json!({ "steps_per_reference_period": s });
-        parameters["steps_per_sample"] = json!(o
-            .resolution
-            .spec
-            .steps_per_sample_for(fs, o.resolution.rom.omega_ref()));
+        parameters["steps_per_sample"] = json!(evidence.options[best].steps_per_sample);
     }
     let c = Candidate::new(
         "discretisation",
         accepted.clone(),
         parameters,
         o.axes,
-        evidence,
+        evidence_json,
         (train.clone(), validation.clone()),
         Steps::All,
     );
-    let after = tried[best].1;
     let ok = work.judge_on(
         c,
         &format!("the twin with {} refined to the reference", o.what),
-        error_of(&before),
-        after,
+        evidence.given.error,
+        evidence.options[best].error,
     );
     let chosen = tried.swap_remove(best).0;
     work.absorb_cost(tried.into_iter().map(|t| t.0));
     if !ok {
         work.absorb_cost(std::iter::once(chosen));
-        return Ok(None);
+        return Ok(Staged {
+            evidence: Some(evidence),
+            accepted: None,
+        });
     }
     (work.progress)(DiagnoseProgress::Note(format!(
         "discretisation: the stages after this one run the twin with {} refined",
         o.what
     )));
     work.replace_runner(chosen);
-    Ok(Some((o.refinement.clone(), o.resolution.clone())))
+    Ok(Staged {
+        evidence: Some(evidence),
+        accepted: Some((o.refinement.clone(), o.resolution.clone())),
+    })
 }

@@ -10,6 +10,9 @@
 //!   (measured) and the fitted wear's clearance (model);
 //! - `evidence-sensors`: measured over model RMS per motion channel on the impact-free steps
 //!   (a sensitivity error is flat in frequency);
+//! - `evidence-discretisation`: the score per step of the tests with contact, of the twin as
+//!   given and of each refinement of its modal basis or step tried, and their contact
+//!   fraction against the measured one (a coarse twin keeps its impacts closed too long);
 //! - `before-after`: the response of the validation tests, measured and the model before and
 //!   after the accepted effects.
 
@@ -19,7 +22,9 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 
 use super::panel::{axis_areas, grid_styles, Band, Series};
-use crate::diagnose::outcome::{BandSpread, BandStep, Diagnosis, Regime, StepScores};
+use crate::diagnose::outcome::{
+    BandSpread, BandStep, Diagnosis, DiscretisedTwin, Regime, StepScores,
+};
 use crate::diagnose::TestClearance;
 use crate::report::draw::{
     draw_legend, draw_runs, finite_range, marker_radius, padded, palette, segments, split_legend,
@@ -75,6 +80,9 @@ pub fn draw_diagnosis(d: &Diagnosis, dir: &Path) -> Result<Vec<PathBuf>, ReportE
     }
     if let Some(f) = evidence_band(d) {
         write(dir, "evidence-band", &f, &mut written)?;
+    }
+    if let Some(f) = evidence_discretisation(d) {
+        write(dir, "evidence-discretisation", &f, &mut written)?;
     }
     if let Some(f) = before_after(d, &with) {
         write(dir, "before-after", &f, &mut written)?;
@@ -1104,6 +1112,130 @@ fn evidence_sensors(d: &Diagnosis) -> Option<Panels> {
         title: "Sensor evidence: a sensitivity error is a ratio flat in frequency, off 1".into(),
         cols: 1,
         panels: vec![p],
+        legend,
+    })
+}
+
+/// The discretisation stage's evidence: one panel per test with contact, the RMS feature
+/// score of each step (the quantity the judge sums) of the twin as given and of each
+/// refinement tried; and the contact fraction of each step, model against measured (a twin
+/// that keeps its impacts closed too long lies above the diagonal).
+fn evidence_discretisation(d: &Diagnosis) -> Option<Panels> {
+    let e = d.discretisation.as_ref()?;
+    let twins: Vec<(&DiscretisedTwin, RGBColor)> = std::iter::once((&e.given, GREY))
+        .chain(e.options.iter().enumerate().map(|(k, t)| (t, palette(k))))
+        .collect();
+    let mut tests: Vec<&str> = Vec::new();
+    for s in twins.iter().flat_map(|(t, _)| &t.steps) {
+        if !tests.contains(&s.test.as_str()) {
+            tests.push(&s.test);
+        }
+    }
+    let mut panels = Vec::new();
+    for test in &tests {
+        let runs: Vec<(Vec<(f64, f64)>, RGBColor)> = (twins.iter())
+            .map(|(t, color)| {
+                let mut pts: Vec<(f64, f64)> = (t.steps.iter())
+                    .filter(|s| s.test == *test && s.omega_ratio.is_finite())
+                    .filter_map(|s| Some((s.omega_ratio, s.score.filter(|v| v.is_finite())?)))
+                    .collect();
+                pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+                (pts, *color)
+            })
+            .collect();
+        let xs: Vec<f64> = runs.iter().flat_map(|r| r.0.iter().map(|p| p.0)).collect();
+        let ys: Vec<f64> = (runs.iter().flat_map(|r| r.0.iter().map(|p| p.1)))
+            .chain([0.0])
+            .collect();
+        let role = match () {
+            _ if e.train_tests.iter().any(|t| t == test) => " (train)",
+            _ if e.validation_tests.iter().any(|t| t == test) => " (validation)",
+            _ => "",
+        };
+        let desc = (OMEGA_DESC, "RMS feature score of the step");
+        let Some(mut p) = Panel::over(format!("{test}{role}"), desc, &xs, &ys) else {
+            continue;
+        };
+        for (pts, color) in runs.into_iter().filter(|r| !r.0.is_empty()) {
+            p.series.push(line(pts, color, LineKind::Markers, width()));
+        }
+        panels.push(p);
+    }
+    if panels.is_empty() {
+        return None;
+    }
+    let contact: Vec<(Vec<(f64, f64)>, RGBColor)> = (twins.iter())
+        .map(|(t, color)| {
+            let pts = (t.steps.iter())
+                .filter_map(|s| Some((s.contact_measured?, s.contact_model?)))
+                .filter(|p| p.0.is_finite() && p.1.is_finite())
+                .collect();
+            (pts, *color)
+        })
+        .collect();
+    let all: Vec<f64> = (contact
+        .iter()
+        .flat_map(|c| c.0.iter().flat_map(|p| [p.0, p.1])))
+    .chain([0.0])
+    .collect();
+    let mut diagonal = false;
+    if all.len() > 1 {
+        let desc = (
+            "contact fraction, measured (-)",
+            "contact fraction, model (-)",
+        );
+        if let Some(mut p) = Panel::over("contact fraction per step".into(), desc, &all, &all) {
+            let hi = p.x.1.min(p.y.1);
+            p.series
+                .push(line(vec![(0.0, 0.0), (hi, hi)], GREY, LineKind::Solid, 1));
+            for (pts, color) in contact.into_iter().filter(|c| !c.0.is_empty()) {
+                p.series.push(Series {
+                    runs: pts.into_iter().map(|q| vec![q]).collect(),
+                    color,
+                    kind: LineKind::Markers,
+                    width: width(),
+                });
+            }
+            panels.push(p);
+            diagonal = true;
+        }
+    }
+    let described = |t: &DiscretisedTwin| {
+        let error = match (&t.error, &t.failure) {
+            (Some(err), _) => format!(
+                "train {}, validation {}",
+                sig(err.train),
+                sig(err.validation)
+            ),
+            (None, Some(f)) => format!("could not run: {f}"),
+            (None, None) => "nothing compared".into(),
+        };
+        format!(
+            "{}: {} modes up to {} x f(1FU), {} pairs, {} steps per 1FU period; {error}",
+            t.refined
+                .as_deref()
+                .map_or("twin as given".to_string(), |r| format!("{r} refined")),
+            t.modes,
+            sig(t.highest_mode_over_1fu),
+            t.contact_pairs,
+            sig(t.steps_per_1fu_period),
+        )
+    };
+    let mut legend: Vec<LegendEntry> = (twins.iter())
+        .map(|(t, color)| entry(described(t), *color, LineKind::Markers))
+        .collect();
+    if diagonal {
+        legend.push(entry("measured = model", GREY, LineKind::Solid));
+    }
+    let cols = match panels.len() {
+        n if n <= 3 => n,
+        n if n <= 4 => 2,
+        _ => 3,
+    };
+    Some(Panels {
+        title: "The twin's own discretisation: the tests with contact, as given and refined".into(),
+        cols,
+        panels,
         legend,
     })
 }

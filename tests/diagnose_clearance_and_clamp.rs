@@ -268,6 +268,23 @@ fn clearance_is_found(offset: f64, plan: &str) {
             "{d:#}"
         );
     }
+    // A smaller clearance closes the face early, as a tilt would: the tilt is fitted, and its
+    // landscape (the train error against the angle, through the face as given) drawn.
+    if offset < 0.0 {
+        let tilt = (d["effects"].as_array().unwrap().iter())
+            .find(|e| e["effect"] == "tilt")
+            .unwrap_or_else(|| panic!("no tilt tried: {d:#}"));
+        let ev = &tilt["evidence"];
+        assert!(ev["angles_tried"].as_array().unwrap().len() >= 10, "{ev}");
+        assert!(ev["train_error_without_tilt"].is_f64(), "{ev}");
+        for ext in ["png", "svg"] {
+            let f = dir
+                .path()
+                .join("clearance")
+                .join(format!("evidence-tilt.{ext}"));
+            assert!(f.is_file(), "no {}", f.display());
+        }
+    }
     // Nothing else is taken for it.
     assert_eq!(
         d["effects"]

@@ -357,6 +357,36 @@ fn full() -> Diagnosis {
             validation: 1.2,
         }),
     };
+    let angles: Vec<serde_json::Value> = [-0.02, -0.016, -0.012, 0.012, 0.016, 0.02]
+        .iter()
+        .map(|a: &f64| serde_json::json!({"angle": a, "train_error": 2.0 + 400.0 * (a + 0.016).abs()}))
+        .collect();
+    let tilt = EffectResult {
+        effect: "tilt".into(),
+        rank: 2,
+        accepted: false,
+        parameters: serde_json::json!({"angle": -0.016, "axis": [0.0, 1.0]}),
+        alternatives: vec!["clearance".into()],
+        evidence: serde_json::json!({
+            "edge_closing_m": 5.4e-5,
+            "angles_tried": angles,
+            "train_error_without_tilt": 16.9,
+            "validation_contact_score_rms": {
+                "model_before": 9.8, "with_tilt": 1.2, "with_clearance_stage": 4.1
+            },
+        }),
+        reason: "the validation error falls 21 %".into(),
+        train_tests: vec!["mid-up".into()],
+        validation_tests: vec!["high-up".into()],
+        error_before: Some(SetError {
+            train: 16.9,
+            validation: 1.92,
+        }),
+        error_after: Some(SetError {
+            train: 2.0,
+            validation: 1.52,
+        }),
+    };
     let (before, after) = (scores(1.01, 1.0), scores(0.991, 1.04));
     Diagnosis {
         verdict: Verdict::Mismatch,
@@ -365,7 +395,7 @@ fn full() -> Diagnosis {
         discretisation: Some(discretisation(&before, 2.5)),
         scores_before: before,
         scores_after: after,
-        effects: vec![effect],
+        effects: vec![effect, tilt],
         validation_tests: vec!["high-up".into()],
         sensors: Some(sensors()),
         linear: Some(linear()),
@@ -412,7 +442,7 @@ fn assert_svg(path: &Path, labels: &[&str]) {
 fn a_diagnosis_draws_every_figure_as_png_and_svg() {
     let dir = out_dir("report_diagnosis_figures");
     let written = draw_diagnosis(&full(), &dir).unwrap();
-    let figures: [(&str, &[&str]); 8] = [
+    let figures: [(&str, &[&str]); 9] = [
         (
             "mismatch-map",
             &["Mismatch map", "upper_tip", "contact", "high-up"],
@@ -427,6 +457,16 @@ fn a_diagnosis_draws_every_figure_as_png_and_svg() {
         (
             "evidence-band",
             &["mid-up", "with the spread", "fixed model", "threshold"],
+        ),
+        (
+            "evidence-tilt",
+            &[
+                "angle about y",
+                "fitted: -0.016 rad",
+                "rejected",
+                "with the clearance offset",
+                "0.054 mm early",
+            ],
         ),
         (
             "evidence-discretisation",
@@ -477,6 +517,7 @@ fn missing_data_leaves_figures_out() {
     if let Some(c) = &mut d.clearance {
         c.tests.iter_mut().for_each(|t| t.clearance_m = None);
     }
+    d.effects[1].evidence = serde_json::json!({});
     if let Some(e) = &mut d.discretisation {
         for t in std::iter::once(&mut e.given).chain(&mut e.options) {
             t.steps.iter_mut().for_each(|s| {
@@ -508,6 +549,10 @@ fn missing_data_leaves_figures_out() {
     }
     d.linear = None;
     d.clearance = None;
+    d.effects[1].evidence = serde_json::json!({
+        "angles_tried": [{"angle": f64::NAN, "train_error": 1.0}, {"angle": 0.01}],
+        "train_error_without_tilt": null,
+    });
     if let Some(e) = &mut d.discretisation {
         for t in std::iter::once(&mut e.given).chain(&mut e.options) {
             t.steps.iter_mut().for_each(|s| {
@@ -558,7 +603,7 @@ fn single_and_extreme_values_draw() {
     }
     let dir = out_dir("report_diagnosis_figures_degenerate");
     let written = draw_diagnosis(&d, &dir).unwrap();
-    assert_eq!(written.len(), 16, "{written:?}");
+    assert_eq!(written.len(), 18, "{written:?}");
     for p in written.iter().filter(|p| p.extension().unwrap() == "png") {
         assert_png(p);
     }

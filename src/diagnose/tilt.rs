@@ -17,7 +17,8 @@
 //! `clearance_fit::test_clearance_by_runs`): `sin(angle) x_edge = c_model - c_measured`, for
 //! either edge; a grid of model runs of the train tests (their steps from two before the first
 //! measured contact to two past the last, started from a state of open contact) over both
-//! signs and 0.6-1.5 times that angle, refined once, fits it.
+//! signs and 0.6-1.5 times that angle, refined once, fits it; the face as given on the same
+//! steps is the landscape's reference (`evidence-tilt`).
 //!
 //! Selection: the tilt is judged by the pipeline's rule against the model without the
 //! clearance offset (the two compete for the same evidence). Where the clearance offset was
@@ -173,6 +174,10 @@ pub(super) fn tilt_stage(
         work.accepted = after_clearance;
         return Ok(());
     };
+    // The face as given on the same steps: the reference of the angles' errors (the
+    // evidence's landscape).
+    let flat = work.scores_spans(base, &train_spans)?;
+    let train_error_flat = set_error(&flat, &train, Steps::All);
     (work.progress)(DiagnoseProgress::Note(format!(
         "tilt: {angle:.3e} rad about y by {} runs of the train tests' contact steps (error {train_error:.3}; the edge closes {closing:.2e} m early)",
         tried.len()
@@ -197,6 +202,7 @@ pub(super) fn tilt_stage(
             "with_clearance_stage": contact_rms(&s_clear),
         },
         "angles_tried": tried.iter().map(|(a, e)| json!({"angle": a, "train_error": e})).collect::<Vec<_>>(),
+        "train_error_without_tilt": train_error_flat,
     });
     let cand = Candidate::new(
         "tilt",

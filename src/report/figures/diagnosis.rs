@@ -10,6 +10,9 @@
 //!   (measured) and the fitted wear's clearance (model);
 //! - `evidence-sensors`: measured over model RMS per motion channel on the impact-free steps
 //!   (a sensitivity error is flat in frequency);
+//! - `evidence-tilt`: the tilt's fit, the train tests' error against the face's angle through
+//!   the face as given, and the validation tests' contact score with the tilt and with the
+//!   clearance offset;
 //! - `evidence-discretisation`: the score per step of the tests with contact, of the twin as
 //!   given and of each refinement of its modal basis or step tried, and their contact
 //!   fraction against the measured one (a coarse twin keeps its impacts closed too long);
@@ -80,6 +83,9 @@ pub fn draw_diagnosis(d: &Diagnosis, dir: &Path) -> Result<Vec<PathBuf>, ReportE
     }
     if let Some(f) = evidence_band(d) {
         write(dir, "evidence-band", &f, &mut written)?;
+    }
+    if let Some(f) = evidence_tilt(d) {
+        write(dir, "evidence-tilt", &f, &mut written)?;
     }
     if let Some(f) = evidence_discretisation(d) {
         write(dir, "evidence-discretisation", &f, &mut written)?;
@@ -1235,6 +1241,115 @@ fn evidence_discretisation(d: &Diagnosis) -> Option<Panels> {
     Some(Panels {
         title: "The twin's own discretisation: the tests with contact, as given and refined".into(),
         cols,
+        panels,
+        legend,
+    })
+}
+
+/// The tilt's fit (the tilt stage's evidence): the train tests' error over their contact
+/// steps against the face's angle about y, through the face as given (angle 0), the fitted
+/// angle marked; and the contact channel's RMS score on the validation tests for the model
+/// without the clearance offset, with the tilt and with the clearance offset (what separates
+/// a tilt from a smaller clearance).
+fn evidence_tilt(d: &Diagnosis) -> Option<Panels> {
+    let e = d.effects.iter().find(|e| e.effect == "tilt")?;
+    let ev = &e.evidence;
+    let number = |v: &serde_json::Value| v.as_f64().filter(|x| x.is_finite());
+    let mut tried: Vec<(f64, f64)> = (ev["angles_tried"].as_array()?.iter())
+        .filter_map(|t| Some((number(&t["angle"])?, number(&t["train_error"])?)))
+        .collect();
+    let flat = number(&ev["train_error_without_tilt"]);
+    tried.extend(flat.map(|f| (0.0, f)));
+    tried.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let fitted =
+        number(&e.parameters["angle"]).and_then(|a| tried.iter().copied().find(|p| p.0 == a));
+    let xs: Vec<f64> = tried.iter().map(|p| p.0).collect();
+    let ys: Vec<f64> = tried.iter().map(|p| p.1).chain([0.0]).collect();
+    let desc = ("angle about y (rad)", "train error, contact steps (-)");
+    let caption = format!("train tests: {}", e.train_tests.join(", "));
+    let mut p = Panel::over(caption, desc, &xs, &ys)?;
+    if let Some(f) = flat {
+        let (x0, x1) = p.x;
+        p.series.push(line(
+            vec![(x0, f), (x1, f)],
+            GREY,
+            LineKind::Dashed,
+            width(),
+        ));
+    }
+    p.series
+        .push(line(tried, palette(0), LineKind::Markers, width()));
+    if let Some(q) = fitted {
+        p.series
+            .push(line(vec![q], palette(1), LineKind::Markers, width() + 3));
+    }
+    let mut panels = vec![p];
+    let contact = &ev["validation_contact_score_rms"];
+    let bars: Vec<(String, f64)> = [
+        ("neither", "model_before"),
+        ("with the tilt", "with_tilt"),
+        ("with the clearance offset", "with_clearance_stage"),
+    ]
+    .iter()
+    .filter_map(|(label, key)| Some((label.to_string(), number(&contact[key])?)))
+    .collect();
+    if !bars.is_empty() {
+        let xs: Vec<f64> = vec![-0.5, bars.len() as f64 - 0.5];
+        let ys: Vec<f64> = bars.iter().map(|b| b.1).chain([0.0]).collect();
+        let caption = format!("validation tests: {}", e.validation_tests.join(", "));
+        let desc = ("", "contact channel, RMS score (-)");
+        if let Some(mut q) = Panel::over(caption, desc, &xs, &ys) {
+            q.x_names = bars.iter().map(|b| b.0.clone()).collect();
+            let pts: Vec<(f64, f64)> = (bars.iter().enumerate())
+                .map(|(k, b)| (k as f64, b.1))
+                .collect();
+            q.bars.push(Bars {
+                points: pts.iter().map(|&(x, y)| (x, 0.0, y)).collect(),
+                color: palette(0),
+                caps: false,
+            });
+            q.series.push(Series {
+                runs: pts.into_iter().map(|pt| vec![pt]).collect(),
+                color: palette(0),
+                kind: LineKind::Markers,
+                width: width(),
+            });
+            panels.push(q);
+        }
+    }
+    let verdict = match (&e.error_before, &e.error_after) {
+        (Some(b), Some(a)) => format!(
+            "; validation {} -> {}, {}",
+            sig(b.validation),
+            sig(a.validation),
+            if e.accepted { "accepted" } else { "rejected" }
+        ),
+        _ => String::new(),
+    };
+    let mut legend = vec![entry(
+        "train error per angle tried (refined once around the best)",
+        palette(0),
+        LineKind::Markers,
+    )];
+    if fitted.is_some() {
+        legend.push(entry(
+            format!(
+                "fitted: {} rad{verdict}",
+                sig(number(&e.parameters["angle"]).unwrap_or(f64::NAN))
+            ),
+            palette(1),
+            LineKind::Markers,
+        ));
+    }
+    if flat.is_some() {
+        legend.push(entry("the face as given (angle 0)", GREY, LineKind::Dashed));
+    }
+    let closing = number(&ev["edge_closing_m"])
+        .map(|c| format!(": the train tests' first contact {} mm early", sig(1e3 * c)))
+        .unwrap_or_default();
+    Some(Panels {
+        title: format!("Tilt of the contact face{closing}"),
+        cols: panels.len(),
         panels,
         legend,
     })

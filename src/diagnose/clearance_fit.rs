@@ -10,6 +10,7 @@ use crate::config::{ClearanceSpec, PhysicsSpec};
 
 use super::clearance::{ClearanceEvidence, TestClearance};
 use super::judge::{alternate, grid_then_refine, set_error, Candidate, Steps, Work};
+use super::outcome::EffectResult;
 use super::rerun::Span;
 use super::{DiagnoseError, DiagnoseProgress};
 
@@ -178,6 +179,19 @@ pub(super) fn clearance_stage(
         (work.progress)(DiagnoseProgress::Note(format!(
             "clearance: the fitted offset {offset:+.2e} m is within 2 % of the plan's {plan:.3e} m"
         )));
+        work.effects.push(EffectResult {
+            effect: "clearance".into(),
+            rank: 0,
+            accepted: false,
+            parameters: json!({}),
+            alternatives: Vec::new(),
+            evidence: json!({"offset_m": offset, "plan_clearance_m": plan, "tests": fitted.iter().map(|(t, c)| json!({"test": t.test, "clearance": c})).collect::<Vec<_>>()}),
+            reason: format!("not indicated: the train tests' clearances by model runs are within 2 % of the model's (offset {offset:+.2e} m)"),
+            train_tests: work.names(&train),
+            validation_tests: work.names(&validation),
+            error_before: None,
+            error_after: None,
+        });
         return Ok(());
     }
     let spread = if offs.len() > 1 {

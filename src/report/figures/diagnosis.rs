@@ -1247,8 +1247,8 @@ fn evidence_discretisation(d: &Diagnosis) -> Option<Panels> {
 }
 
 /// The tilt's fit (the tilt stage's evidence): the train tests' error over their contact
-/// steps against the face's angle about y, through the face as given (angle 0), the fitted
-/// angle marked; and the contact channel's RMS score on the validation tests for the model
+/// steps against the face's angle about y, through the face as given (angle 0), the valley's
+/// floor and the fitted angle (its mean) marked; and the contact channel's RMS score on the validation tests for the model
 /// without the clearance offset, with the tilt and with the clearance offset (what separates
 /// a tilt from a smaller clearance).
 fn evidence_tilt(d: &Diagnosis) -> Option<Panels> {
@@ -1261,8 +1261,11 @@ fn evidence_tilt(d: &Diagnosis) -> Option<Panels> {
     let flat = number(&ev["train_error_without_tilt"]);
     tried.extend(flat.map(|f| (0.0, f)));
     tried.sort_by(|a, b| a.0.total_cmp(&b.0));
-    let fitted =
-        number(&e.parameters["angle"]).and_then(|a| tried.iter().copied().find(|p| p.0 == a));
+    let fitted = number(&e.parameters["angle"]);
+    let floor: Vec<(f64, f64)> = (ev["floor_angles"].as_array().into_iter().flatten())
+        .filter_map(number)
+        .filter_map(|a| tried.iter().copied().find(|p| p.0 == a))
+        .collect();
     let xs: Vec<f64> = tried.iter().map(|p| p.0).collect();
     let ys: Vec<f64> = tried.iter().map(|p| p.1).chain([0.0]).collect();
     let desc = ("angle about y (rad)", "train error, contact steps (-)");
@@ -1279,9 +1282,22 @@ fn evidence_tilt(d: &Diagnosis) -> Option<Panels> {
     }
     p.series
         .push(line(tried, palette(0), LineKind::Markers, width()));
-    if let Some(q) = fitted {
-        p.series
-            .push(line(vec![q], palette(1), LineKind::Markers, width() + 3));
+    if !floor.is_empty() {
+        p.series.push(Series {
+            runs: floor.iter().map(|&q| vec![q]).collect(),
+            color: palette(1),
+            kind: LineKind::Markers,
+            width: width() + 3,
+        });
+    }
+    if let Some(a) = fitted {
+        let (y0, y1) = p.y;
+        p.series.push(line(
+            vec![(a, y0), (a, y1)],
+            palette(1),
+            LineKind::Dashed,
+            width(),
+        ));
     }
     let mut panels = vec![p];
     let contact = &ev["validation_contact_score_rms"];
@@ -1322,7 +1338,11 @@ fn evidence_tilt(d: &Diagnosis) -> Option<Panels> {
             "; validation {} -> {}, {}",
             sig(b.validation),
             sig(a.validation),
-            if e.accepted { "accepted" } else { "rejected" }
+            match () {
+                _ if e.accepted => "accepted",
+                _ if e.reason.starts_with("an equal alternative") => "an equal alternative",
+                _ => "rejected",
+            }
         ),
         _ => String::new(),
     };
@@ -1331,14 +1351,18 @@ fn evidence_tilt(d: &Diagnosis) -> Option<Panels> {
         palette(0),
         LineKind::Markers,
     )];
-    if fitted.is_some() {
+    if !floor.is_empty() {
         legend.push(entry(
-            format!(
-                "fitted: {} rad{verdict}",
-                sig(number(&e.parameters["angle"]).unwrap_or(f64::NAN))
-            ),
+            "the valley's floor (within the band's chaos of the smallest error)",
             palette(1),
             LineKind::Markers,
+        ));
+    }
+    if let Some(a) = fitted {
+        legend.push(entry(
+            format!("fitted (the floor's mean): {} rad{verdict}", sig(a)),
+            palette(1),
+            LineKind::Dashed,
         ));
     }
     if flat.is_some() {

@@ -67,13 +67,12 @@ fn edges(rom: &Rom) -> (f64, f64) {
 /// The train errors within this share of the smallest one are the valley's floor: the band's
 /// chaos moves a run's error by about that much (the floor of a hidden 0.025 rad tilt on the
 /// four-probe plan: 1.52, 1.52, 1.49 at 0.0265, 0.0286, 0.0318 rad; of a hidden 0.02 rad on
-/// `identify.toml`: 3.61-3.97 from 0.0166 to 0.0277 rad).
+/// `identify.toml`: 3.61-3.97 from -0.0166 to -0.0277 rad).
 const FLOOR_SHARE: f64 = 0.1;
 
 /// The angle the tried `(angle, train error)` points fit, the smallest error and the floor's
-/// angles: the mean
-/// angle of the valley's floor around the best point, i.e. the contiguous points of the best
-/// one's sign whose errors are within [`FLOOR_SHARE`] of the smallest. Where the floor is
+/// angles: the mean angle of the valley's floor around the best point, i.e. the contiguous
+/// points of the best one's sign whose errors are within [`FLOOR_SHARE`] of the smallest. Where the floor is
 /// flat within the chaos the best point is a draw from it, at either end as often as in the
 /// middle (BENCHMARKS.md, "The tilt's angle from the valley's floor"); None without points.
 fn valley_floor(tried: &[(f64, f64)]) -> Option<(f64, f64, Vec<f64>)> {

@@ -180,17 +180,13 @@ pub(super) fn clearance_stage(
             "clearance: the fitted offset {offset:+.2e} m is within 2 % of the plan's {plan:.3e} m"
         )));
         work.effects.push(EffectResult {
-            effect: "clearance".into(),
-            rank: 0,
-            accepted: false,
-            parameters: json!({}),
-            alternatives: Vec::new(),
-            evidence: json!({"offset_m": offset, "plan_clearance_m": plan, "tests": fitted.iter().map(|(t, c)| json!({"test": t.test, "clearance": c})).collect::<Vec<_>>()}),
-            reason: format!("not indicated: the train tests' clearances by model runs are within 2 % of the model's (offset {offset:+.2e} m)"),
             train_tests: work.names(&train),
             validation_tests: work.names(&validation),
-            error_before: None,
-            error_after: None,
+            ..EffectResult::unfitted(
+                "clearance",
+                json!({"offset_m": offset, "plan_clearance_m": plan, "tests": fitted.iter().map(|(t, c)| json!({"test": t.test, "clearance": c})).collect::<Vec<_>>()}),
+                format!("not indicated: the train tests' clearances by model runs are within 2 % of the model's (offset {offset:+.2e} m)"),
+            )
         });
         return Ok(());
     }

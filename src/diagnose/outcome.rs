@@ -95,6 +95,11 @@ impl StepScores {
         self.features.iter().map(|f| f.score).reduce(f64::max)
     }
 
+    /// The comparison of feature `feature` of channel `channel` (None: not compared).
+    pub fn feature(&self, channel: &str, feature: &str) -> Option<&FeatureComparison> {
+        (self.features.iter()).find(|f| f.channel == channel && f.feature == feature)
+    }
+
     /// The RMS of the step's feature scores, its share of the judge's error (None: nothing
     /// compared).
     pub fn rms_score(&self) -> Option<f64> {
@@ -209,6 +214,26 @@ pub struct EffectResult {
     pub error_before: Option<SetError>,
     /// Error of the model with the effect.
     pub error_after: Option<SetError>,
+}
+
+impl EffectResult {
+    /// Effect `effect` rejected before any fit (not indicated by the evidence, or no trend),
+    /// with its `evidence` and the `reason`; no tests, alternatives or errors.
+    pub fn unfitted(effect: &str, evidence: serde_json::Value, reason: String) -> EffectResult {
+        EffectResult {
+            effect: effect.into(),
+            rank: 0,
+            accepted: false,
+            parameters: serde_json::json!({}),
+            alternatives: Vec::new(),
+            evidence,
+            reason,
+            train_tests: Vec::new(),
+            validation_tests: Vec::new(),
+            error_before: None,
+            error_after: None,
+        }
+    }
 }
 
 /// The twin's discretisation of the fixed model where the `discretisation` effect was

@@ -23,7 +23,7 @@ use crate::config::{ReductionSpec, RigConfig};
 use crate::rom::info::RomInfo;
 use crate::rom::Rom;
 use crate::signal::features::CONTACT_CHANNEL;
-use crate::twin::{FeatureComparison, TwinModel, TwinSpec};
+use crate::twin::{TwinModel, TwinSpec};
 
 use super::judge::{alternate, set_error, Candidate, Steps, Work};
 use super::outcome::{
@@ -78,21 +78,20 @@ fn discretised(
     run: Result<&[StepScores], &str>,
     error: Option<SetError>,
 ) -> DiscretisedTwin {
-    fn contact(s: &StepScores) -> Option<&FeatureComparison> {
-        (s.features.iter())
-            .find(|f| f.channel == CONTACT_CHANNEL && f.feature == "contact_fraction")
-    }
     let steps = run.map_or_else(
         |_| Vec::new(),
         |scores| {
             (scores.iter())
-                .map(|s| DiscretisedStep {
-                    test: s.test.clone(),
-                    step: s.step,
-                    omega_ratio: s.omega_ratio,
-                    score: s.rms_score(),
-                    contact_measured: contact(s).map(|f| f.measured),
-                    contact_model: contact(s).map(|f| f.model),
+                .map(|s| {
+                    let contact = s.feature(CONTACT_CHANNEL, "contact_fraction");
+                    DiscretisedStep {
+                        test: s.test.clone(),
+                        step: s.step,
+                        omega_ratio: s.omega_ratio,
+                        score: s.rms_score(),
+                        contact_measured: contact.map(|f| f.measured),
+                        contact_model: contact.map(|f| f.model),
+                    }
                 })
                 .collect()
         },
@@ -251,7 +250,8 @@ pub(super) fn resolution_stage<'a>(
     let given_twin = discretised(None, given, fs, Ok(&before), error_of(&before));
     // Per option: its runner and how it did (a refined twin the reference ROM's stability
     // limit or the session does not allow could not run: that option is out).
-    let mut tried: Vec<(ModelRunner<'a>, DiscretisedTwin)> = Vec::new();
+    let mut runners: Vec<ModelRunner<'a>> = Vec::new();
+    let mut twins: Vec<DiscretisedTwin> = Vec::new();
     let names = work.names(&tests).join(", ");
     for o in &options {
         (work.progress)(DiagnoseProgress::Evaluation(format!(
@@ -271,16 +271,17 @@ pub(super) fn resolution_stage<'a>(
             Ok(s) => discretised(Some(o.what), &o.resolution, fs, Ok(&s), error_of(&s)),
             Err(e) => discretised(Some(o.what), &o.resolution, fs, Err(&e.to_string()), None),
         };
-        tried.push((runner, t));
+        runners.push(runner);
+        twins.push(t);
     }
     let evidence = DiscretisationEvidence {
         train_tests: work.names(&train),
         validation_tests: work.names(&validation),
         given: given_twin,
-        options: tried.iter().map(|t| t.1.clone()).collect(),
+        options: twins,
     };
-    let best = (tried.iter().enumerate())
-        .filter_map(|(i, (_, t))| t.error.map(|e| (i, e.train)))
+    let best = (evidence.options.iter().enumerate())
+        .filter_map(|(i, t)| t.error.map(|e| (i, e.train)))
         .min_by(|a, b| a.1.total_cmp(&b.1))
         .map(|(i, _)| i);
     let evidence_json = json!({
@@ -300,7 +301,7 @@ pub(super) fn resolution_stage<'a>(
         let failed: Vec<String> = (evidence.options.iter())
             .filter_map(|t| t.failure.clone())
             .collect();
-        work.absorb_cost(tried.into_iter().map(|t| t.0));
+        work.absorb_cost(runners);
         work.undecided(
             "discretisation",
             if failed.is_empty() {
@@ -339,8 +340,8 @@ pub(super) fn resolution_stage<'a>(
         evidence.given.error,
         evidence.options[best].error,
     );
-    let chosen = tried.swap_remove(best).0;
-    work.absorb_cost(tried.into_iter().map(|t| t.0));
+    let chosen = runners.swap_remove(best);
+    work.absorb_cost(runners);
     if !ok {
         work.absorb_cost(std::iter::once(chosen));
         return Ok(Staged {

@@ -37,6 +37,7 @@ use crate::rom::Rom;
 use super::clearance::{ClearanceEvidence, TestClearance};
 use super::clearance_fit::test_clearance_by_runs;
 use super::judge::{alternate, grid_then_refine, set_error, set_error_of, Candidate, Steps, Work};
+use super::outcome::EffectResult;
 use super::rerun::Span;
 use super::{DiagnoseError, DiagnoseProgress};
 
@@ -147,18 +148,14 @@ pub(super) fn tilt_stage(
         (work.progress)(DiagnoseProgress::Note(format!(
             "tilt: the train tests' first contact comes {closing:+.2e} m from the model's clearance: no edge closes early, a tilt is not indicated"
         )));
-        work.effects.push(super::outcome::EffectResult {
-            effect: "tilt".into(),
-            rank: 0,
-            accepted: false,
-            parameters: json!({}),
-            alternatives: Vec::new(),
-            evidence: json!({"edge_closing_m": closing, "plan_clearance_m": plan}),
-            reason: format!("not indicated: a tilted face closes one edge early, but the train tests' first contact is not earlier than the model's clearance by 2 % of it ({closing:+.2e} m)"),
+        work.effects.push(EffectResult {
             train_tests: work.names(&train),
             validation_tests: work.names(&validation),
-            error_before: None,
-            error_after: None,
+            ..EffectResult::unfitted(
+                "tilt",
+                json!({"edge_closing_m": closing, "plan_clearance_m": plan}),
+                format!("not indicated: a tilted face closes one edge early, but the train tests' first contact is not earlier than the model's clearance by 2 % of it ({closing:+.2e} m)"),
+            )
         });
         return Ok(());
     }

@@ -326,17 +326,12 @@ pub(super) fn wear_stage(
     )));
     if !trend {
         work.effects.push(EffectResult {
-            effect: "wear".into(),
-            rank: 0,
-            accepted: false,
-            parameters: json!({}),
             alternatives: vec!["clearance: a constant offset (no trend with the contact impulse)".into()],
-            evidence,
-            reason: format!("no trend of the clearance with the contact impulse: slope {k_all:.2e} m/(N s), standard error {se_all:.1e} m/(N s), growth {growth:.2e} m over the session (3 standard errors and 2 % of the plan's clearance are needed)"),
-            train_tests: Vec::new(),
-            validation_tests: Vec::new(),
-            error_before: None,
-            error_after: None,
+            ..EffectResult::unfitted(
+                "wear",
+                evidence,
+                format!("no trend of the clearance with the contact impulse: slope {k_all:.2e} m/(N s), standard error {se_all:.1e} m/(N s), growth {growth:.2e} m over the session (3 standard errors and 2 % of the plan's clearance are needed)"),
+            )
         });
         return Ok(false);
     }

@@ -111,9 +111,15 @@ fn write<F: Figure>(
     Ok(())
 }
 
-/// The comparison of feature `feature` of channel `channel` in step `s`.
-fn feature<'a>(s: &'a StepScores, channel: &str, feature: &str) -> Option<&'a FeatureComparison> {
-    (s.features.iter()).find(|f| f.channel == channel && f.feature == feature)
+/// The distinct names of `names`, in the order first seen.
+fn first_seen<'a>(names: impl Iterator<Item = &'a str>) -> Vec<&'a str> {
+    let mut out: Vec<&str> = Vec::new();
+    for n in names {
+        if !out.contains(&n) {
+            out.push(n);
+        }
+    }
+    out
 }
 
 /// Test names by test index, in session order, from `(index, name)` pairs.
@@ -940,12 +946,7 @@ fn evidence_clearance(d: &Diagnosis) -> Option<Panels> {
 fn evidence_band(d: &Diagnosis) -> Option<Panels> {
     let b = d.band_before.as_ref()?;
     let after = d.band_after.as_ref();
-    let mut tests: Vec<&str> = Vec::new();
-    for s in &b.steps {
-        if !tests.contains(&s.test.as_str()) {
-            tests.push(&s.test);
-        }
-    }
+    let tests = first_seen(b.steps.iter().map(|s| s.test.as_str()));
     fn steps_of<'b>(band: &'b BandSpread, t: &str) -> Vec<&'b BandStep> {
         (band.steps.iter())
             .filter(|s| s.test == t && s.omega_ratio.is_finite())
@@ -1061,7 +1062,7 @@ fn evidence_sensors(d: &Diagnosis) -> Option<Panels> {
         for (ti, _) in &tests {
             let mut pts: Vec<(usize, f64, f64)> = (free.iter().filter(|s| s.test_index == *ti))
                 .filter_map(|s| {
-                    let f = feature(s, channel, "rms")?;
+                    let f = s.feature(channel, "rms")?;
                     let r = f.measured / f.model;
                     r.is_finite().then_some((s.step, s.omega_ratio, r))
                 })
@@ -1131,12 +1132,12 @@ fn evidence_discretisation(d: &Diagnosis) -> Option<Panels> {
     let twins: Vec<(&DiscretisedTwin, RGBColor)> = std::iter::once((&e.given, GREY))
         .chain(e.options.iter().enumerate().map(|(k, t)| (t, palette(k))))
         .collect();
-    let mut tests: Vec<&str> = Vec::new();
-    for s in twins.iter().flat_map(|(t, _)| &t.steps) {
-        if !tests.contains(&s.test.as_str()) {
-            tests.push(&s.test);
-        }
-    }
+    let tests = first_seen(
+        twins
+            .iter()
+            .flat_map(|(t, _)| &t.steps)
+            .map(|s| s.test.as_str()),
+    );
     let mut panels = Vec::new();
     for test in &tests {
         let runs: Vec<(Vec<(f64, f64)>, RGBColor)> = (twins.iter())
@@ -1409,7 +1410,7 @@ fn before_after(d: &Diagnosis, with: &str) -> Option<Panels> {
             steps.sort_by(|a, b| a.omega_ratio.total_cmp(&b.omega_ratio));
             let x: Vec<f64> = steps.iter().map(|s| s.omega_ratio).collect();
             let value = |s: &StepScores, f: &str, m: fn(&FeatureComparison) -> f64| {
-                feature(s, channel, f).map_or(f64::NAN, m)
+                s.feature(channel, f).map_or(f64::NAN, m)
             };
             let measured: Vec<f64> = steps
                 .iter()

@@ -127,6 +127,9 @@ pub struct TestClearance {
     pub onset_clearance_m: Option<f64>,
     /// Contact onsets behind [`Self::onset_clearance_m`].
     pub onsets: usize,
+    /// Standard error of [`Self::onset_clearance_m`], m: the onsets' sample standard deviation
+    /// over the square root of their number (None with fewer than two onsets).
+    pub onset_standard_error_m: Option<f64>,
     /// Normal contact impulse the model accumulated before the test, N s: not measured,
     /// filled in by a model run (the abscissa of the wear trend). None here.
     pub accumulated_contact_impulse_ns: Option<f64>,
@@ -203,6 +206,11 @@ pub fn clearance_per_test_of(
             .collect();
         let onset_clearance =
             (!at_onsets.is_empty()).then(|| at_onsets.iter().sum::<f64>() / at_onsets.len() as f64);
+        let onset_standard_error = onset_clearance.filter(|_| at_onsets.len() > 1).map(|m| {
+            let n = at_onsets.len() as f64;
+            let var = at_onsets.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0);
+            (var / n).sqrt()
+        });
         let note = match (lo, hi) {
             (Some(_), Some(_)) => String::new(),
             (Some(_), None) => "no contact in the test: the clearance is above the lower bound".into(),
@@ -225,6 +233,7 @@ pub fn clearance_per_test_of(
             impact_free_windows: before.len(),
             onset_clearance_m: onset_clearance,
             onsets: at_onsets.len(),
+            onset_standard_error_m: onset_standard_error,
             accumulated_contact_impulse_ns: None,
             note,
         });
@@ -332,6 +341,7 @@ mod tests {
             impact_free_windows: 3,
             onset_clearance_m: None,
             onsets: 0,
+            onset_standard_error_m: None,
             accumulated_contact_impulse_ns: None,
             note: String::new(),
         }

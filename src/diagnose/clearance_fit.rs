@@ -15,12 +15,41 @@ use super::rerun::Span;
 use super::{DiagnoseError, DiagnoseProgress};
 
 /// A test's clearance refined by model runs.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub(super) struct RunClearance {
     /// The clearance whose model run matched the test best, m.
     pub clearance_m: f64,
     /// Its error (RMS score over every step and channel of the test), -.
     pub error: f64,
+    /// Every clearance run and its error, (m, -), by clearance.
+    pub tried: Vec<(f64, f64)>,
+    /// The runs' own spread, m ([`valley_spread`]).
+    pub spread_m: f64,
+}
+
+/// The spread of a clearance found by model runs, m: half the largest distance from the best
+/// run (`best`) of the runs whose error lies within `null` (the contact null spread) of its
+/// error, the clearances the runs cannot tell from the best; at least half the distance to
+/// the nearest other run (the grid's resolution). `tried`: (clearance, error) of every run.
+///
+/// NOTE: a clean valley gives a few per cent of the clearance (7-45 um on `identify.toml`
+/// with clamp friction and wear hidden); the false minimum of its low-level up test with wear
+/// alone (two valleys over a 0.47-1.03 mm bracket, the deeper one 180 um high) gives 105 um
+/// (BENCHMARKS.md, "Each clearance estimate by its own spread").
+pub(super) fn valley_spread(tried: &[(f64, f64)], best: (f64, f64), null: f64) -> f64 {
+    let others = tried.iter().filter(|t| t.0 != best.0);
+    let resolution = others
+        .clone()
+        .map(|t| (t.0 - best.0).abs())
+        .fold(f64::INFINITY, f64::min);
+    let valley = others
+        .filter(|t| t.1 <= best.1 + null)
+        .map(|t| (t.0 - best.0).abs())
+        .fold(0.0, f64::max);
+    match resolution.is_finite() {
+        true => 0.5 * valley.max(resolution),
+        false => f64::NAN,
+    }
 }
 
 /// How many times finer than the twin's own step the runs that fit a test's clearance are.
@@ -60,18 +89,27 @@ pub(super) fn test_clearance_by_runs(
     work.runner.set_refinement(own * FIT_REFINEMENT);
     let tried = fit_in_bracket(work, t, (lo, hi), from, through, &with_clearance);
     work.runner.set_refinement(own);
-    let tried = tried?;
+    let mut tried = tried?;
+    tried.sort_by(|a, b| a.0.total_cmp(&b.0));
     let Some(&(best, error)) = tried.iter().min_by(|a, b| a.1.total_cmp(&b.1)) else {
         return Ok(None);
     };
     (work.progress)(DiagnoseProgress::Note(format!(
-        "clearance of {}: {best:.4e} m by model runs (bracket {lo:.4e}-{hi:.4e} m, error {error:.3}, {} runs at a {FIT_REFINEMENT}x finer twin step)",
+        "clearance of {}: {best:.4e} m by model runs (bracket {lo:.4e}-{hi:.4e} m, error {error:.3}, {} runs at a {FIT_REFINEMENT}x finer twin step; tried {})",
         t.test,
-        tried.len()
+        tried.len(),
+        tried
+            .iter()
+            .map(|(c, e)| format!("{:.0}um:{e:.2}", c * 1e6))
+            .collect::<Vec<_>>()
+            .join(" ")
     )));
+    let spread_m = valley_spread(&tried, (best, error), work.opts.contact_null_spread);
     Ok(Some(RunClearance {
         clearance_m: best,
         error,
+        tried,
+        spread_m,
     }))
 }
 
@@ -231,4 +269,38 @@ pub(super) fn clearance_stage(
     .judged_where_fitted(spans, FIT_REFINEMENT, what);
     work.judge(cand)?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::valley_spread;
+
+    #[test]
+    fn the_valley_spread_is_what_the_runs_cannot_tell_from_the_best() {
+        // identify.toml's low-level up test with clamp friction, um and error: a clean valley.
+        let clean = [
+            (599.0, 2.18),
+            (642.0, 1.73),
+            (674.0, 1.21),
+            (695.0, 0.82),
+            (706.0, 1.22),
+            (770.0, 1.48),
+            (813.0, 2.11),
+        ];
+        assert_eq!(valley_spread(&clean, (695.0, 0.82), 1.0), 37.5);
+        // Two valleys, the deeper one false: the other is within the null spread.
+        let two = [
+            (684.0, 2.19),
+            (754.0, 1.86),
+            (858.0, 6.59),
+            (893.0, 1.61),
+            (963.0, 2.30),
+        ];
+        assert_eq!(valley_spread(&two, (893.0, 1.61), 1.0), 104.5);
+        // Nothing within the null spread: the grid's resolution.
+        let sharp = [(700.0, 3.0), (720.0, 0.5), (760.0, 4.0)];
+        assert_eq!(valley_spread(&sharp, (720.0, 0.5), 1.0), 10.0);
+        // A single run: no spread.
+        assert!(valley_spread(&[(720.0, 0.5)], (720.0, 0.5), 1.0).is_nan());
+    }
 }

@@ -7,8 +7,8 @@
 //! 1. The clearance of every test that brackets it (impact-free steps, then contact;
 //!    [`super::clearance`], reference section 4, Table 2) is refined by model runs of that
 //!    test alone over its bracket (`clearance_fit::test_clearance_by_runs`, shared with the
-//!    clearance and tilt stages), and averaged with the one read at the test's contact
-//!    onsets ([`measured_clearance`]).
+//!    clearance and tilt stages), and combined with the one read at the test's contact
+//!    onsets, each weighted by its own spread ([`measured_clearance`]).
 //! 2. The accumulated impulse `P` at the start of each test comes from one run of the model as
 //!    accepted so far from the session's start to the last bracketed test's first step, with
 //!    the wear counter on and a zero coefficient
@@ -117,34 +117,35 @@ fn record_impulses(ce: &mut ClearanceEvidence, impulse: &[Option<f64>]) {
     }
 }
 
-/// A probe's clearance from its two estimates, m: the mean of the one refined by model runs
-/// within the bracket (`by_runs`) and the one at the contact onsets (`at_onsets`); the
-/// onsets' alone where the two differ by more than [`ESTIMATES_AGREE`] of it (the runs' false
-/// minimum, below); the runs' alone without onsets.
+/// A probe's clearance from its two estimates, m: the one refined by model runs within the
+/// bracket (`by_runs`, with its spread, `clearance_fit::valley_spread`) and the one at the
+/// contact onsets (`at_onsets`, with its standard error), each weighted by the inverse of its
+/// own variance; the runs' alone without onsets or without the onsets' standard error (a
+/// single onset reads tens of per cent off).
 ///
 /// NOTE: each scatters by 2-5 % (15-50 um) on the wear proofs' probes, from different
 /// information (BENCHMARKS.md, "Wear on six probes, and the clearance at the contact
 /// onsets"): the runs from how the model's response past the first contact matches the
-/// test's, whose error over the bracket has false minima (chaotic features; a finer grid
-/// over a narrower range found other ones, 50 um off), the onsets from the tips' reading
-/// where the probes met (-5 % to +3 %, no outlier seen). Their errors were not correlated there,
-/// so the mean lowers the variance; a growth of 80-130 um over a session, the weaker wear the
-/// proofs hide, needs it. The two differed by up to 9.9 % of the onsets' value on the
-/// six-probe sessions; on `identify.toml`'s low-level up test (0.005 omega_2 steps, a bracket
-/// of 0.47-1.03 mm) the runs read 0.893 mm where the onsets read 0.723 and the hidden wear
-/// had grown the clearance to about 0.713 (BENCHMARKS.md, "Wear on `identify.toml`").
-fn measured_clearance(by_runs: f64, at_onsets: Option<f64>) -> f64 {
-    match at_onsets.filter(|c| c.is_finite() && *c > 0.0) {
-        Some(o) if (by_runs - o).abs() > ESTIMATES_AGREE * o => o,
-        Some(o) => 0.5 * (by_runs + o),
-        None => by_runs,
+/// test's, whose error over the bracket has false minima (chaotic features), the onsets from
+/// the tips' reading where the probes met, with nothing of the model in it. Their errors were
+/// not correlated there, so combining them lowers the variance; a growth of 80-130 um over a
+/// session, the weaker wear the proofs hide, needs it. Each has had outliers that its own
+/// spread shows (BENCHMARKS.md, "Each clearance estimate by its own spread"): on
+/// `identify.toml`'s low-level up test with wear alone the runs read 0.893 mm in a false
+/// valley (spread 105 um) where the onsets read 0.723 (+-30 um) and the hidden wear had grown
+/// the clearance to about 0.713; with friction in the lower clamp the onsets read 8-15 % high
+/// (0.785 mm +-92 um on the low-level down test, nothing grown from the plan's 0.699) where the
+/// model runs, whose model carries the fitted clamp, read 0.680 (+-45 um).
+fn measured_clearance(by_runs: (f64, f64), at_onsets: Option<(f64, Option<f64>)>) -> f64 {
+    let (r, sr) = by_runs;
+    match at_onsets {
+        Some((o, Some(so))) if o.is_finite() && o > 0.0 && so > 0.0 && sr > 0.0 => {
+            let (wr, wo) = (1.0 / (sr * sr), 1.0 / (so * so));
+            (wr * r + wo * o) / (wr + wo)
+        }
+        _ => r,
     }
 }
-
-/// How far apart (share of the onsets' value) the two clearance estimates of a test may be
-/// and still be averaged ([`measured_clearance`]): twice the largest scatter of the onsets'
-/// estimate seen (5 %).
-const ESTIMATES_AGREE: f64 = 0.1;
 
 /// The train and validation tests of the wear candidate (test indices, session order).
 ///
@@ -210,6 +211,9 @@ pub struct WearPoint {
     /// The clearance refined by model runs within the bracket, m.
     #[serde(default)]
     pub run_clearance_m: f64,
+    /// The runs' spread (`clearance_fit::valley_spread`), m.
+    #[serde(default)]
+    pub run_spread_m: f64,
     /// The plan's clearance, m.
     pub plan_clearance_m: f64,
     /// The bracket of the first contact, m.
@@ -217,6 +221,12 @@ pub struct WearPoint {
     /// The clearance at the test's contact onsets ([`super::clearance`]), m.
     #[serde(default)]
     pub onset_clearance_m: Option<f64>,
+    /// The onsets' standard error ([`TestClearance::onset_standard_error_m`]), m.
+    #[serde(default)]
+    pub onset_standard_error_m: Option<f64>,
+    /// Every clearance the model runs tried and its error, (m, -), by clearance.
+    #[serde(default)]
+    pub run_errors: Vec<(f64, f64)>,
     /// Whether the point was used to fit (else it validates).
     pub train: bool,
 }
@@ -286,15 +296,37 @@ pub(super) fn wear_stage(
                 test: t.test.clone(),
                 test_index: t.test_index,
                 contact_impulse_ns: p,
-                clearance_m: measured_clearance(r.clearance_m, t.onset_clearance_m),
+                clearance_m: measured_clearance(
+                    (r.clearance_m, r.spread_m),
+                    t.onset_clearance_m.map(|o| (o, t.onset_standard_error_m)),
+                ),
                 run_clearance_m: r.clearance_m,
+                run_spread_m: r.spread_m,
                 plan_clearance_m: t.plan_clearance_m,
                 bracket_m: [lo.min(hi), lo.max(hi)],
                 onset_clearance_m: t.onset_clearance_m,
+                onset_standard_error_m: t.onset_standard_error_m,
+                run_errors: r.tried.clone(),
                 train: false,
             });
         }
     }
+    (work.progress)(DiagnoseProgress::Note(format!(
+        "wear: clearance per test (by model runs +- their valley's spread, at the contact onsets +- standard error, combined): {}",
+        points
+            .iter()
+            .map(|p| format!(
+                "{} {:.0} +- {:.0} / {}{} -> {:.0} um",
+                p.test,
+                p.run_clearance_m * 1e6,
+                p.run_spread_m * 1e6,
+                p.onset_clearance_m.map_or("-".into(), |o| format!("{:.0}", o * 1e6)),
+                p.onset_standard_error_m.map_or(String::new(), |e| format!(" +- {:.0}", e * 1e6)),
+                p.clearance_m * 1e6,
+            ))
+            .collect::<Vec<_>>()
+            .join(", ")
+    )));
     let xy = |p: &WearPoint| (p.contact_impulse_ns, p.clearance_m - p.plan_clearance_m);
     let all: Vec<(f64, f64)> = points.iter().map(xy).collect();
     let plan = bracketed[0].plan_clearance_m;
@@ -571,12 +603,23 @@ mod tests {
     }
 
     #[test]
-    fn estimates_far_apart_keep_the_onsets() {
-        // Units do not matter here: values that halve exactly.
-        assert_eq!(measured_clearance(8.0, Some(7.5)), 7.75);
-        assert_eq!(measured_clearance(8.0, Some(6.0)), 6.0);
-        assert_eq!(measured_clearance(8.0, None), 8.0);
-        assert_eq!(measured_clearance(8.0, Some(f64::NAN)), 8.0);
+    fn each_estimate_weighs_by_its_own_spread() {
+        // Equal spreads: the mean; one twice the other's: weights 4:1.
+        assert_eq!(measured_clearance((8.0, 1.0), Some((6.0, Some(1.0)))), 7.0);
+        assert_eq!(measured_clearance((8.0, 0.5), Some((3.0, Some(1.0)))), 7.0);
+        // No onsets, no standard error, or a bad value: the runs'.
+        assert_eq!(measured_clearance((8.0, 1.0), None), 8.0);
+        assert_eq!(measured_clearance((8.0, 1.0), Some((6.0, None))), 8.0);
+        assert_eq!(
+            measured_clearance((8.0, 1.0), Some((f64::NAN, Some(1.0)))),
+            8.0
+        );
+        // identify.toml, um: low-level up with wear alone (the runs' false valley), low-level
+        // down with clamp friction (the onsets read high): both land within 4 % of the truth.
+        let wear = measured_clearance((893.0, 105.0), Some((723.0, Some(30.0))));
+        assert!((wear - 713.0).abs() < 0.04 * 713.0, "{wear}");
+        let clamp = measured_clearance((680.0, 45.0), Some((785.0, Some(92.0))));
+        assert!((clamp - 699.0).abs() < 0.04 * 699.0, "{clamp}");
     }
 
     #[test]

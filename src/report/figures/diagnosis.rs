@@ -893,7 +893,7 @@ fn evidence_clearance(d: &Diagnosis) -> Option<Panels> {
             p.series
                 .push(line(pts, BLACK, LineKind::Markers, width() + 2));
             legend.push(entry(
-                "measured: the model runs' value and the onsets', combined",
+                "measured: the model runs' and the onsets' value, each weighted by its spread",
                 BLACK,
                 LineKind::Markers,
             ));

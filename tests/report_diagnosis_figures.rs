@@ -190,6 +190,7 @@ fn clearance() -> ClearanceEvidence {
             impact_free_windows: 7,
             onset_clearance_m: c.map(|c| 0.97 * c),
             onsets: if c.is_some() { 40 } else { 0 },
+            onset_standard_error_m: c.map(|_| 1e-5),
             accumulated_contact_impulse_ns: None,
             note: String::new(),
         }

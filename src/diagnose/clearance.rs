@@ -42,6 +42,7 @@ use serde::Serialize;
 
 use crate::config::RigConfig;
 use crate::session::replay::Recording;
+use crate::signal::features::standard_error;
 
 use super::error::EvidenceError;
 use super::evidence::{session_evidence, SessionEvidence, WindowEvidence};
@@ -206,11 +207,7 @@ pub fn clearance_per_test_of(
             .collect();
         let onset_clearance =
             (!at_onsets.is_empty()).then(|| at_onsets.iter().sum::<f64>() / at_onsets.len() as f64);
-        let onset_standard_error = onset_clearance.filter(|_| at_onsets.len() > 1).map(|m| {
-            let n = at_onsets.len() as f64;
-            let var = at_onsets.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0);
-            (var / n).sqrt()
-        });
+        let onset_standard_error = (at_onsets.len() > 1).then(|| standard_error(&at_onsets));
         let note = match (lo, hi) {
             (Some(_), Some(_)) => String::new(),
             (Some(_), None) => "no contact in the test: the clearance is above the lower bound".into(),

@@ -94,17 +94,16 @@ pub(super) fn test_clearance_by_runs(
     let Some(&(best, error)) = tried.iter().min_by(|a, b| a.1.total_cmp(&b.1)) else {
         return Ok(None);
     };
-    (work.progress)(DiagnoseProgress::Note(format!(
-        "clearance of {}: {best:.4e} m by model runs (bracket {lo:.4e}-{hi:.4e} m, error {error:.3}, {} runs at a {FIT_REFINEMENT}x finer twin step; tried {})",
-        t.test,
-        tried.len(),
-        tried
-            .iter()
-            .map(|(c, e)| format!("{:.0}um:{e:.2}", c * 1e6))
-            .collect::<Vec<_>>()
-            .join(" ")
-    )));
     let spread_m = valley_spread(&tried, (best, error), work.opts.contact_null_spread);
+    (work.progress)(DiagnoseProgress::Note(format!(
+        "clearance of {}: {:.0} +- {:.0} um by model runs (bracket {:.0}-{:.0} um, error {error:.3}, {} runs at a {FIT_REFINEMENT}x finer twin step)",
+        t.test,
+        best * 1e6,
+        spread_m * 1e6,
+        lo * 1e6,
+        hi * 1e6,
+        tried.len(),
+    )));
     Ok(Some(RunClearance {
         clearance_m: best,
         error,

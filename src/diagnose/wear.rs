@@ -306,7 +306,7 @@ pub(super) fn wear_stage(
                 bracket_m: [lo.min(hi), lo.max(hi)],
                 onset_clearance_m: t.onset_clearance_m,
                 onset_standard_error_m: t.onset_standard_error_m,
-                run_errors: r.tried.clone(),
+                run_errors: r.tried,
                 train: false,
             });
         }

@@ -214,7 +214,7 @@ pub fn quantile(x: &[f64], q: f64) -> f64 {
 }
 
 /// Sample standard deviation (n - 1); 0 for fewer than two values.
-fn sample_std(x: &[f64]) -> f64 {
+pub(crate) fn sample_std(x: &[f64]) -> f64 {
     if x.len() < 2 {
         return 0.0;
     }
@@ -224,7 +224,7 @@ fn sample_std(x: &[f64]) -> f64 {
 }
 
 /// Standard error of the mean of `x`: `s(x) / sqrt(len)`.
-fn standard_error(x: &[f64]) -> f64 {
+pub(crate) fn standard_error(x: &[f64]) -> f64 {
     sample_std(x) / (x.len() as f64).sqrt()
 }
 

@@ -22,7 +22,7 @@
 mod cli_support;
 mod twin_support;
 
-use twin_support::{hidden_and_declared, max_scores, Case};
+use twin_support::{hidden_and_declared, max_scores, on_every_core, Case};
 
 /// One high-level step in sustained impacts (the wear-in: wear opens the gap here), then the
 /// low level up through the top of 1FU, where the beams graze the protrusion at 1.00-1.01
@@ -80,8 +80,7 @@ fn a_twin_with_the_hidden_contact_physics_tracks_the_rig_and_the_nominal_twin_do
     // The null case's spread: nothing hidden, the nominal twin, three noise seeds (the effect
     // cases below run on the default seed, 1). The bounds are the largest score and the largest
     // median over the seeds.
-    let (mut null_max, mut null_median) = (0.0f64, 0.0f64);
-    for seed in NULL_SEEDS {
+    let nulls = on_every_core(&NULL_SEEDS, |&seed| {
         let null_case = Case::new(
             dir.path(),
             &format!("null-seed{seed}"),
@@ -89,8 +88,11 @@ fn a_twin_with_the_hidden_contact_physics_tracks_the_rig_and_the_nominal_twin_do
             &format!("[daq]\nnoise_seed = {seed}\n"),
         );
         null_case.record(PLAN, false);
-        let null = max_scores(&null_case.replay(&null_case.nominal, "nominal-twin"));
-        let m = median(&null);
+        max_scores(&null_case.replay(&null_case.nominal, "nominal-twin"))
+    });
+    let (mut null_max, mut null_median) = (0.0f64, 0.0f64);
+    for (seed, null) in NULL_SEEDS.iter().zip(&nulls) {
+        let m = median(null);
         println!("null case, noise seed {seed}: {null:.2?}, median {m:.2}");
         null_max = null.iter().copied().fold(null_max, f64::max);
         null_median = null_median.max(m);
@@ -111,8 +113,8 @@ fn a_twin_with_the_hidden_contact_physics_tracks_the_rig_and_the_nominal_twin_do
             "[{t}.wear]\ncoefficient = 1.2e-4\nmax_growth = 3.0e-4\n",
         ),
     ];
-    let mut failures = Vec::new();
-    for (i, (name, physics)) in cases.iter().enumerate() {
+    let indexed: Vec<(usize, &str)> = cases.iter().map(|c| c.1).enumerate().collect();
+    let runs = on_every_core(&indexed, |&(i, physics)| {
         let case = Case::new(
             dir.path(),
             &format!("case{i}"),
@@ -120,9 +122,14 @@ fn a_twin_with_the_hidden_contact_physics_tracks_the_rig_and_the_nominal_twin_do
             &hidden_and_declared(physics),
         );
         case.record(PLAN, false);
-        let matched = max_scores(&case.replay(&case.rig, "twin-with-physics"));
-        let nominal = max_scores(&case.replay(&case.nominal, "nominal-twin"));
-        let (m, n) = (median(&matched), median(&nominal));
+        (
+            max_scores(&case.replay(&case.rig, "twin-with-physics")),
+            max_scores(&case.replay(&case.nominal, "nominal-twin")),
+        )
+    });
+    let mut failures = Vec::new();
+    for ((name, _), (matched, nominal)) in cases.iter().zip(&runs) {
+        let (m, n) = (median(matched), median(nominal));
         println!(
             "{name}: twin with the physics {matched:.2?} (median {m:.2}), nominal twin \
              {nominal:.2?} ({n:.2})"

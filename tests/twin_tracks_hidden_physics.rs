@@ -17,7 +17,7 @@ mod twin_support;
 
 use std::path::Path;
 
-use twin_support::{hidden_and_declared, max_scores, Case};
+use twin_support::{hidden_and_declared, max_scores, on_every_core, Case};
 
 /// Three steps through 1FU at a level far from contact; 50 recorded periods give the
 /// measurement two sub-windows, hence a spread.
@@ -91,12 +91,15 @@ fn a_twin_with_the_hidden_physics_tracks_the_rig_and_the_nominal_twin_does_not()
             "[{t}]\nsensor_gains = [{ channel = \"upper_mid\", gain = 0.95 }]\n",
         ),
     ];
-    for (i, (name, physics)) in cases.iter().enumerate() {
-        let (matched, nominal) = session(
+    let indexed: Vec<(usize, &str)> = cases.iter().map(|c| c.1).enumerate().collect();
+    let runs = on_every_core(&indexed, |&(i, physics)| {
+        session(
             dir.path(),
             &format!("case{i}"),
             &hidden_and_declared(physics),
-        );
+        )
+    });
+    for ((name, _), (matched, nominal)) in cases.iter().zip(&runs) {
         println!("{name}: twin with the physics {matched:.2?}, nominal twin {nominal:.2?}");
         for (k, (&m, &n)) in matched.iter().zip(&null).enumerate() {
             // As close as the null case, per step: within its score plus one spread.

@@ -6,8 +6,36 @@
 #![allow(dead_code)]
 
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Mutex;
 
 use crate::cli_support::{default_rig_with, json, rigtwin, text};
+
+/// `f` of every item, on as many threads as the machine has cores (at most one per item),
+/// in the items' order. The cases of these tests are independent sessions, each a chain of
+/// single-threaded processes: one case at a time leaves a core idle. A panic in a case is the
+/// test's panic.
+pub fn on_every_core<T: Sync, R: Send>(items: &[T], f: impl Fn(&T) -> R + Sync) -> Vec<R> {
+    let threads = std::thread::available_parallelism()
+        .map_or(1, |n| n.get())
+        .clamp(1, items.len().max(1));
+    let next = AtomicUsize::new(0);
+    let results: Vec<Mutex<Option<R>>> = items.iter().map(|_| Mutex::new(None)).collect();
+    std::thread::scope(|s| {
+        for _ in 0..threads {
+            s.spawn(|| loop {
+                let i = next.fetch_add(1, Ordering::Relaxed);
+                let Some(item) = items.get(i) else { break };
+                let r = f(item);
+                *results[i].lock().unwrap() = Some(r);
+            });
+        }
+    });
+    results
+        .into_iter()
+        .map(|r| r.into_inner().unwrap().expect("every item ran"))
+        .collect()
+}
 
 /// Every step's largest score (`tests[].steps[].twin.max_score`), in the plan's order.
 pub fn max_scores(summary: &serde_json::Value) -> Vec<f64> {

@@ -214,7 +214,7 @@ pub fn quantile(x: &[f64], q: f64) -> f64 {
 }
 
 /// Sample standard deviation (n - 1); 0 for fewer than two values.
-pub(crate) fn sample_std(x: &[f64]) -> f64 {
+fn sample_std(x: &[f64]) -> f64 {
     if x.len() < 2 {
         return 0.0;
     }

@@ -100,6 +100,13 @@ fn wear_is_found_on(
     assert_eq!(w.len(), 1, "{d:#}");
     assert_eq!(w[0]["rank"], 1 + named_before, "{d:#}");
     let fit = w[0]["parameters"]["coefficient"].as_f64().unwrap();
+    println!(
+        "wear {coefficient}: fitted {fit} on {}, validation {} -> {} on {}",
+        w[0]["train_tests"],
+        w[0]["error_before"]["validation"],
+        w[0]["error_after"]["validation"],
+        w[0]["validation_tests"]
+    );
     assert!(
         (fit / coefficient - 1.0).abs() < 0.2,
         "coefficient {fit} for {coefficient}"

@@ -19,8 +19,9 @@
 //!
 //! Each case runs 2-3 minutes of rig time and 4-10 minutes of diagnosis on the 2-core
 //! machine: all are `#[ignore]`d; their figures, and which of them hold, are in BENCHMARKS.md
-//! ("Diagnosis: wear and tilt"; for wear, "Wear driven by the normal contact impulse" and
-//! "Wear on six probes, and the clearance at the contact onsets").
+//! ("Diagnosis: wear and tilt"; for wear, "Wear driven by the normal contact impulse",
+//! "Wear on six probes, and the clearance at the contact onsets" and, their latest run, "The
+//! six-probe wear proofs under the spread-weighted clearances": neither holds there).
 
 mod cli_support;
 mod diagnose_support;

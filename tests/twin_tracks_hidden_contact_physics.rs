@@ -80,7 +80,7 @@ fn a_twin_with_the_hidden_contact_physics_tracks_the_rig_and_the_nominal_twin_do
     // The null case's spread: nothing hidden, the nominal twin, three noise seeds (the effect
     // cases below run on the default seed, 1). The bounds are the largest score and the largest
     // median over the seeds.
-    let nulls = on_every_core(&NULL_SEEDS, |&seed| {
+    let nulls = on_every_core(&NULL_SEEDS, |_, &seed| {
         let null_case = Case::new(
             dir.path(),
             &format!("null-seed{seed}"),
@@ -113,8 +113,7 @@ fn a_twin_with_the_hidden_contact_physics_tracks_the_rig_and_the_nominal_twin_do
             "[{t}.wear]\ncoefficient = 1.2e-4\nmax_growth = 3.0e-4\n",
         ),
     ];
-    let indexed: Vec<(usize, &str)> = cases.iter().map(|c| c.1).enumerate().collect();
-    let runs = on_every_core(&indexed, |&(i, physics)| {
+    let runs = on_every_core(&cases, |i, &(_, physics)| {
         let case = Case::new(
             dir.path(),
             &format!("case{i}"),

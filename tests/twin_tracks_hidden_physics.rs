@@ -91,8 +91,7 @@ fn a_twin_with_the_hidden_physics_tracks_the_rig_and_the_nominal_twin_does_not()
             "[{t}]\nsensor_gains = [{ channel = \"upper_mid\", gain = 0.95 }]\n",
         ),
     ];
-    let indexed: Vec<(usize, &str)> = cases.iter().map(|c| c.1).enumerate().collect();
-    let runs = on_every_core(&indexed, |&(i, physics)| {
+    let runs = on_every_core(&cases, |i, &(_, physics)| {
         session(
             dir.path(),
             &format!("case{i}"),

@@ -11,11 +11,11 @@ use std::sync::Mutex;
 
 use crate::cli_support::{default_rig_with, json, rigtwin, text};
 
-/// `f` of every item, on as many threads as the machine has cores (at most one per item),
-/// in the items' order. The cases of these tests are independent sessions, each a chain of
+/// `f(index, item)` of every item, on as many threads as the machine has cores (at most one
+/// per item), in the items' order. The cases of these tests are independent sessions, each a chain of
 /// single-threaded processes: one case at a time leaves a core idle. A panic in a case is the
 /// test's panic.
-pub fn on_every_core<T: Sync, R: Send>(items: &[T], f: impl Fn(&T) -> R + Sync) -> Vec<R> {
+pub fn on_every_core<T: Sync, R: Send>(items: &[T], f: impl Fn(usize, &T) -> R + Sync) -> Vec<R> {
     let threads = std::thread::available_parallelism()
         .map_or(1, |n| n.get())
         .clamp(1, items.len().max(1));
@@ -26,7 +26,7 @@ pub fn on_every_core<T: Sync, R: Send>(items: &[T], f: impl Fn(&T) -> R + Sync) 
             s.spawn(|| loop {
                 let i = next.fetch_add(1, Ordering::Relaxed);
                 let Some(item) = items.get(i) else { break };
-                let r = f(item);
+                let r = f(i, item);
                 *results[i].lock().unwrap() = Some(r);
             });
         }

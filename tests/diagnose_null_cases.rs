@@ -81,13 +81,15 @@ fn band_within_the_spread(d: &Value) {
     );
 }
 
-/// The demo plan on the nominal rig, recorded once for the tests of this file that diagnose
-/// it (in cargo's folder for integration tests' files, made afresh by each run of this test
-/// binary): (its folder, the stripped log).
+/// The demo plan on the nominal rig, recorded once per process for the tests of this file
+/// that diagnose it (in cargo's folder for integration tests' files, made afresh by each
+/// process of this test binary: `cargo test` runs both tests in one, `cargo nextest` each in
+/// its own): (its folder, the stripped log).
 fn demo_session() -> &'static (PathBuf, PathBuf) {
     static SESSION: OnceLock<(PathBuf, PathBuf)> = OnceLock::new();
     SESSION.get_or_init(|| {
-        let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("diagnose_null_cases-demo");
+        let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
+            .join(format!("diagnose_null_cases-demo-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).unwrap();
         let (_, stripped) = sim_session(&dir, "demo", "", &repo_plan("demo.toml"));

@@ -275,4 +275,19 @@ fn state_of_another_rom_is_refused() {
         integ.run(&mut bad, &excitation, 1, &mut NullSink),
         Err(SimError::StateValue { what: "eta", .. })
     ));
+    // A state (e.g. read back from a damaged log) with a normal force on a pair it does not
+    // list as closed: the open prediction would not see that contact.
+    let at_rest = State::at_rest(rom.omega.len(), 1, 0.0);
+    let mut json = serde_json::to_value(&at_rest).unwrap();
+    json["lambda"]["index"] = serde_json::json!([0]);
+    json["lambda"]["value"] = serde_json::json!([1.0]);
+    let mut forced: State = serde_json::from_value(json).unwrap();
+    let err = integ
+        .run(&mut forced, &excitation, 1, &mut NullSink)
+        .unwrap_err();
+    assert!(
+        matches!(err, SimError::StateValue { index: 0, .. }),
+        "{err}"
+    );
+    assert!(err.to_string().contains("not list as closed"), "{err}");
 }

@@ -246,19 +246,13 @@ impl Predictor {
         }
         let (e_p, e_q) = (e_p.sqrt(), e_q.sqrt());
 
-        // The whole patch open: only the pairs closed in the previous step are candidates
-        // (none, unless a state was set with forces on open pairs).
+        // The whole patch open and no pair closed in the previous step (`r_prev` is None
+        // exactly when the state lists no closed pair, and a state holds a positive normal
+        // force only on its closed pairs: `Integrator::check_state`): no candidate.
         if r_prev.is_none() {
             let (g_lo, g_big) = g0.range(n);
             if self.patch_open(x_p, g_lo, g_big, e_p) && self.patch_open(x_q, g_lo, g_big, e_q) {
                 self.patch_open_steps += 1;
-                for k in 0..n {
-                    if lambda_prev[3 * k] > 0.0 {
-                        let row = &self.phi_n[k * m..(k + 1) * m];
-                        out.cand.push(k);
-                        out.p_cand.push(g0.at(k) + dot(row, x_p));
-                    }
-                }
                 return;
             }
         }
@@ -431,10 +425,8 @@ mod tests {
                     .iter()
                     .map(|x| x + rng.gen_range(-scale..scale) * 0.01)
                     .collect();
-                let mut lambda = vec![0.0; 3 * n];
-                if trial % 5 == 0 {
-                    lambda[3 * (trial % n)] = 1.0;
-                }
+                // No pair closed in the previous step (`r_prev` None: the forces are zero).
+                let lambda = vec![0.0; 3 * n];
                 let mut run = |exact: bool| {
                     let (mut cand, mut p) = (vec![], vec![]);
                     let mut all = vec![0.0; n];

@@ -56,6 +56,18 @@ impl Integrator {
                 expected: self.model.n_pairs,
             });
         }
+        // The open prediction takes the previous step's contact from the closed pairs alone
+        // (predict.rs), as the step leaves a state: a positive normal force only on them.
+        let n_pairs = self.model.n_pairs;
+        if let Some(k) =
+            (0..n_pairs).find(|&k| state.lambda[3 * k] > 0.0 && !state.closed.contains(&k))
+        {
+            return Err(SimError::StateValue {
+                what: "lambda (a normal force on a pair the state does not list as closed)",
+                index: 3 * k,
+                value: state.lambda[3 * k],
+            });
+        }
         if !state.time.is_finite() {
             return Err(SimError::StateValue {
                 what: "time",

@@ -152,6 +152,11 @@ impl Integrator {
             }
         }
         self.model.gap_offset = offsets.map(<[f64]>::to_vec);
+        self.model.gap_offset_range = offsets.map_or((0.0, 0.0), |off| {
+            off.iter().fold((f64::INFINITY, 0.0f64), |(lo, big), &o| {
+                (lo.min(o), big.max(o.abs()))
+            })
+        });
         Ok(())
     }
 

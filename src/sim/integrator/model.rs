@@ -26,6 +26,8 @@ pub(crate) struct Model {
     /// Per-pair normal gap offsets added to the clearance (`C`), m; `None`: none (the
     /// default, the scalar code path).
     pub(crate) gap_offset: Option<Vec<f64>>,
+    /// The smallest offset and the largest magnitude of `gap_offset`, m (zero without).
+    pub(crate) gap_offset_range: (f64, f64),
     /// Omega^2, D = 2 zeta w, beta, per mode.
     pub(crate) omega2: Vec<f64>,
     pub(crate) damping: Vec<f64>,
@@ -96,6 +98,7 @@ impl Model {
             report_gaps: params.report_gaps,
             clearance: rom.clearance,
             gap_offset: None,
+            gap_offset_range: (0.0, 0.0),
             omega2: rom.omega.iter().map(|w| w * w).collect(),
             damping,
             beta: rom.beta.clone(),

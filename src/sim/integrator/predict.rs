@@ -82,8 +82,8 @@ pub(crate) trait InitialGap: Copy {
     /// `g0_n,k` of pair `k`, m.
     fn at(self, k: usize) -> f64;
 
-    /// The smallest `g0_n,k` of pairs `0..n` and the largest magnitude, m.
-    fn range(self, n: usize) -> (f64, f64);
+    /// The smallest `g0_n,k` over the pairs and a bound on the largest magnitude, m.
+    fn range(self) -> (f64, f64);
 }
 
 impl InitialGap for f64 {
@@ -93,7 +93,7 @@ impl InitialGap for f64 {
     }
 
     #[inline(always)]
-    fn range(self, _n: usize) -> (f64, f64) {
+    fn range(self) -> (f64, f64) {
         (self, self.abs())
     }
 }
@@ -105,6 +105,9 @@ pub(crate) struct OffsetGap<'a> {
     pub clearance: f64,
     /// Offset per pair (`C`), m.
     pub offset: &'a [f64],
+    /// The smallest offset and the largest magnitude, m (set with the offsets, not per
+    /// step).
+    pub range: (f64, f64),
 }
 
 impl InitialGap for OffsetGap<'_> {
@@ -113,12 +116,12 @@ impl InitialGap for OffsetGap<'_> {
         self.clearance + self.offset[k]
     }
 
+    // NOTE: rounding is monotone, so `clearance + min offset` is exactly the smallest
+    // `clearance + offset_k`; the magnitude only sizes the bound's slack.
     #[inline(always)]
-    fn range(self, n: usize) -> (f64, f64) {
-        (0..n).fold((f64::INFINITY, 0.0f64), |(lo, big), k| {
-            let g = self.at(k);
-            (lo.min(g), big.max(g.abs()))
-        })
+    fn range(self) -> (f64, f64) {
+        let (lowest, largest) = self.range;
+        (self.clearance + lowest, self.clearance.abs() + largest)
     }
 }
 
@@ -250,7 +253,7 @@ impl Predictor {
         // exactly when the state lists no closed pair, and a state holds a positive normal
         // force only on its closed pairs: `Integrator::check_state`): no candidate.
         if r_prev.is_none() {
-            let (g_lo, g_big) = g0.range(n);
+            let (g_lo, g_big) = g0.range();
             if self.patch_open(x_p, g_lo, g_big, e_p) && self.patch_open(x_q, g_lo, g_big, e_q) {
                 self.patch_open_steps += 1;
                 return;
@@ -439,6 +442,10 @@ mod tests {
                         let g0 = OffsetGap {
                             clearance: 3e-4,
                             offset: &offset,
+                            range: (
+                                offset.iter().copied().fold(f64::INFINITY, f64::min),
+                                offset.iter().fold(0.0, |big, o| o.abs().max(big)),
+                            ),
                         };
                         pred.predict(&x_p, &x_q, g0, &lambda, None, 1.0, out);
                     } else {

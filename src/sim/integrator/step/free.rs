@@ -96,6 +96,7 @@ pub(super) fn predict_candidates(md: &mut Model, ws: &mut Workspace, st: &State)
             OffsetGap {
                 clearance: md.clearance,
                 offset,
+                range: md.gap_offset_range,
             },
             &st.lambda,
             r_prev,

@@ -13,7 +13,7 @@ mod cli_support;
 mod hw_support;
 
 use cli_support::{cache, json, text};
-use hw_support::{hw_args, run_hw, FirmwareSim};
+use hw_support::{assert_ramp_falls_to_zero, hw_args, run_hw, FirmwareSim};
 use rigtwin::control::{ControlState, EventKind, Phase, SessionEvent};
 use rigtwin::log::read_session;
 use rigtwin::session::topics::{TOPIC_CONTROL, TOPIC_DAQ, TOPIC_EVENTS, TOPIC_STATUS};
@@ -118,22 +118,8 @@ fn session_on(plan: &str, fault: &str) -> Outcome {
 }
 
 fn assert_ramped_down(o: &Outcome, what: &str) {
-    assert!(
-        o.ramp.len() >= 10,
-        "{what}: ramp-down blocks {}",
-        o.ramp.len()
-    );
-    assert!(
-        o.ramp.last().unwrap().drive_v < 1e-9,
-        "{what}: {:?}",
-        o.ramp.last()
-    );
-    assert!(
-        o.ramp
-            .windows(2)
-            .all(|w| w[1].drive_v <= w[0].drive_v + 1e-12),
-        "{what}"
-    );
+    let drives: Vec<f64> = o.ramp.iter().map(|c| c.drive_v).collect();
+    assert_ramp_falls_to_zero(&drives, what);
 }
 
 #[test]

@@ -148,3 +148,28 @@ pub fn cantools_python_or_skip(name: &str) -> Option<String> {
     eprintln!("SKIPPED {name}: {why}");
     None
 }
+
+/// The drive of a session's recorded ramp-down blocks, over the links: it ends at zero and,
+/// from its peak on, only falls. The blocks the device computed before the command reached it
+/// (at most those in flight, as in the runner's allowance) may still carry a rising drive,
+/// e.g. the last steps of a setpoint ramp-up.
+pub fn assert_ramp_falls_to_zero(drives: &[f64], what: &str) {
+    println!("{what}: ramp-down drive {drives:?}");
+    assert!(
+        drives.len() >= 10,
+        "{what}: ramp-down blocks {}",
+        drives.len()
+    );
+    assert!(drives[drives.len() - 1] < 1e-9, "{what}: {drives:?}");
+    let peak = (0..drives.len())
+        .max_by(|&a, &b| drives[a].total_cmp(&drives[b]).then(b.cmp(&a)))
+        .unwrap();
+    assert!(
+        peak < 4,
+        "{what}: the ramp peaks at block {peak}: {drives:?}"
+    );
+    assert!(
+        drives[peak..].windows(2).all(|w| w[1] <= w[0] + 1e-12),
+        "{what}: {drives:?}"
+    );
+}

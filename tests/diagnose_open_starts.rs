@@ -11,7 +11,10 @@
 //! - runs made side by side on two threads (`ModelRunner::run_many`, a fit's grid) give what
 //!   the same runs one after the other give;
 //! - a run with wear starts a test worn as a run from the session's start left it
-//!   (`ModelRunner::set_wear_from`).
+//!   (`ModelRunner::set_wear_from`);
+//! - an ensemble member's run (`ModelRunner::run_members`, the judge's draws in the band)
+//!   differs from the plain run only from the first step with contact, and draws the same
+//!   perturbations whatever it runs beside.
 
 mod cli_support;
 mod default_rom;
@@ -19,7 +22,7 @@ mod diagnose_support;
 
 use diagnose_support::sim_session;
 use rigtwin::config::{ClearanceSpec, PhysicsSpec, RigConfig, TiltSpec, WearSpec};
-use rigtwin::diagnose::rerun::{ModelRunner, SessionSteps, Span};
+use rigtwin::diagnose::rerun::{MemberRun, ModelRunner, SessionSteps, Span};
 use rigtwin::session::replay::{replay, Replay};
 use rigtwin::twin::TwinModel;
 
@@ -215,4 +218,60 @@ fn a_run_with_wear_starts_a_test_worn_as_the_twins_step_left_it() {
         q > 0.0 && q != p,
         "{q} N s at the finer step, {p} N s at the twin's"
     );
+}
+
+/// `ModelRunner::run_members`: member 0 is the plain run; member m > 0 is perturbed at the
+/// start of each step with contact on the rig, so the impact-free steps before the band
+/// compare exactly as member 0's and the band's steps do not; the same member gives the same
+/// scores alone and beside other runs on two threads (common random numbers), another member
+/// other ones.
+#[test]
+fn ensemble_members_differ_from_the_plain_run_only_in_the_band() {
+    let dir = tempfile::tempdir().unwrap();
+    let (log, _) = sim_session(
+        dir.path(),
+        "members",
+        "[safety]\ndaq_timeout_s = 30\n",
+        PLAN,
+    );
+    let r = replay(&log).unwrap();
+    let cfg = RigConfig::default_rig();
+    let steps = SessionSteps::of(&r.recording, &r.summary);
+    let first = steps.first_contact(0).expect("the sweep reaches the band");
+    assert!(first >= 2, "first contact at step {first}");
+    let mut runner = runner_of(&r, &steps, &cfg, 1);
+    let whole = vec![Span::whole(0)];
+    let nominal = PhysicsSpec::default();
+    let member = |runner: &mut ModelRunner<'_>, m: usize| {
+        let run: MemberRun = (nominal.clone(), whole.clone(), m);
+        runner.run_members(&[run]).unwrap().pop().unwrap()
+    };
+    let plain = runner.run_spans(&nominal, &whole).unwrap();
+    assert_eq!(member(&mut runner, 0), plain);
+    let one = member(&mut runner, 1);
+    let two = member(&mut runner, 2);
+    assert_eq!(one.len(), plain.len());
+    for (k, ((p, a), b)) in plain.iter().zip(&one).zip(&two).enumerate() {
+        assert!(!p.features.is_empty() && !a.features.is_empty(), "step {k}");
+        if k < first {
+            assert_eq!(p, a, "step {k}: before the band");
+            assert_eq!(p, b, "step {k}: before the band");
+        }
+    }
+    assert_ne!(
+        plain[first..],
+        one[first..],
+        "member 1 is member 0 in the band"
+    );
+    assert_ne!(one[first..], two[first..], "members 1 and 2 draw the same");
+
+    let mut side_by_side = runner_of(&r, &steps, &cfg, 2);
+    let runs: Vec<MemberRun> = vec![
+        (offset(2e-5), whole.clone(), 1),
+        (nominal.clone(), whole.clone(), 1),
+        (nominal.clone(), whole.clone(), 2),
+    ];
+    let out = side_by_side.run_members(&runs).unwrap();
+    assert_eq!(out[1], one);
+    assert_eq!(out[2], two);
 }

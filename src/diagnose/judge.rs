@@ -10,7 +10,7 @@ use std::collections::HashMap;
 use crate::config::PhysicsSpec;
 
 use super::outcome::{EffectResult, Regime, SetError, StageCost, StepScores, Undecided};
-use super::rerun::{ModelRunner, RunCost, SessionSteps, Span};
+use super::rerun::{MemberRun, ModelRunner, RunCost, SessionSteps, Span};
 use super::DiagnoseError;
 
 /// How many times finer than the twin's own step a candidate judged on the impact band is
@@ -38,6 +38,13 @@ pub struct DiagnoseOptions {
     /// truncation error and lowers the validation error 1.3x; a hidden +14 % clearance
     /// lowers it 4x.
     pub contact_min_relative_improvement: f64,
+    /// Runs of each model whose errors judge a candidate on the impact band: the model as
+    /// given and `band_members - 1` draws from perturbed states at the band's steps
+    /// ([`ModelRunner::run_members`]); the error is their RMS. Default 3: one run of a
+    /// non-periodic response is one draw, and a right model's draw can land on another
+    /// attractor than the rig's in a step or two (BENCHMARKS.md, "The judge's errors in the
+    /// band over three draws").
+    pub band_members: usize,
     /// Threads for model runs.
     pub jobs: usize,
 }
@@ -51,6 +58,7 @@ impl Default for DiagnoseOptions {
             min_relative_improvement: 0.2,
             contact_null_spread: 1.0,
             contact_min_relative_improvement: 0.5,
+            band_members: 3,
             jobs: 1,
         }
     }
@@ -110,6 +118,22 @@ pub(super) fn set_error_of(
 /// [`set_error_of`] over every channel.
 pub(super) fn set_error(scores: &[StepScores], tests: &[usize], which: Steps) -> Option<f64> {
     set_error_of(scores, tests, which, None)
+}
+
+/// The root mean square of `errors` (None without any).
+fn rms(errors: &[f64]) -> Option<f64> {
+    (!errors.is_empty())
+        .then(|| (errors.iter().map(|e| e * e).sum::<f64>() / errors.len() as f64).sqrt())
+}
+
+/// The RMS of the train and of the validation errors of `errors` (None without any).
+fn rms_of(errors: &[SetError]) -> Option<SetError> {
+    let train: Vec<f64> = errors.iter().map(|e| e.train).collect();
+    let validation: Vec<f64> = errors.iter().map(|e| e.validation).collect();
+    Some(SetError {
+        train: rms(&train)?,
+        validation: rms(&validation)?,
+    })
 }
 
 /// A candidate effect.
@@ -209,7 +233,8 @@ pub(super) struct Work<'a> {
     pub(super) accepted: PhysicsSpec,
     pub(super) effects: Vec<EffectResult>,
     pub(super) undecided: Vec<Undecided>,
-    cache: HashMap<(String, Vec<Span>, u32), Vec<StepScores>>,
+    /// Runs made: (model, steps, twin step refinement, ensemble member) -> scores.
+    cache: HashMap<(String, Vec<Span>, u32, usize), Vec<StepScores>>,
     pub(super) progress: &'a mut dyn FnMut(DiagnoseProgress),
     /// What the stages' model runs cost, as each ended.
     pub(super) stage_costs: Vec<StageCost>,
@@ -295,23 +320,41 @@ impl<'a> Work<'a> {
         ext: &PhysicsSpec,
         spans: &[Span],
     ) -> Result<Vec<StepScores>, DiagnoseError> {
-        let key = self.cache_key(ext, spans);
+        self.member_scores(ext, spans, 0)
+    }
+
+    /// [`Work::scores_spans`] of ensemble member `member` ([`ModelRunner::run_members`]).
+    fn member_scores(
+        &mut self,
+        ext: &PhysicsSpec,
+        spans: &[Span],
+        member: usize,
+    ) -> Result<Vec<StepScores>, DiagnoseError> {
+        let key = self.cache_key(ext, spans, member);
         if let Some(s) = self.cache.get(&key) {
             return Ok(s.clone());
         }
-        let s = self.runner.run_spans(ext, spans)?;
+        let run = (ext.clone(), spans.to_vec(), member);
+        let s = (self.runner.run_members(std::slice::from_ref(&run))?)
+            .pop()
+            .unwrap_or_default();
         self.cache.insert(key, s.clone());
         Ok(s)
     }
 
     /// What a run of `ext` over `spans` is remembered by: the model, the steps, the twin step's
     /// refinement, and, with wear, where its tests start ([`ModelRunner::set_wear_from`]).
-    fn cache_key(&self, ext: &PhysicsSpec, spans: &[Span]) -> (String, Vec<Span>, u32) {
+    fn cache_key(
+        &self,
+        ext: &PhysicsSpec,
+        spans: &[Span],
+        member: usize,
+    ) -> (String, Vec<Span>, u32, usize) {
         let mut model = ext.to_json();
         if let Some(r) = self.runner.wear_from().filter(|_| ext.wear.is_some()) {
             model.push_str(&format!(" worn as at x{r}"));
         }
-        (model, spans.to_vec(), self.runner.refinement())
+        (model, spans.to_vec(), self.runner.refinement(), member)
     }
 
     /// Runs the model for every `(ext, spans)` of `runs` not run before, side by side on the
@@ -321,19 +364,24 @@ impl<'a> Work<'a> {
         &mut self,
         runs: Vec<(PhysicsSpec, Vec<Span>)>,
     ) -> Result<(), DiagnoseError> {
+        self.prefetch_members(runs.into_iter().map(|(e, s)| (e, s, 0)).collect())
+    }
+
+    /// [`Work::prefetch`] of ensemble members' runs ([`ModelRunner::run_members`]).
+    fn prefetch_members(&mut self, runs: Vec<MemberRun>) -> Result<(), DiagnoseError> {
         let (mut keys, mut todo) = (Vec::new(), Vec::new());
-        for (ext, spans) in runs {
-            let key = self.cache_key(&ext, &spans);
+        for (ext, spans, member) in runs {
+            let key = self.cache_key(&ext, &spans, member);
             if self.cache.contains_key(&key) || keys.contains(&key) {
                 continue;
             }
             keys.push(key);
-            todo.push((ext, spans));
+            todo.push((ext, spans, member));
         }
         if todo.len() < 2 {
             return Ok(());
         }
-        let out = self.runner.run_many(&todo)?;
+        let out = self.runner.run_members(&todo)?;
         for (key, s) in keys.into_iter().zip(out) {
             self.cache.insert(key, s);
         }
@@ -361,22 +409,37 @@ impl<'a> Work<'a> {
 
     /// The errors of the model `ext` on the candidate's tests: on every step of them, or,
     /// with `where_fitted`, on the steps its fit compared ([`Candidate::judged_where_fitted`]).
+    ///
+    /// A candidate judged on the impact band is judged over [`Work::members`] runs of each
+    /// model: the errors are the RMS of the members' ([`DiagnoseOptions::band_members`]).
     pub(super) fn errors(
         &mut self,
         ext: &PhysicsSpec,
         c: &Candidate,
         where_fitted: bool,
     ) -> Result<Option<SetError>, DiagnoseError> {
-        let s = self.scores_spans(ext, &Self::judged_spans(c, where_fitted))?;
-        Ok(
+        let spans = Self::judged_spans(c, where_fitted);
+        let mut of_members = Vec::new();
+        for member in 0..self.members(c.steps) {
+            let s = self.member_scores(ext, &spans, member)?;
             match (
                 set_error_of(&s, &c.train, c.steps, c.channel.as_deref()),
                 set_error_of(&s, &c.validation, c.steps, c.channel.as_deref()),
             ) {
-                (Some(train), Some(validation)) => Some(SetError { train, validation }),
-                _ => None,
-            },
-        )
+                (Some(train), Some(validation)) => of_members.push(SetError { train, validation }),
+                _ => return Ok(None),
+            }
+        }
+        Ok(rms_of(&of_members))
+    }
+
+    /// The runs of each model a candidate judged on `steps` is judged over: the band's
+    /// members for the impact band, one run otherwise.
+    pub(super) fn members(&self, steps: Steps) -> usize {
+        match steps {
+            Steps::All => self.opts.band_members.max(1),
+            Steps::ImpactFree => 1,
+        }
     }
 
     /// The spans [`Work::errors`] compares: every step of the candidate's tests, or, with
@@ -402,10 +465,15 @@ impl<'a> Work<'a> {
         where_fitted: bool,
     ) -> Result<(Option<SetError>, Option<SetError>), DiagnoseError> {
         let spans = Self::judged_spans(c, where_fitted);
-        self.prefetch(vec![
-            (before.clone(), spans.clone()),
-            (c.ext.clone(), spans),
-        ])?;
+        let runs = (0..self.members(c.steps))
+            .flat_map(|m| {
+                [
+                    (before.clone(), spans.clone(), m),
+                    (c.ext.clone(), spans.clone(), m),
+                ]
+            })
+            .collect();
+        self.prefetch_members(runs)?;
         Ok((
             self.errors(before, c, where_fitted)?,
             self.errors(&c.ext, c, where_fitted)?,
@@ -415,7 +483,9 @@ impl<'a> Work<'a> {
     /// Judges candidate `c` against the accepted model; accepts it if it predicts its
     /// validation tests better beyond the null spread. Returns whether accepted.
     ///
-    /// A candidate judged on the impact band (every step) that passes is judged again at a
+    /// A candidate judged on the impact band (every step) is judged on the RMS of the errors of
+    /// [`Work::members`] runs of each model, the model before and the candidate's drawing the
+    /// same perturbations ([`ModelRunner::run_members`]). One that passes is judged again at a
     /// twin step [`CONFIRM_REFINEMENT`] times finer, on its validation tests: the default
     /// twin over-counts contact in the band (its step, BENCHMARKS.md "Why the nominal twin
     /// over-counts contact"), and a smaller clearance or a tilt can absorb part of that
@@ -428,7 +498,14 @@ impl<'a> Work<'a> {
     /// A candidate that also names where it was fitted ([`Candidate::judged_where_fitted`])
     /// and is not accepted so is judged there as well ([`Work::judge_where_fitted`]).
     pub(super) fn judge(&mut self, mut c: Candidate) -> Result<bool, DiagnoseError> {
-        self.show(&c, None);
+        let members = self.members(c.steps);
+        if members > 1 {
+            c.evidence["judged_over_runs"] = serde_json::json!({
+                "members": members,
+                "perturbation": self.runner.perturbation(),
+            });
+        }
+        self.show(&c, (members > 1).then(|| format!("each model's error the RMS of {members} runs from perturbed states in the band")).as_deref());
         let (ok, before, after, reason) = self.judge_on_whole_tests(&mut c)?;
         let Some(w) = c.where_fitted.clone().filter(|_| !ok) else {
             return Ok(self.record(c, before, after, ok, reason));
@@ -467,15 +544,29 @@ impl<'a> Work<'a> {
         );
         (self.progress)(DiagnoseProgress::Evaluation(line));
         let (validation, steps, channel) = (c.validation.clone(), c.steps, c.channel.clone());
-        let fine = |w: &mut Self, ext: &PhysicsSpec| -> Result<Option<f64>, DiagnoseError> {
-            let s = w.scores(ext, &validation)?;
-            Ok(set_error_of(&s, &validation, steps, channel.as_deref()))
-        };
         let whole: Vec<Span> = validation.iter().map(|&t| Span::whole(t)).collect();
-        let both = self.prefetch(vec![
-            (accepted.clone(), whole.clone()),
-            (cand_ext.clone(), whole),
-        ]);
+        let members = self.members(steps);
+        let fine = |w: &mut Self, ext: &PhysicsSpec| -> Result<Option<f64>, DiagnoseError> {
+            let mut of_members = Vec::new();
+            for member in 0..members {
+                let s = w.member_scores(ext, &whole, member)?;
+                match set_error_of(&s, &validation, steps, channel.as_deref()) {
+                    Some(e) => of_members.push(e),
+                    None => return Ok(None),
+                }
+            }
+            Ok(rms(&of_members))
+        };
+        let both = self.prefetch_members(
+            (0..members)
+                .flat_map(|m| {
+                    [
+                        (accepted.clone(), whole.clone(), m),
+                        (cand_ext.clone(), whole.clone(), m),
+                    ]
+                })
+                .collect(),
+        );
         let fb = both.and_then(|()| fine(self, &accepted));
         let fa = fb.as_ref().ok().map(|_| fine(self, &cand_ext));
         self.runner.set_refinement(own);

@@ -234,6 +234,15 @@ impl SessionSteps {
         (at < last).then_some(at)
     }
 
+    /// The sample where the step of record window `w` starts: the last `step_start` of its
+    /// test and step before its record window (a step recorded again starts again).
+    pub fn step_start(&self, w: &SessionStep) -> Option<u64> {
+        (self.starts.iter())
+            .filter(|s| s.0 == w.test_index && s.1 == w.info.step)
+            .map(|s| s.2)
+            .rfind(|&at| at <= w.info.record_first_sample)
+    }
+
     /// The sample where the step before test `ti`'s first step starts (the lead-in), or
     /// `None` for the session's first step.
     fn lead_in(&self, ti: usize) -> Option<u64> {
@@ -399,6 +408,10 @@ pub struct ModelRunner<'a> {
     wear_from: Option<u32>,
 }
 
+/// A run of [`ModelRunner::run_members`]: its extensions, the steps it scores and its
+/// ensemble member (0: unperturbed; [`ModelRunner::run_members`]).
+pub type MemberRun = (PhysicsSpec, Vec<Span>, usize);
+
 /// What one stretch of tests gave.
 struct GroupRun {
     scores: Vec<StepScores>,
@@ -544,10 +557,28 @@ impl<'a> ModelRunner<'a> {
         &mut self,
         runs: &[(PhysicsSpec, Vec<Span>)],
     ) -> Result<Vec<Vec<StepScores>>, DiagnoseError> {
+        let runs: Vec<MemberRun> = (runs.iter())
+            .map(|(ext, spans)| (ext.clone(), spans.clone(), 0))
+            .collect();
+        self.run_members(&runs)
+    }
+
+    /// [`ModelRunner::run_many`] of ensemble members: a run of member `m` > 0 is the run of
+    /// member 0 (the model as [`ModelRunner::run_many`] runs it) with the twin's modal
+    /// velocities perturbed at the start of each step whose record window had contact on the
+    /// rig, by the `[twin]` ensemble's relative perturbation, from a seed of the step and the
+    /// member only ([`crate::twin::TwinState::perturbed`]). In the impact band, whose response
+    /// is not periodic, each member is another draw of the same model; common random numbers:
+    /// every model run as member `m` gets the same perturbations. Only member 0's runs keep
+    /// the contact impulse and the states at the tests' lead-ins.
+    pub fn run_members(
+        &mut self,
+        runs: &[MemberRun],
+    ) -> Result<Vec<Vec<StepScores>>, DiagnoseError> {
         let mut wanted_of: Vec<Vec<Span>> = Vec::with_capacity(runs.len());
         // (run, stretch of consecutive tests, where it starts); the whole session for wear.
         let mut groups: Vec<(usize, Vec<Span>, Start)> = Vec::new();
-        for (r, (ext, spans)) in runs.iter().enumerate() {
+        for (r, (ext, spans, _)) in runs.iter().enumerate() {
             let mut wanted: Vec<Span> = spans.clone();
             wanted.sort_unstable();
             wanted.dedup_by_key(|s| s.test);
@@ -604,7 +635,7 @@ impl<'a> ModelRunner<'a> {
             wanted_of.push(wanted);
         }
         let wall = std::time::Instant::now();
-        let models: Vec<TwinModel<'_>> = runs.iter().map(|(ext, _)| self.model(ext)).collect();
+        let models: Vec<TwinModel<'_>> = runs.iter().map(|(ext, ..)| self.model(ext)).collect();
         let this: &ModelRunner<'_> = self;
         // The longest stretches first, each thread taking the next one left when it is done:
         // the threads finish close together whatever the mix of long and short stretches.
@@ -628,7 +659,8 @@ impl<'a> ModelRunner<'a> {
                                 break done;
                             };
                             let (r, spans, start) = &groups[g];
-                            done.push((g, this.run_group(&models[*r], spans, start)));
+                            let member = runs[*r].2;
+                            done.push((g, this.run_group(&models[*r], spans, start, member)));
                         }
                     })
                 })
@@ -650,6 +682,9 @@ impl<'a> ModelRunner<'a> {
             self.cost.runs += 1;
             self.cost.rig_seconds += g.rig_seconds;
             out[*r].extend(g.scores);
+            if runs[*r].2 > 0 {
+                continue;
+            }
             if matches!(start, Start::Rest) && !g.lead_ins.is_empty() {
                 self.worn
                     .entry((runs[*r].0.to_json(), self.refinement))
@@ -866,6 +901,12 @@ impl<'a> ModelRunner<'a> {
         Ok(std::mem::take(&mut self.last_impulses))
     }
 
+    /// The relative perturbation of an ensemble member's modal velocities
+    /// ([`ModelRunner::run_members`]).
+    pub fn perturbation(&self) -> f64 {
+        self.spec.ensemble_perturbation
+    }
+
     /// The threads the runs are spread over.
     pub fn jobs(&self) -> usize {
         self.jobs
@@ -899,12 +940,14 @@ impl<'a> ModelRunner<'a> {
     }
 
     /// One stretch of consecutive tests (the steps `group` names), from rest at its lead-in
-    /// or from the open state `start`.
+    /// or from the open state `start`, as ensemble member `member`
+    /// ([`ModelRunner::run_members`]).
     fn run_group(
         &self,
         model: &TwinModel<'_>,
         group: &[Span],
         start: &Start,
+        member: usize,
     ) -> Result<GroupRun, DiagnoseError> {
         let rec = self.rec;
         let empty = GroupRun {
@@ -939,6 +982,19 @@ impl<'a> ModelRunner<'a> {
                 .collect();
         }
         let mut lead_ins = Vec::new();
+        // A member's perturbations: at the start of each step with contact on the rig.
+        let mut perturb_at: VecDeque<(usize, u64)> = VecDeque::new();
+        if member > 0 {
+            for (k, w) in windows.iter().enumerate() {
+                if w.regime == Regime::Impacts {
+                    if let Some(at) = self.steps.step_start(w) {
+                        perturb_at.push_back((k, at));
+                    }
+                }
+            }
+            perturb_at.make_contiguous().sort_by_key(|x| x.1);
+        }
+        let relative = self.spec.ensemble_perturbation;
         let end = last.info.record_end_sample();
         let (mut twin, first_block, mut clearances) =
             self.twin_at(model, self.start_sample(group, start))?;
@@ -985,6 +1041,22 @@ impl<'a> ModelRunner<'a> {
                     impulse.push((t, w.impulse));
                 } else if model.extensions.wear.is_some() {
                     impulse.push((t, 0.0));
+                }
+            }
+            // NOTE: at the first block that starts at or after the step's start (blocks are a
+            // few ms), so that the step before's record window, which ends there, is not
+            // perturbed.
+            for k in due_before(&mut perturb_at, b.first_sample + 1) {
+                let info = &windows[k].info;
+                if let Some(state) = twin.state() {
+                    let s = state.perturbed(
+                        &info.test,
+                        info.step,
+                        info.record_attempt,
+                        member,
+                        relative,
+                    );
+                    twin.set_state(&s)?;
                 }
             }
             let tb = twin.push_block(&b)?;

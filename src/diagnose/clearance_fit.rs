@@ -95,7 +95,7 @@ pub(super) fn test_clearance_by_runs(
         return Ok(None);
     };
     let spread_m = valley_spread(&tried, (best, error), work.opts.contact_null_spread);
-    (work.progress)(DiagnoseProgress::Note(format!(
+    work.note_once(format!(
         "clearance of {}: {:.0} +- {:.0} um by model runs (bracket {:.0}-{:.0} um, error {error:.3}, {} runs at a {FIT_REFINEMENT}x finer twin step)",
         t.test,
         best * 1e6,
@@ -103,7 +103,7 @@ pub(super) fn test_clearance_by_runs(
         lo * 1e6,
         hi * 1e6,
         tried.len(),
-    )));
+    ));
     Ok(Some(RunClearance {
         clearance_m: best,
         error,

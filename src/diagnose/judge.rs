@@ -240,6 +240,8 @@ pub(super) struct Work<'a> {
     pub(super) stage_costs: Vec<StageCost>,
     /// The stage under way and the runner's cost at its start.
     stage_start: Option<(&'static str, RunCost)>,
+    /// The lines [`Work::note_once`] has shown.
+    notes_shown: std::collections::HashSet<String>,
 }
 
 impl<'a> Work<'a> {
@@ -262,6 +264,7 @@ impl<'a> Work<'a> {
             progress,
             stage_costs: Vec::new(),
             stage_start: None,
+            notes_shown: std::collections::HashSet::new(),
         }
     }
 }
@@ -272,6 +275,14 @@ impl<'a> Work<'a> {
         self.end_stage();
         self.stage_start = Some((stage, self.runner.cost));
         (self.progress)(DiagnoseProgress::Stage(line.into()));
+    }
+
+    /// `line` on the terminal, unless it was shown before (a result several stages share, the
+    /// same runs found in the cache, is shown once).
+    pub(super) fn note_once(&mut self, line: String) {
+        if self.notes_shown.insert(line.clone()) {
+            (self.progress)(DiagnoseProgress::Note(line));
+        }
     }
 
     /// The stage under way ends: its model runs' cost is kept in `stage_costs`.

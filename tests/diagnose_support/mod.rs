@@ -188,7 +188,7 @@ pub fn sim_session(
 }
 
 /// `rigtwin diagnose LOG --json dir/TAG.json --out dir/TAG --jobs 2 ARGS...`: asserts it
-/// succeeds and shows its stages and verdict; returns the diagnosis.
+/// succeeds and shows its stages and verdict, each clearance fit once; returns the diagnosis.
 pub fn diagnose(log: &Path, dir: &Path, tag: &str, args: &[&str]) -> serde_json::Value {
     let json = dir.join(format!("{tag}.json"));
     let out = dir.join(tag);
@@ -207,6 +207,14 @@ pub fn diagnose(log: &Path, dir: &Path, tag: &str, args: &[&str]) -> serde_json:
     let t = crate::cli_support::text(&o);
     assert!(o.status.success(), "{t}");
     assert!(t.contains("== locate") && t.contains("verdict:"), "{t}");
+    // A clearance fit several stages share is shown once, where it was run.
+    let fits: Vec<&str> = t
+        .lines()
+        .filter(|l| l.contains("by model runs (bracket"))
+        .collect();
+    for (k, l) in fits.iter().enumerate() {
+        assert!(!fits[..k].contains(l), "shown twice: {l}\n{t}");
+    }
     serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap()
 }
 

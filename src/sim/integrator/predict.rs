@@ -69,7 +69,8 @@ pub(crate) struct Predictor {
     patch_mid: Vec<f64>,
     patch_half: Vec<f64>,
     b_max: f64,
-    /// Steps whose pairs the patch bound proved open.
+    /// Steps whose pairs the patch bound proved open (kept for the unit tests only).
+    #[cfg(test)]
     patch_open_steps: u64,
     /// Work arrays, `C` each.
     lo_p: Vec<f64>,
@@ -181,6 +182,7 @@ impl Predictor {
             patch_mid,
             patch_half,
             b_max,
+            #[cfg(test)]
             patch_open_steps: 0,
             lo_p: vec![0.0; n_pairs],
             lo_q: vec![0.0; n_pairs],
@@ -255,7 +257,10 @@ impl Predictor {
         if r_prev.is_none() {
             let (g_lo, g_big) = g0.range();
             if self.patch_open(x_p, g_lo, g_big, e_p) && self.patch_open(x_q, g_lo, g_big, e_q) {
-                self.patch_open_steps += 1;
+                #[cfg(test)]
+                {
+                    self.patch_open_steps += 1;
+                }
                 return;
             }
         }

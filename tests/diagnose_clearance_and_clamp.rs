@@ -238,6 +238,18 @@ fn clamp_friction_past_the_band_is_fitted_by_model_runs() {
     assert_eq!(c[0]["rank"], 1, "{d:#}");
     assert_eq!(c[0]["evidence"]["mode"], "1FL", "{d:#}");
     assert_clamp(c[0], share, slip, serde_json::json!(["lower"]));
+    // The shares the runs cannot tell apart bracket the fitted one; where they span more than
+    // 20 % of it, the other shares are named as the alternative.
+    let (ev, p) = (&c[0]["evidence"], &c[0]["parameters"]);
+    let sf = p["stiffness_fraction"].as_f64().unwrap();
+    let apart: Vec<f64> = (ev["shares_not_told_apart"].as_array().unwrap().iter())
+        .map(|x| x.as_f64().unwrap())
+        .collect();
+    assert!(apart[0] <= sf && sf <= apart[1], "{ev}");
+    let wide = apart[0] < 0.8 * sf || apart[1] > 1.2 * sf;
+    let named = (c[0]["alternatives"].as_array().unwrap().iter())
+        .any(|a| a.as_str().unwrap().contains("stiffness_fraction from"));
+    assert_eq!(wide, named, "{:#}", c[0]);
 }
 
 fn clearance_is_found(offset: f64, plan: &str) {

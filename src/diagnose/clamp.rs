@@ -548,11 +548,29 @@ fn clamp_by_runs(work: &mut Work<'_>, lin: &LinearEvidence) -> Result<Vec<String
         )));
         // Slipped through at the low level too (twice the half-slip amplitude): the joint
         // acts as a constant softening there, which a linear correction mimics.
-        let alternatives = if 2.0 * a_h < low.peak_tip_amplitude_m {
+        let mut alternatives = if 2.0 * a_h < low.peak_tip_amplitude_m {
             vec![format!("linear_frequency and linear_damping of {mode}: the joint is fully slipped at both levels")]
         } else {
             Vec::new()
         };
+        // The joints the session cannot tell from the fitted one: the runs whose train error
+        // lies within the null spread of the best's.
+        let near: Vec<&(f64, f64, f64)> = (tried.iter())
+            .filter(|t| t.2 <= e + work.opts.null_spread)
+            .collect();
+        let range = |v: &dyn Fn(&(f64, f64, f64)) -> f64| {
+            (near.iter()).fold((f64::INFINITY, 0.0f64), |(lo, hi), t| {
+                (lo.min(v(t)), hi.max(v(t)))
+            })
+        };
+        let (share_lo, share_hi) = range(&|t| t.0);
+        let (ratio_lo, ratio_hi) = range(&|t| t.0 / t.1);
+        if share_lo < (1.0 - SHARE_UNDETERMINED) * sf || share_hi > (1.0 + SHARE_UNDETERMINED) * sf
+        {
+            alternatives.push(format!(
+                "clamp_friction of {mode} with a stiffness_fraction from {share_lo:.3} to {share_hi:.3} (share per slip amplitude {ratio_lo:.0}-{ratio_hi:.0} /m): their runs' train errors lie within the null spread of the best's"
+            ));
+        }
         let cand = Candidate::new(
             "clamp_friction",
             joint(sf, a_h),
@@ -564,6 +582,8 @@ fn clamp_by_runs(work: &mut Work<'_>, lin: &LinearEvidence) -> Result<Vec<String
                 "low_level_fit": {"test": low.test, "frequency_hz": low.frequency_hz, "damping_ratio": low.damping_ratio, "peak_tip_amplitude_m": low.peak_tip_amplitude_m},
                 "predicted_tip_amplitude_m": a_ref,
                 "stiffness_share_per_slip_amplitude_per_m": sf / a_h,
+                "shares_not_told_apart": [share_lo, share_hi],
+                "share_per_slip_amplitude_not_told_apart_per_m": [ratio_lo, ratio_hi],
                 "runs": tried.iter().map(|t| json!({"stiffness_fraction": t.0, "half_slip_tip_amplitude": t.1, "train_error": t.2})).collect::<Vec<_>>(),
             }),
             (train, validation),

@@ -446,7 +446,7 @@ impl<'a> Work<'a> {
 
     /// The runs of each model a candidate judged on `steps` is judged over: the band's
     /// members for the impact band, one run otherwise.
-    pub(super) fn members(&self, steps: Steps) -> usize {
+    fn members(&self, steps: Steps) -> usize {
         match steps {
             Steps::All => self.opts.band_members.max(1),
             Steps::ImpactFree => 1,

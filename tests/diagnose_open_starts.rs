@@ -20,6 +20,9 @@ mod cli_support;
 mod default_rom;
 mod diagnose_support;
 
+use std::path::PathBuf;
+use std::sync::OnceLock;
+
 use diagnose_support::sim_session;
 use rigtwin::config::{ClearanceSpec, PhysicsSpec, RigConfig, TiltSpec, WearSpec};
 use rigtwin::diagnose::rerun::{MemberRun, ModelRunner, SessionSteps, Span};
@@ -43,6 +46,18 @@ omega_start = 1.03
 omega_end = 0.98
 steps = 6
 "#;
+
+/// The log of `PLAN` on the simulated rig, recorded once for the tests that replay it.
+fn down_session() -> &'static PathBuf {
+    static SESSION: OnceLock<PathBuf> = OnceLock::new();
+    SESSION.get_or_init(|| {
+        let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
+            .join(format!("diagnose_open_starts-down-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        sim_session(&dir, "down", "[safety]\ndaq_timeout_s = 30\n", PLAN).0
+    })
+}
 
 /// A runner of the default rig's model over `r` on `jobs` threads.
 fn runner_of<'a>(
@@ -73,9 +88,7 @@ fn offset(o: f64) -> PhysicsSpec {
 
 #[test]
 fn runs_from_an_open_state_compare_what_runs_from_rest_do() {
-    let dir = tempfile::tempdir().unwrap();
-    let (log, _) = sim_session(dir.path(), "down", "[safety]\ndaq_timeout_s = 30\n", PLAN);
-    let r = replay(&log).unwrap();
+    let r = replay(down_session()).unwrap();
     let cfg = RigConfig::default_rig();
     let steps = SessionSteps::of(&r.recording, &r.summary);
     let runner = || runner_of(&r, &steps, &cfg, 1);
@@ -227,14 +240,7 @@ fn a_run_with_wear_starts_a_test_worn_as_the_twins_step_left_it() {
 /// other ones.
 #[test]
 fn ensemble_members_differ_from_the_plain_run_only_in_the_band() {
-    let dir = tempfile::tempdir().unwrap();
-    let (log, _) = sim_session(
-        dir.path(),
-        "members",
-        "[safety]\ndaq_timeout_s = 30\n",
-        PLAN,
-    );
-    let r = replay(&log).unwrap();
+    let r = replay(down_session()).unwrap();
     let cfg = RigConfig::default_rig();
     let steps = SessionSteps::of(&r.recording, &r.summary);
     let first = steps.first_contact(0).expect("the sweep reaches the band");

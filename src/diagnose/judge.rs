@@ -40,10 +40,11 @@ pub struct DiagnoseOptions {
     pub contact_min_relative_improvement: f64,
     /// Runs of each model whose errors judge a candidate on the impact band: the model as
     /// given and `band_members - 1` draws from perturbed states at the band's steps
-    /// ([`ModelRunner::run_members`]); the error is their RMS. Default 3: one run of a
-    /// non-periodic response is one draw, and a right model's draw can land on another
-    /// attractor than the rig's in a step or two (BENCHMARKS.md, "The judge's errors in the
-    /// band over three draws").
+    /// ([`ModelRunner::run_members`]); the error takes each step's median over them
+    /// ([`members_error`]). Default 3: one run of a non-periodic response is one draw, and a
+    /// right model's draw can land on another attractor than the rig's in a step or two
+    /// (BENCHMARKS.md, "The judge's errors in the band over three draws", "The judge's draws
+    /// compared per step").
     pub band_members: usize,
     /// Threads for model runs.
     pub jobs: usize,
@@ -94,22 +95,9 @@ pub(super) fn set_error_of(
 ) -> Option<f64> {
     let (mut sum, mut n) = (0.0, 0usize);
     for s in scores.iter().filter(|s| tests.contains(&s.test_index)) {
-        let keep = match which {
-            Steps::ImpactFree => s.regime != Regime::Impacts,
-            Steps::All => true,
-        };
-        if !keep {
-            continue;
-        }
-        for f in &s.features {
-            if which == Steps::ImpactFree && f.channel == "contact" {
-                continue;
-            }
-            if channel.is_some_and(|c| c != f.channel) {
-                continue;
-            }
-            sum += f.score * f.score;
-            n += 1;
+        if let Some((ss, k)) = step_squares(s, which, channel) {
+            sum += ss;
+            n += k;
         }
     }
     (n > 0).then(|| (sum / n as f64).sqrt())
@@ -120,20 +108,74 @@ pub(super) fn set_error(scores: &[StepScores], tests: &[usize], which: Steps) ->
     set_error_of(scores, tests, which, None)
 }
 
-/// The root mean square of `errors` (None without any).
-fn rms(errors: &[f64]) -> Option<f64> {
-    (!errors.is_empty())
-        .then(|| (errors.iter().map(|e| e * e).sum::<f64>() / errors.len() as f64).sqrt())
+/// The sum of the squared scores of step `s`'s features [`set_error_of`] counts, and how
+/// many they are; None where the step is not in `which`.
+fn step_squares(s: &StepScores, which: Steps, channel: Option<&str>) -> Option<(f64, usize)> {
+    if which == Steps::ImpactFree && s.regime == Regime::Impacts {
+        return None;
+    }
+    let (mut sum, mut n) = (0.0, 0usize);
+    for f in &s.features {
+        if which == Steps::ImpactFree && f.channel == "contact" {
+            continue;
+        }
+        if channel.is_some_and(|c| c != f.channel) {
+            continue;
+        }
+        sum += f.score * f.score;
+        n += 1;
+    }
+    Some((sum, n))
 }
 
-/// The RMS of the train and of the validation errors of `errors` (None without any).
-fn rms_of(errors: &[SetError]) -> Option<SetError> {
-    let train: Vec<f64> = errors.iter().map(|e| e.train).collect();
-    let validation: Vec<f64> = errors.iter().map(|e| e.validation).collect();
-    Some(SetError {
-        train: rms(&train)?,
-        validation: rms(&validation)?,
-    })
+/// [`set_error_of`] over several runs of one model (`members`, each over the same steps):
+/// per step, the median over the runs of the mean squared score of its features; the root of
+/// their mean, weighted by the features' count. None where a run compares nothing.
+///
+/// A step of the chaotic band is one draw per run, and a run can land on another attractor
+/// than the rig's at a step or two, e.g. stay on the impacting branch a step past where the
+/// rig dropped off it: that run's score there is ten times the others'. The median keeps the
+/// typical draw's; a mean would let one such step decide between two models (BENCHMARKS.md,
+/// "The judge's draws compared per step").
+pub(super) fn members_error(
+    members: &[Vec<StepScores>],
+    tests: &[usize],
+    which: Steps,
+    channel: Option<&str>,
+) -> Option<f64> {
+    if members
+        .iter()
+        .any(|m| set_error_of(m, tests, which, channel).is_none())
+    {
+        return None;
+    }
+    let mut steps: std::collections::BTreeMap<(usize, usize), Vec<(f64, usize)>> =
+        std::collections::BTreeMap::new();
+    for s in members.iter().flatten() {
+        if !tests.contains(&s.test_index) {
+            continue;
+        }
+        if let Some((sum, n)) = step_squares(s, which, channel).filter(|&(_, n)| n > 0) {
+            steps
+                .entry((s.test_index, s.step))
+                .or_default()
+                .push((sum / n as f64, n));
+        }
+    }
+    let (mut sum, mut n) = (0.0, 0usize);
+    for runs in steps.values_mut() {
+        runs.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let k = runs.len();
+        let median = if k % 2 == 1 {
+            runs[k / 2].0
+        } else {
+            0.5 * (runs[k / 2 - 1].0 + runs[k / 2].0)
+        };
+        let count = runs.iter().map(|r| r.1).max().unwrap_or(0);
+        sum += median * count as f64;
+        n += count;
+    }
+    (n > 0).then(|| (sum / n as f64).sqrt())
 }
 
 /// A candidate effect.
@@ -422,7 +464,8 @@ impl<'a> Work<'a> {
     /// with `where_fitted`, on the steps its fit compared ([`Candidate::judged_where_fitted`]).
     ///
     /// A candidate judged on the impact band is judged over [`Work::members`] runs of each
-    /// model: the errors are the RMS of the members' ([`DiagnoseOptions::band_members`]).
+    /// model ([`DiagnoseOptions::band_members`]): the errors take each step's median over
+    /// them ([`members_error`]).
     pub(super) fn errors(
         &mut self,
         ext: &PhysicsSpec,
@@ -430,18 +473,14 @@ impl<'a> Work<'a> {
         where_fitted: bool,
     ) -> Result<Option<SetError>, DiagnoseError> {
         let spans = Self::judged_spans(c, where_fitted);
-        let mut of_members = Vec::new();
+        let mut runs = Vec::new();
         for member in 0..self.members(c.steps) {
-            let s = self.member_scores(ext, &spans, member)?;
-            match (
-                set_error_of(&s, &c.train, c.steps, c.channel.as_deref()),
-                set_error_of(&s, &c.validation, c.steps, c.channel.as_deref()),
-            ) {
-                (Some(train), Some(validation)) => of_members.push(SetError { train, validation }),
-                _ => return Ok(None),
-            }
+            runs.push(self.member_scores(ext, &spans, member)?);
         }
-        Ok(rms_of(&of_members))
+        let channel = c.channel.as_deref();
+        Ok(members_error(&runs, &c.train, c.steps, channel)
+            .zip(members_error(&runs, &c.validation, c.steps, channel))
+            .map(|(train, validation)| SetError { train, validation }))
     }
 
     /// The runs of each model a candidate judged on `steps` is judged over: the band's
@@ -494,9 +533,9 @@ impl<'a> Work<'a> {
     /// Judges candidate `c` against the accepted model; accepts it if it predicts its
     /// validation tests better beyond the null spread. Returns whether accepted.
     ///
-    /// A candidate judged on the impact band (every step) is judged on the RMS of the errors of
-    /// [`Work::members`] runs of each model, the model before and the candidate's drawing the
-    /// same perturbations ([`ModelRunner::run_members`]). One that passes is judged again at a
+    /// A candidate judged on the impact band (every step) is judged on [`Work::members`] runs
+    /// of each model, each step's median over them ([`members_error`]), the model before and
+    /// the candidate's drawing the same perturbations ([`ModelRunner::run_members`]). One that passes is judged again at a
     /// twin step [`CONFIRM_REFINEMENT`] times finer, on its validation tests: the default
     /// twin over-counts contact in the band (its step, BENCHMARKS.md "Why the nominal twin
     /// over-counts contact"), and a smaller clearance or a tilt can absorb part of that
@@ -514,9 +553,10 @@ impl<'a> Work<'a> {
             c.evidence["judged_over_runs"] = serde_json::json!({
                 "members": members,
                 "perturbation": self.runner.perturbation(),
+                "per_step": "the median over the runs of the step's mean squared score",
             });
         }
-        self.show(&c, (members > 1).then(|| format!("each model's error the RMS of {members} runs from perturbed states in the band")).as_deref());
+        self.show(&c, (members > 1).then(|| format!("each model's error per step the median of {members} runs from perturbed states in the band")).as_deref());
         let (ok, before, after, reason) = self.judge_on_whole_tests(&mut c)?;
         let Some(w) = c.where_fitted.clone().filter(|_| !ok) else {
             return Ok(self.record(c, before, after, ok, reason));
@@ -558,15 +598,11 @@ impl<'a> Work<'a> {
         let whole: Vec<Span> = validation.iter().map(|&t| Span::whole(t)).collect();
         let members = self.members(steps);
         let fine = |w: &mut Self, ext: &PhysicsSpec| -> Result<Option<f64>, DiagnoseError> {
-            let mut of_members = Vec::new();
+            let mut runs = Vec::new();
             for member in 0..members {
-                let s = w.member_scores(ext, &whole, member)?;
-                match set_error_of(&s, &validation, steps, channel.as_deref()) {
-                    Some(e) => of_members.push(e),
-                    None => return Ok(None),
-                }
+                runs.push(w.member_scores(ext, &whole, member)?);
             }
-            Ok(rms(&of_members))
+            Ok(members_error(&runs, &validation, steps, channel.as_deref()))
         };
         let both = self.prefetch_members(
             (0..members)
@@ -838,5 +874,66 @@ mod tests {
     fn tests_split_alternately() {
         assert_eq!(alternate(&[3, 5, 6, 9]), (vec![3, 6], vec![5, 9]));
         assert_eq!(alternate(&[2]), (vec![2], vec![]));
+    }
+
+    /// A step of test `test` with one `contact` and one `lower_tip` feature of these scores.
+    fn step(test: usize, step: usize, regime: Regime, scores: [f64; 2]) -> StepScores {
+        let feature = |channel: &str, score: f64| crate::twin::compare::FeatureComparison {
+            channel: channel.to_string(),
+            feature: "rms".to_string(),
+            measured: 1.0,
+            measured_spread: None,
+            model: 1.0,
+            model_spread: None,
+            score,
+        };
+        StepScores {
+            test: format!("t{test}"),
+            test_index: test,
+            step,
+            omega_ratio: 1.0,
+            regime,
+            level: 2e-5,
+            features: vec![
+                feature("contact", scores[0]),
+                feature("lower_tip", scores[1]),
+            ],
+        }
+    }
+
+    #[test]
+    fn runs_of_a_model_are_judged_by_each_steps_median() {
+        // Three runs over two band steps of test 0 and one of test 1: the second run lands on
+        // another attractor at step 1 (scores 20).
+        let run = |s1: f64, s0: f64, t1: f64| {
+            vec![
+                step(0, 0, Regime::Impacts, [s0, s0]),
+                step(0, 1, Regime::Impacts, [s1, s1]),
+                step(1, 0, Regime::ImpactFreeHigh, [t1, 3.0 * t1]),
+            ]
+        };
+        let runs = [run(1.0, 2.0, 1.0), run(20.0, 3.0, 2.0), run(2.0, 1.0, 3.0)];
+        // Test 0, per step: median of the mean squares {4, 9, 1} = 4 and {1, 400, 4} = 4.
+        let e = members_error(&runs, &[0], Steps::All, None).unwrap();
+        assert!((e - 2.0).abs() < 1e-12, "{e}");
+        // The plain error of each run alone, for contrast: the outlier run's is 14.3.
+        let alone = set_error_of(&runs[1], &[0], Steps::All, None).unwrap();
+        assert!((alone - (409.0f64 / 2.0).sqrt()).abs() < 1e-12, "{alone}");
+        // Impact-free steps leave out the contact channel; one channel alone is its features.
+        let e = members_error(&runs, &[1], Steps::ImpactFree, None).unwrap();
+        assert!((e - 6.0).abs() < 1e-12, "{e}");
+        let e = members_error(&runs, &[0, 1], Steps::All, Some("contact")).unwrap();
+        assert!(
+            (e - ((4.0 + 4.0 + 4.0) / 3.0f64).sqrt()).abs() < 1e-12,
+            "{e}"
+        );
+        // One run is the plain error; an even count takes the mean of the middle two.
+        let e = members_error(&runs[..1], &[0, 1], Steps::All, None).unwrap();
+        assert_eq!(Some(e), set_error_of(&runs[0], &[0, 1], Steps::All, None));
+        let e = members_error(&runs[..2], &[0], Steps::All, None).unwrap();
+        assert!((e - ((6.5 + 200.5) / 2.0f64).sqrt()).abs() < 1e-12, "{e}");
+        // A run that compares nothing there: no error.
+        assert_eq!(members_error(&runs, &[2], Steps::All, None), None);
+        assert_eq!(members_error(&runs, &[0], Steps::ImpactFree, None), None);
     }
 }

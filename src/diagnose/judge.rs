@@ -535,15 +535,15 @@ impl<'a> Work<'a> {
     ///
     /// A candidate judged on the impact band (every step) is judged on [`Work::members`] runs
     /// of each model, each step's median over them ([`members_error`]), the model before and
-    /// the candidate's drawing the same perturbations ([`ModelRunner::run_members`]). One that passes is judged again at a
-    /// twin step [`CONFIRM_REFINEMENT`] times finer, on its validation tests: the default
-    /// twin over-counts contact in the band (its step, BENCHMARKS.md "Why the nominal twin
-    /// over-counts contact"), and a smaller clearance or a tilt can absorb part of that
-    /// excess (on `identify.toml` with nothing hidden, a tilt of -0.012 rad lowered the
-    /// validation error 3x at the twin's step). What passes at the finer step as well is
-    /// missing physics; what does not is the twin's own discretisation. A candidate with wear
-    /// runs each validation test there from its lead-in, worn as the run at the twin's step
-    /// left it ([`ModelRunner::set_wear_from`]).
+    /// the candidate's drawing the same perturbations ([`ModelRunner::run_members`]). One
+    /// that passes is judged again at a twin step [`CONFIRM_REFINEMENT`] times finer, on its
+    /// validation tests: the default twin over-counts contact in the band (its step,
+    /// BENCHMARKS.md "Why the nominal twin over-counts contact"), and a smaller clearance or a
+    /// tilt can absorb part of that excess (on `identify.toml` with nothing hidden, a tilt of
+    /// -0.012 rad lowered the validation error 3x at the twin's step). What passes at the
+    /// finer step as well is missing physics; what does not is the twin's own
+    /// discretisation. A candidate with wear runs each validation test there from its
+    /// lead-in, worn as the run at the twin's step left it ([`ModelRunner::set_wear_from`]).
     ///
     /// A candidate that also names where it was fitted ([`Candidate::judged_where_fitted`])
     /// and is not accepted so is judged there as well ([`Work::judge_where_fitted`]).

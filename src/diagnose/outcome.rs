@@ -174,7 +174,8 @@ pub struct ValidationWithSpread {
     pub after: f64,
 }
 
-/// An error on a set of steps: the RMS of the compared features' scores.
+/// An error on a set of steps: the RMS of the compared features' scores (for a candidate
+/// judged on the impact band, each step's median over the runs of each model).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct SetError {
     /// Error on the steps the effect was fitted on, -.

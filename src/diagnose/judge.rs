@@ -33,20 +33,11 @@ pub struct DiagnoseOptions {
     /// band is non-periodic and the nominal twin's own truncation scores its steps around 4-6
     /// where the rig matches the model (BENCHMARKS.md, "The comparison's spread").
     pub contact_null_spread: f64,
-    /// The share of the error before such an effect must remove where it was fitted
-    /// ([`Candidate::judged_where_fitted`]), -. Default 0.5: on `identify.toml` with nothing
-    /// hidden, a smaller clearance absorbs part of the twin's truncation error and lowers the
-    /// validation error 1.3x; a hidden +14 % clearance lowers it 4x.
+    /// The share of the error before such an effect must remove, -. Default 0.5: on
+    /// `identify.toml` with nothing hidden, a smaller clearance absorbs part of the twin's
+    /// truncation error and lowers the validation error 1.3x; a hidden +14 % clearance
+    /// lowers it 4x.
     pub contact_min_relative_improvement: f64,
-    /// The share of the error before such an effect must remove at the finer twin step that
-    /// confirms it ([`CONFIRM_REFINEMENT`]), -. Default 0.3. At the twin's own step such an
-    /// effect is asked the impact-free share (`min_relative_improvement`): the finer step,
-    /// not a share, tells the default twin's contact excess from missing physics (a tilt had
-    /// absorbed it 3x at the twin's step on `identify.toml` with nothing hidden). At the finer
-    /// step that excess is gone, and hidden effects removed 47-76 % of the error there; the
-    /// null session's clearance 2 % (BENCHMARKS.md, "The band's share asked at the finer
-    /// step").
-    pub confirm_min_relative_improvement: f64,
     /// Runs of each model whose errors judge a candidate on the impact band: the model as
     /// given and `band_members - 1` draws from perturbed states at the band's steps
     /// ([`ModelRunner::run_members`]); the error takes each step's median over them
@@ -68,7 +59,6 @@ impl Default for DiagnoseOptions {
             min_relative_improvement: 0.2,
             contact_null_spread: 1.0,
             contact_min_relative_improvement: 0.5,
-            confirm_min_relative_improvement: 0.3,
             band_members: 3,
             jobs: 1,
         }
@@ -587,9 +577,7 @@ impl<'a> Work<'a> {
     ) -> Result<(bool, Option<SetError>, Option<SetError>, String), DiagnoseError> {
         let accepted = self.accepted.clone();
         let (before, after) = self.errors_before_after(&accepted, c, false)?;
-        // NOTE: at the twin's step a band candidate is asked the impact-free share; its
-        // confirmation at the finer step below asks the band's.
-        let (ok, reason) = self.assess_with(c, before, after, self.opts.min_relative_improvement);
+        let (ok, reason) = self.assess(c, before, after);
         if !ok || c.steps != Steps::All {
             return Ok((ok, before, after, reason));
         }
@@ -637,16 +625,12 @@ impl<'a> Work<'a> {
                 validation,
             })
         };
-        // NOTE: the finer step asks a smaller share than where-fitted judging does: the
-        // finer twin's chaotic band lands on other attractors than the default one's (a
-        // hidden +14 % clearance: 2.37 -> 0.59 at the twin's step, 4.74 -> 2.53 at the 3x
-        // finer one).
-        let (ok2, reason2) = self.assess_with(
-            c,
-            as_set(fb, before),
-            as_set(fa, after),
-            self.opts.confirm_min_relative_improvement,
-        );
+        // NOTE: the finer step asks the fall beyond the null spread and the penalty, not
+        // the regime's share: the share guards against the default twin's own contact excess,
+        // which the finer step removes, while the finer twin's chaotic band lands on other
+        // attractors than the default one's (a hidden +14 % clearance: 2.37 -> 0.59 at the
+        // twin's step, 4.74 -> 2.53 at the 3x finer one).
+        let (ok2, reason2) = self.assess_with(c, as_set(fb, before), as_set(fa, after), false);
         c.evidence["finer_twin_step"] = serde_json::json!({
             "refinement": own * CONFIRM_REFINEMENT,
             "validation_before": fb,
@@ -682,7 +666,7 @@ impl<'a> Work<'a> {
         let fitted_step = self.errors_before_after(&accepted, &c, true);
         self.runner.set_refinement(own);
         let (before, after) = fitted_step?;
-        let (ok, reason) = self.assess(&c, before, after);
+        let (ok, reason) = self.assess_with(&c, before, after, true);
         c.evidence["judged_on"] = serde_json::json!({
             "steps": w.what,
             "refinement": own * w.refinement,
@@ -736,28 +720,30 @@ impl<'a> Work<'a> {
         before: Option<SetError>,
         after: Option<SetError>,
     ) -> (bool, String) {
-        let share = match c.steps {
-            Steps::All => self.opts.contact_min_relative_improvement,
-            Steps::ImpactFree => self.opts.min_relative_improvement,
-        };
-        self.assess_with(c, before, after, share)
+        self.assess_with(c, before, after, true)
     }
 
-    /// [`Work::assess`], asking the share `share` of the error before.
+    /// [`Work::assess`], asking the regime's share of the error before only with `share`.
     fn assess_with(
         &self,
         c: &Candidate,
         before: Option<SetError>,
         after: Option<SetError>,
-        share: f64,
+        share: bool,
     ) -> (bool, String) {
         match (before, after) {
             (Some(b), Some(a)) => {
                 let gain = b.validation - a.validation;
-                let null = match c.steps {
-                    Steps::All => self.opts.contact_null_spread,
-                    Steps::ImpactFree => self.opts.null_spread,
+                let (null, regime_share) = match c.steps {
+                    Steps::All => (
+                        self.opts.contact_null_spread,
+                        self.opts.contact_min_relative_improvement,
+                    ),
+                    Steps::ImpactFree => {
+                        (self.opts.null_spread, self.opts.min_relative_improvement)
+                    }
                 };
+                let share = if share { regime_share } else { 0.0 };
                 let needed = null + self.opts.parameter_penalty * c.n_params as f64;
                 if a.validation >= b.validation {
                     (

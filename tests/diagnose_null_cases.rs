@@ -23,7 +23,8 @@ use std::path::PathBuf;
 use std::sync::OnceLock;
 
 use diagnose_support::{
-    accepted, assert_null, assert_replay_gives_the_after_scores, diagnose, repo_plan, sim_session,
+    accepted, assert_null, assert_replay_gives_the_after_scores, diagnose, process_dir, repo_plan,
+    sim_session,
 };
 use rigtwin::config::RigConfig;
 use serde_json::Value;
@@ -82,16 +83,11 @@ fn band_within_the_spread(d: &Value) {
 }
 
 /// The demo plan on the nominal rig, recorded once per process for the tests of this file
-/// that diagnose it (in cargo's folder for integration tests' files, made afresh by each
-/// process of this test binary: `cargo test` runs both tests in one, `cargo nextest` each in
-/// its own): (its folder, the stripped log).
+/// that diagnose it ([`process_dir`]): (its folder, the stripped log).
 fn demo_session() -> &'static (PathBuf, PathBuf) {
     static SESSION: OnceLock<(PathBuf, PathBuf)> = OnceLock::new();
     SESSION.get_or_init(|| {
-        let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
-            .join(format!("diagnose_null_cases-demo-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
+        let dir = process_dir("diagnose_null_cases-demo");
         let (_, stripped) = sim_session(&dir, "demo", "", &repo_plan("demo.toml"));
         (dir, stripped)
     })

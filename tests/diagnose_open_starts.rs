@@ -23,7 +23,7 @@ mod diagnose_support;
 use std::path::PathBuf;
 use std::sync::OnceLock;
 
-use diagnose_support::sim_session;
+use diagnose_support::{process_dir, sim_session};
 use rigtwin::config::{ClearanceSpec, PhysicsSpec, RigConfig, TiltSpec, WearSpec};
 use rigtwin::diagnose::rerun::{MemberRun, ModelRunner, SessionSteps, Span};
 use rigtwin::session::replay::{replay, Replay};
@@ -47,14 +47,12 @@ omega_end = 0.98
 steps = 6
 "#;
 
-/// The log of `PLAN` on the simulated rig, recorded once for the tests that replay it.
+/// The log of `PLAN` on the simulated rig, recorded once per process for the tests that
+/// replay it ([`process_dir`]).
 fn down_session() -> &'static PathBuf {
     static SESSION: OnceLock<PathBuf> = OnceLock::new();
     SESSION.get_or_init(|| {
-        let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
-            .join(format!("diagnose_open_starts-down-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
+        let dir = process_dir("diagnose_open_starts-down");
         sim_session(&dir, "down", "[safety]\ndaq_timeout_s = 30\n", PLAN).0
     })
 }

@@ -95,10 +95,7 @@ pub(super) fn set_error_of(
 ) -> Option<f64> {
     let (mut sum, mut n) = (0.0, 0usize);
     for s in scores.iter().filter(|s| tests.contains(&s.test_index)) {
-        if let Some((ss, k)) = step_squares(s, which, channel) {
-            sum += ss;
-            n += k;
-        }
+        add_step_squares(s, which, channel, &mut sum, &mut n);
     }
     (n > 0).then(|| (sum / n as f64).sqrt())
 }
@@ -108,13 +105,18 @@ pub(super) fn set_error(scores: &[StepScores], tests: &[usize], which: Steps) ->
     set_error_of(scores, tests, which, None)
 }
 
-/// The sum of the squared scores of step `s`'s features [`set_error_of`] counts, and how
-/// many they are; None where the step is not in `which`.
-fn step_squares(s: &StepScores, which: Steps, channel: Option<&str>) -> Option<(f64, usize)> {
+/// Adds the squared scores of the features of step `s` that [`set_error_of`] counts to
+/// `sum`, and their count to `n` (none where the step is not in `which`).
+fn add_step_squares(
+    s: &StepScores,
+    which: Steps,
+    channel: Option<&str>,
+    sum: &mut f64,
+    n: &mut usize,
+) {
     if which == Steps::ImpactFree && s.regime == Regime::Impacts {
-        return None;
+        return;
     }
-    let (mut sum, mut n) = (0.0, 0usize);
     for f in &s.features {
         if which == Steps::ImpactFree && f.channel == "contact" {
             continue;
@@ -122,10 +124,9 @@ fn step_squares(s: &StepScores, which: Steps, channel: Option<&str>) -> Option<(
         if channel.is_some_and(|c| c != f.channel) {
             continue;
         }
-        sum += f.score * f.score;
-        n += 1;
+        *sum += f.score * f.score;
+        *n += 1;
     }
-    Some((sum, n))
 }
 
 /// [`set_error_of`] over several runs of one model (`members`, each over the same steps):
@@ -143,23 +144,23 @@ pub(super) fn members_error(
     which: Steps,
     channel: Option<&str>,
 ) -> Option<f64> {
-    if members
-        .iter()
-        .any(|m| set_error_of(m, tests, which, channel).is_none())
-    {
-        return None;
-    }
     let mut steps: std::collections::BTreeMap<(usize, usize), Vec<(f64, usize)>> =
         std::collections::BTreeMap::new();
-    for s in members.iter().flatten() {
-        if !tests.contains(&s.test_index) {
-            continue;
+    for run in members {
+        let mut compared = false;
+        for s in run.iter().filter(|s| tests.contains(&s.test_index)) {
+            let (mut sum, mut n) = (0.0, 0usize);
+            add_step_squares(s, which, channel, &mut sum, &mut n);
+            if n > 0 {
+                compared = true;
+                steps
+                    .entry((s.test_index, s.step))
+                    .or_default()
+                    .push((sum / n as f64, n));
+            }
         }
-        if let Some((sum, n)) = step_squares(s, which, channel).filter(|&(_, n)| n > 0) {
-            steps
-                .entry((s.test_index, s.step))
-                .or_default()
-                .push((sum / n as f64, n));
+        if !compared {
+            return None;
         }
     }
     let (mut sum, mut n) = (0.0, 0usize);
@@ -395,6 +396,19 @@ impl<'a> Work<'a> {
         Ok(s)
     }
 
+    /// [`Work::member_scores`] of the members `0..members`, one run each ([`members_error`]
+    /// judges them).
+    fn member_runs(
+        &mut self,
+        ext: &PhysicsSpec,
+        spans: &[Span],
+        members: usize,
+    ) -> Result<Vec<Vec<StepScores>>, DiagnoseError> {
+        (0..members)
+            .map(|m| self.member_scores(ext, spans, m))
+            .collect()
+    }
+
     /// What a run of `ext` over `spans` is remembered by: the model, the steps, the twin step's
     /// refinement, and, with wear, where its tests start ([`ModelRunner::set_wear_from`]).
     fn cache_key(
@@ -473,10 +487,7 @@ impl<'a> Work<'a> {
         where_fitted: bool,
     ) -> Result<Option<SetError>, DiagnoseError> {
         let spans = Self::judged_spans(c, where_fitted);
-        let mut runs = Vec::new();
-        for member in 0..self.members(c.steps) {
-            runs.push(self.member_scores(ext, &spans, member)?);
-        }
+        let runs = self.member_runs(ext, &spans, self.members(c.steps))?;
         let channel = c.channel.as_deref();
         Ok(members_error(&runs, &c.train, c.steps, channel)
             .zip(members_error(&runs, &c.validation, c.steps, channel))
@@ -598,10 +609,7 @@ impl<'a> Work<'a> {
         let whole: Vec<Span> = validation.iter().map(|&t| Span::whole(t)).collect();
         let members = self.members(steps);
         let fine = |w: &mut Self, ext: &PhysicsSpec| -> Result<Option<f64>, DiagnoseError> {
-            let mut runs = Vec::new();
-            for member in 0..members {
-                runs.push(w.member_scores(ext, &whole, member)?);
-            }
+            let runs = w.member_runs(ext, &whole, members)?;
             Ok(members_error(&runs, &validation, steps, channel.as_deref()))
         };
         let both = self.prefetch_members(

@@ -22,6 +22,17 @@ use anyhow::{bail, Context};
 use rigtwin::config::RigConfig;
 use rigtwin::log::{read_session, write_atomically, SessionRead};
 
+/// A folder `name` for what the tests of one test binary share (a session recorded once per
+/// process), in cargo's folder for integration tests' files, made afresh by each process:
+/// `cargo test` runs a binary's tests in one, `cargo nextest` each in its own.
+pub fn process_dir(name: &str) -> std::path::PathBuf {
+    let dir = std::path::PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
 /// The plan file `name` of the repository's `rig-config/plans/`.
 pub fn repo_plan(name: &str) -> String {
     std::fs::read_to_string(format!(

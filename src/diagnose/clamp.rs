@@ -296,7 +296,7 @@ pub(super) fn clamp_stage(work: &mut Work<'_>, lin: &LinearEvidence) -> Result<(
     };
     // NOTE: the fit's runs cover each test's steps near its resonance before its first
     // measured contact ([`super::rerun::SessionSteps::near_resonance`]), each from rest at
-    // the step before: the clamp is fitted on impact-free steps, a band test's contact and
+    // its lead-in: the clamp is fitted on impact-free steps, a band test's contact and
     // the steps past it are chaotic and slow to run, and off resonance the joint hardly
     // slips. The judgement runs the whole tests.
     let near_resonance = |tests: &[usize]| -> Vec<Span> {

@@ -164,8 +164,8 @@ name = "quiet"
 level = 3e-6
 direction = "up"
 omega_start = 0.90
-omega_end = 0.91
-steps = 2
+omega_end = 0.915
+steps = 4
 
 [[test]]
 name = "again"
@@ -178,7 +178,7 @@ steps = 3
 
 /// `ModelRunner::set_wear_from`: a run of a model with wear starts a test from rest at its
 /// lead-in, with the clearance and wear a run from the session's start at the twin's own step
-/// had there. The lead-in of `again` (the last step of `quiet`) has no contact, so the normal
+/// had there. The lead-in of `again` (the last three steps of `quiet`) has no contact, so the normal
 /// contact impulse at `again`'s start is the run from the start's exactly, at the twin's step
 /// and at a 3x finer one (where a finer run from the session's start exchanges its own).
 #[test]

@@ -178,9 +178,10 @@ steps = 3
 
 /// `ModelRunner::set_wear_from`: a run of a model with wear starts a test from rest at its
 /// lead-in, with the clearance and wear a run from the session's start at the twin's own step
-/// had there. The lead-in of `again` (the last three steps of `quiet`) has no contact, so the normal
-/// contact impulse at `again`'s start is the run from the start's exactly, at the twin's step
-/// and at a 3x finer one (where a finer run from the session's start exchanges its own).
+/// had there. The lead-in of `again` (the last three steps of `quiet`) has no contact, so
+/// the normal contact impulse at `again`'s start is the run from the start's exactly, at the
+/// twin's step and at a 3x finer one (where a finer run from the session's start exchanges
+/// its own).
 #[test]
 fn a_run_with_wear_starts_a_test_worn_as_the_twins_step_left_it() {
     let dir = tempfile::tempdir().unwrap();

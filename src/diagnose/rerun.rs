@@ -292,8 +292,9 @@ pub enum LeadIn {
     /// Before the test's first step (the previous test's last steps, or the session's
     /// start): the steps before the span's first run too, and shape the state it starts in.
     Test,
-    /// Before the span's first step: the test's steps before the lead-in are not run (a span whose
-    /// steps depend on the earlier ones only through a free transient that has decayed).
+    /// Before the span's first step: the test's steps before the lead-in are not run (a span
+    /// whose steps depend on the earlier ones only through a free transient that has
+    /// decayed).
     Span,
 }
 
@@ -1177,7 +1178,7 @@ mod tests {
     }
 
     #[test]
-    fn the_steps_near_a_resonance_run_from_the_step_before() {
+    fn the_steps_near_a_resonance_run_from_their_own_lead_in() {
         let a = [30.0, 32.0, 40.0, 70.0, 130.0, 90.0, 50.0, 35.0];
         let b = [10.0, 12.0, 20.0, 30.0, 50.0, 80.0];
         let s = session(&a, &b, 4);

@@ -23,9 +23,9 @@
 //! "Wear on six probes, and the clearance at the contact onsets"; their latest runs: "The
 //! judge's draws compared per step", where the clamp friction and wear case and the nulls
 //! hold, and the 2.5e-5 six-probe wear and the 0.02 rad tilt do not; since the three-step
-//! lead-in, "A run's lead-in from rest", the same recordings diagnosed by hand: the wear on
-//! `identify.toml` holds, the 0.03 rad tilt's angle is 21 % off and the clamp friction and
-//! wear case misses the wear).
+//! lead-in, "A run's lead-in from rest": the wear on `identify.toml` holds (its recording
+//! diagnosed by hand), the 0.03 rad tilt fails on its angle, 21 % off (run as a test), and
+//! the clamp friction and wear case misses the wear (its recording diagnosed by hand).
 
 mod cli_support;
 mod diagnose_support;

@@ -185,9 +185,9 @@ impl SessionSteps {
     /// base's, summed) rises above the span's smallest by at least `fraction` of the largest
     /// rise, run from rest at their own lead-in ([`LeadIn::Span`]). Off resonance the tips move
     /// little and a joint in the clamp hardly slips: those steps carry little of the evidence
-    /// a resonance fit looks for, and a run from rest at a step below the cut starts with a
-    /// free transient that small, decayed over that step and the next one's settling (250
-    /// periods and more) before the first compared record window.
+    /// a resonance fit looks for, and a run from rest at steps below the cut starts with a
+    /// free transient that small, decayed over the lead-in's steps and the first one's
+    /// settling ([`LEAD_IN_STEPS`]) before the first compared record window.
     pub fn near_resonance(&self, ti: usize, fraction: f64) -> Option<Span> {
         let span = self.before_contact(ti)?;
         let size = |s: &SessionStep| s.measured.metrics.rms_upper + s.measured.metrics.rms_lower;
@@ -257,8 +257,8 @@ impl SessionSteps {
         k.checked_sub(LEAD_IN_STEPS).map(|k| self.starts[k].2)
     }
 
-    /// The sample where a run of `span` from rest starts ([`LeadIn`]); `None` for the
-    /// session's first step.
+    /// The sample where a run of `span` from rest starts ([`LeadIn`]); `None` (the
+    /// recording's start) where fewer than [`LEAD_IN_STEPS`] steps come before it.
     fn lead_in_of(&self, span: &Span) -> Option<u64> {
         if span.lead_in == LeadIn::Test || span.from == 0 {
             return self.lead_in(span.test);

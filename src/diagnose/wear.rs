@@ -14,9 +14,10 @@
 //!    the wear counter on and a zero coefficient
 //!    ([`super::rerun::ModelRunner::contact_impulse`]): what the contact exchanged before the
 //!    test's first impact.
-//! 3. The clearances against `P`: a straight line `c - c_plan = a + k P`. A constant offset
-//!    has no trend with `P` (`k` within 3 standard errors of zero, or a growth over the
-//!    session below 2 % of the plan's clearance): no wear, the pipeline's clearance stage
+//! 3. The clearances against `P`: a straight line `c - c_plan = a + k P`, each point weighted
+//!    by the inverse of its own variance ([`weights_of`]). A constant offset has no trend
+//!    with `P` (`k` within 3 standard errors of zero, or a growth over the session below 2 %
+//!    of the plan's clearance): no wear, the pipeline's clearance stage
 //!    judges the offset. A trend is wear: its coefficient `k` (m/(N s)) from the train tests'
 //!    points, then made consistent with the model's own impulse under that wear (the line's
 //!    fixed point: the session re-run with the coefficient, the train tests' clearances
@@ -55,6 +56,27 @@ fn fixed_point(runs: &[(f64, f64)]) -> Option<f64> {
     (k > 0.0 && k <= top).then_some(k)
 }
 
+/// How many times a relative error of the model's contact impulse is the relative error it
+/// makes in the coefficient [`fixed_point`] finds from the same `runs`: `1 / (1 - b)` for the
+/// runs' line `a + b k` (an impulse low by a fraction `e` raises every slope by about `e`, and
+/// the fixed point `a / (1 - b)` by `e / (1 - b)`). `None` where [`fixed_point`] has no line,
+/// or one as steep as 1.
+///
+/// NOTE: 1.0-1.5 where the wear was found within 20 % on `identify.toml` and the six-probe
+/// plan; 2.9 and 3.8 on two diagnoses of one `identify.toml` session with a hidden 3.5e-5
+/// m/(N s) (+57 % and +96 %): there the clearance grows by 600 um, 85 % of the plan's, and
+/// the contact that wears it fades as it grows, so a larger coefficient buys little more
+/// growth and the last test's clearance says little about the coefficient (BENCHMARKS.md,
+/// "Wear points weighted by their own spread").
+fn impulse_error_gain(runs: &[(f64, f64)]) -> Option<f64> {
+    let l = line(runs)?;
+    (l.slope < 1.0).then(|| 1.0 / (1.0 - l.slope))
+}
+
+/// The [`impulse_error_gain`] above which the wear stage says the coefficient is poorly
+/// conditioned.
+const CONDITIONED_GAIN: f64 = 2.0;
+
 /// A least-squares line `y = a + k x` ([`line`]).
 #[derive(Clone, Copy, Debug)]
 struct Line {
@@ -71,26 +93,37 @@ struct Line {
 /// The least-squares line through `points`; `None` with fewer than two points or no spread in
 /// `x`.
 fn line(points: &[(f64, f64)]) -> Option<Line> {
+    weighted_line(points, &vec![1.0; points.len()])
+}
+
+/// The weighted least-squares line through `points` (`weights`, one per point, positive: the
+/// inverse of each point's variance); `None` with fewer than two points or no spread in `x`.
+/// The standard errors scale with the residuals (the weights give the points' relative
+/// variances, not their absolute ones): equal weights are [`line`].
+fn weighted_line(points: &[(f64, f64)], weights: &[f64]) -> Option<Line> {
     let n = points.len();
-    if n < 2 {
+    if n < 2 || weights.len() != n {
         return None;
     }
     let nf = n as f64;
-    let mx = points.iter().map(|p| p.0).sum::<f64>() / nf;
-    let my = points.iter().map(|p| p.1).sum::<f64>() / nf;
-    let sxx: f64 = points.iter().map(|p| (p.0 - mx).powi(2)).sum();
+    let sw: f64 = weights.iter().sum();
+    let wsum = |f: &dyn Fn((f64, f64)) -> f64| -> f64 {
+        points.iter().zip(weights).map(|(&p, w)| w * f(p)).sum()
+    };
+    let mx = wsum(&|p| p.0) / sw;
+    let my = wsum(&|p| p.1) / sw;
+    let sxx = wsum(&|p| (p.0 - mx).powi(2));
     // NOTE: relative to the scale of x: equal x's leave a round-off spread, not zero.
-    let scale: f64 = points.iter().map(|p| p.0 * p.0).sum();
+    let scale = wsum(&|p| p.0 * p.0);
     if sxx.is_nan() || sxx <= 1e-12 * scale {
         return None;
     }
-    let sxy: f64 = points.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum();
+    let sxy = wsum(&|p| (p.0 - mx) * (p.1 - my));
     let k = sxy / sxx;
     let a = my - k * mx;
-    // The residuals' variance, NaN with two points (no degree of freedom left).
+    // The residuals' variance at unit weight, NaN with two points (no degree of freedom left).
     let s2 = if n > 2 {
-        let rss: f64 = points.iter().map(|p| (p.1 - a - k * p.0).powi(2)).sum();
-        rss / (nf - 2.0)
+        wsum(&|p| (p.1 - a - k * p.0).powi(2)) / (nf - 2.0)
     } else {
         f64::NAN
     };
@@ -98,15 +131,32 @@ fn line(points: &[(f64, f64)]) -> Option<Line> {
         intercept: a,
         slope: k,
         slope_se: (s2 / sxx).sqrt(),
-        intercept_se: (s2 * (1.0 / nf + mx * mx / sxx)).sqrt(),
+        intercept_se: (s2 * (1.0 / sw + mx * mx / sxx)).sqrt(),
     })
 }
 
-/// Least-squares slope of `y = k x` (no intercept); `None` without a nonzero `x`.
-fn slope_through_origin(points: &[(f64, f64)]) -> Option<f64> {
-    let sxx: f64 = points.iter().map(|p| p.0 * p.0).sum();
-    let sxy: f64 = points.iter().map(|p| p.0 * p.1).sum();
+/// Weighted least-squares slope of `y = k x` (no intercept; `weights` as in
+/// [`weighted_line`]); `None` without a nonzero `x`.
+fn slope_through_origin(points: &[(f64, f64)], weights: &[f64]) -> Option<f64> {
+    let sxx: f64 = points.iter().zip(weights).map(|(p, w)| w * p.0 * p.0).sum();
+    let sxy: f64 = points.iter().zip(weights).map(|(p, w)| w * p.0 * p.1).sum();
     (sxx > 0.0 && sxx.is_finite()).then(|| sxy / sxx)
+}
+
+/// The weights of the wear points' line: the inverse of each point's variance
+/// ([`WearPoint::spread_m`]); equal weights where a point has no finite positive spread.
+///
+/// NOTE: the points' spreads differ by up to ten times within a session (7-91 um on
+/// `identify.toml` with friction in the lower clamp beside a 2e-5 m/(N s) wear: the low-level
+/// down test's runs found a flat valley over 680-770 um). Unweighted, that point's +78 um
+/// (the rig's had not grown) made the slope 1.66e-5 m/(N s) +- 8.0e-6, no trend; weighted,
+/// 1.86e-5 +- 3.6e-6 (BENCHMARKS.md, "Wear points weighted by their own spread").
+fn weights_of(spreads: &[f64]) -> Vec<f64> {
+    if spreads.iter().all(|s| s.is_finite() && *s > 0.0) {
+        spreads.iter().map(|s| 1.0 / (s * s)).collect()
+    } else {
+        vec![1.0; spreads.len()]
+    }
 }
 
 /// Each test's accumulated normal contact impulse at its start (`impulse`, per test index, N s;
@@ -117,11 +167,12 @@ fn record_impulses(ce: &mut ClearanceEvidence, impulse: &[Option<f64>]) {
     }
 }
 
-/// A probe's clearance from its two estimates, m: the one refined by model runs within the
-/// bracket (`by_runs`, with its spread, `clearance_fit::valley_spread`) and the one at the
-/// contact onsets (`at_onsets`, with its standard error), each weighted by the inverse of its
-/// own variance; the runs' alone without onsets or without the onsets' standard error (a
-/// single onset reads tens of per cent off).
+/// A probe's clearance and its spread from its two estimates, (m, m): the one refined by model
+/// runs within the bracket (`by_runs`, with its spread, `clearance_fit::valley_spread`) and
+/// the one at the contact onsets (`at_onsets`, with its standard error), each weighted by the
+/// inverse of its own variance, and the combined spread (the inverse of the summed weights'
+/// root); the runs' alone without onsets or without the onsets' standard error (a single onset
+/// reads tens of per cent off).
 ///
 /// NOTE: each scatters by 2-5 % (15-50 um) on the wear proofs' probes, from different
 /// information (BENCHMARKS.md, "Wear on six probes, and the clearance at the contact
@@ -136,14 +187,14 @@ fn record_impulses(ce: &mut ClearanceEvidence, impulse: &[Option<f64>]) {
 /// the clearance to about 0.713; with friction in the lower clamp the onsets read 8-15 % high
 /// (0.785 mm +-92 um on the low-level down test, nothing grown from the plan's 0.699) where the
 /// model runs, whose model carries the fitted clamp, read 0.680 (+-45 um).
-fn measured_clearance(by_runs: (f64, f64), at_onsets: Option<(f64, Option<f64>)>) -> f64 {
+fn measured_clearance(by_runs: (f64, f64), at_onsets: Option<(f64, Option<f64>)>) -> (f64, f64) {
     let (r, sr) = by_runs;
     match at_onsets {
         Some((o, Some(so))) if o.is_finite() && o > 0.0 && so > 0.0 && sr > 0.0 => {
             let (wr, wo) = (1.0 / (sr * sr), 1.0 / (so * so));
-            (wr * r + wo * o) / (wr + wo)
+            ((wr * r + wo * o) / (wr + wo), (wr + wo).sqrt().recip())
         }
-        _ => r,
+        _ => (r, sr),
     }
 }
 
@@ -212,6 +263,9 @@ pub struct WearPoint {
     /// The measured clearance, m: the two estimates, [`Self::run_clearance_m`] and
     /// [`Self::onset_clearance_m`], as [`measured_clearance`] combines them.
     pub clearance_m: f64,
+    /// The measured clearance's spread, m ([`measured_clearance`]): its weight in the line.
+    #[serde(default)]
+    pub spread_m: f64,
     /// The clearance refined by model runs within the bracket, m.
     #[serde(default)]
     pub run_clearance_m: f64,
@@ -296,14 +350,16 @@ pub(super) fn wear_stage(
             continue;
         };
         if let Some(r) = test_clearance_by_runs(work, t)? {
+            let (clearance_m, spread_m) = measured_clearance(
+                (r.clearance_m, r.spread_m),
+                t.onset_clearance_m.map(|o| (o, t.onset_standard_error_m)),
+            );
             points.push(WearPoint {
                 test: t.test.clone(),
                 test_index: t.test_index,
                 contact_impulse_ns: p,
-                clearance_m: measured_clearance(
-                    (r.clearance_m, r.spread_m),
-                    t.onset_clearance_m.map(|o| (o, t.onset_standard_error_m)),
-                ),
+                clearance_m,
+                spread_m,
                 run_clearance_m: r.clearance_m,
                 run_spread_m: r.spread_m,
                 plan_clearance_m: t.plan_clearance_m,
@@ -333,13 +389,14 @@ pub(super) fn wear_stage(
     )));
     let xy = |p: &WearPoint| (p.contact_impulse_ns, p.clearance_m - p.plan_clearance_m);
     let all: Vec<(f64, f64)> = points.iter().map(xy).collect();
+    let w_all = weights_of(&points.iter().map(|p| p.spread_m).collect::<Vec<_>>());
     let plan = bracketed[0].plan_clearance_m;
     let Some(Line {
         intercept: a_all,
         slope: k_all,
         slope_se: se_all,
         ..
-    }) = line(&all)
+    }) = weighted_line(&all, &w_all)
     else {
         work.undecided(
             "wear",
@@ -400,7 +457,14 @@ pub(super) fn wear_stage(
     (work.progress)(DiagnoseProgress::Note(said));
     // The train tests' line (all points when they are fewer than two with spread in P).
     let tr: Vec<(f64, f64)> = points.iter().filter(|p| p.train).map(xy).collect();
-    let tr_line = line(&tr);
+    let w_tr = weights_of(
+        &points
+            .iter()
+            .filter(|p| p.train)
+            .map(|p| p.spread_m)
+            .collect::<Vec<_>>(),
+    );
+    let tr_line = weighted_line(&tr, &w_tr);
     let (a0, k_line) = match tr_line {
         Some(l) if l.slope > 0.0 => (l.intercept, l.slope),
         _ => (a_all, k_all),
@@ -418,9 +482,9 @@ pub(super) fn wear_stage(
     let offset = if shown { a0 } else { 0.0 };
     let slope = |tr: &[(f64, f64)]| -> Option<f64> {
         if shown {
-            line(tr).map(|l| l.slope)
+            weighted_line(tr, &w_tr).map(|l| l.slope)
         } else {
-            slope_through_origin(tr)
+            slope_through_origin(tr, &w_tr)
         }
     };
     let k0 = slope(&tr).filter(|k| *k > 0.0).unwrap_or(k_line);
@@ -481,12 +545,14 @@ pub(super) fn wear_stage(
     // slope at a zero coefficient where no offset comes with the wear), else, without a line
     // yet (one run and an offset), the last run's slope, as plain iteration would.
     let start = (offset == 0.0).then_some((0.0, k0));
-    let estimate = |runs: &[(f64, f64, Vec<Option<f64>>)]| -> Option<f64> {
-        let slopes: Vec<(f64, f64)> = start
+    let slopes_of = |runs: &[(f64, f64, Vec<Option<f64>>)]| -> Vec<(f64, f64)> {
+        start
             .into_iter()
             .chain(runs.iter().map(|r| (r.0, r.1)))
-            .collect();
-        fixed_point(&slopes).or_else(|| runs.last().map(|r| r.1))
+            .collect()
+    };
+    let estimate = |runs: &[(f64, f64, Vec<Option<f64>>)]| -> Option<f64> {
+        fixed_point(&slopes_of(runs)).or_else(|| runs.last().map(|r| r.1))
     };
     let mut next = if side_by_side {
         vec![k0, 1.6 * k0]
@@ -523,6 +589,14 @@ pub(super) fn wear_stage(
         };
     }
     let k = estimate(&runs).unwrap_or(k0);
+    let gain = impulse_error_gain(&slopes_of(&runs));
+    if let Some(g) = gain.filter(|&g| g > CONDITIONED_GAIN) {
+        (work.progress)(DiagnoseProgress::Note(format!(
+            "wear: a 10 % error in the model's contact impulse moves the coefficient {:.0} %: the train tests' slope follows the coefficient at {:.2} of its rate (the growth limits itself: a grown clearance closes less)",
+            10.0 * g,
+            1.0 - 1.0 / g
+        )));
+    }
     // The points against the impulse of the run nearest the coefficient.
     if let Some((_, _, impulse)) = runs
         .iter()
@@ -555,6 +629,7 @@ pub(super) fn wear_stage(
     evidence["points_against"] = json!(
         "the model's accumulated normal contact impulse before each test (N s), with the fitted wear"
     );
+    evidence["impulse_error_gain"] = json!(gain);
     evidence["coefficient_runs"] = json!(runs
         .iter()
         .map(|r| json!({"coefficient_m_per_ns": r.0, "train_slope_m_per_ns": r.1}))
@@ -607,22 +682,48 @@ mod tests {
     }
 
     #[test]
+    fn the_impulse_error_gain_is_how_the_fixed_point_amplifies_a_scale_error() {
+        // Slopes 2 + 0.5 k: fixed point 4, gain 2. The same runs with every slope 10 % higher
+        // (the model's impulse 10 % low): the fixed point 20 % higher.
+        let runs: Vec<(f64, f64)> = [0.0, 2.0, 3.0, 5.0]
+            .iter()
+            .map(|&k| (k, 2.0 + 0.5 * k))
+            .collect();
+        assert!((impulse_error_gain(&runs).unwrap() - 2.0).abs() < 1e-12);
+        let k = fixed_point(&runs).unwrap();
+        let high: Vec<(f64, f64)> = runs.iter().map(|&(k, g)| (k, 1.1 * g)).collect();
+        let k_high = fixed_point(&high).unwrap();
+        assert!((k_high / k - 1.0 - 0.1 * 2.0).abs() < 0.05, "{k} {k_high}");
+        // Slopes that do not follow the coefficient: gain 1. Steeper than 1: none.
+        assert!((impulse_error_gain(&[(0.0, 2.0), (3.0, 2.0)]).unwrap() - 1.0).abs() < 1e-12);
+        assert_eq!(impulse_error_gain(&[(1.0, 2.0), (2.0, 4.0)]), None);
+    }
+
+    #[test]
     fn each_estimate_weighs_by_its_own_spread() {
         // Equal spreads: the mean; one twice the other's: weights 4:1.
-        assert_eq!(measured_clearance((8.0, 1.0), Some((6.0, Some(1.0)))), 7.0);
-        assert_eq!(measured_clearance((8.0, 0.5), Some((3.0, Some(1.0)))), 7.0);
-        // No onsets, no standard error, or a bad value: the runs'.
-        assert_eq!(measured_clearance((8.0, 1.0), None), 8.0);
-        assert_eq!(measured_clearance((8.0, 1.0), Some((6.0, None))), 8.0);
+        // The combined spread: 1/sqrt(1 + 1) and 1/sqrt(4 + 1).
+        let (c, s) = measured_clearance((8.0, 1.0), Some((6.0, Some(1.0))));
+        assert_eq!(c, 7.0);
+        assert!((s - 0.5f64.sqrt()).abs() < 1e-15, "{s}");
+        let (c, s) = measured_clearance((8.0, 0.5), Some((3.0, Some(1.0))));
+        assert_eq!(c, 7.0);
+        assert!((s - 0.2f64.sqrt()).abs() < 1e-15, "{s}");
+        // No onsets, no standard error, or a bad value: the runs' and their spread.
+        assert_eq!(measured_clearance((8.0, 1.0), None), (8.0, 1.0));
+        assert_eq!(
+            measured_clearance((8.0, 1.0), Some((6.0, None))),
+            (8.0, 1.0)
+        );
         assert_eq!(
             measured_clearance((8.0, 1.0), Some((f64::NAN, Some(1.0)))),
-            8.0
+            (8.0, 1.0)
         );
         // identify.toml, um: low-level up with wear alone (the runs' false valley), low-level
         // down with clamp friction (the onsets read high): both land within 4 % of the truth.
-        let wear = measured_clearance((893.0, 105.0), Some((723.0, Some(30.0))));
+        let (wear, _) = measured_clearance((893.0, 105.0), Some((723.0, Some(30.0))));
         assert!((wear - 713.0).abs() < 0.04 * 713.0, "{wear}");
-        let clamp = measured_clearance((680.0, 45.0), Some((785.0, Some(92.0))));
+        let (clamp, _) = measured_clearance((680.0, 45.0), Some((785.0, Some(92.0))));
         assert!((clamp - 699.0).abs() < 0.04 * 699.0, "{clamp}");
     }
 
@@ -672,7 +773,36 @@ mod tests {
         let l = line(&pts).unwrap();
         assert!(l.intercept_se * 3.0 > l.intercept.abs());
         assert!(line(&pts[..2]).unwrap().intercept_se.is_nan());
-        assert_eq!(slope_through_origin(&[(1.0, 2.0), (2.0, 4.0)]), Some(2.0));
-        assert_eq!(slope_through_origin(&[(0.0, 2.0)]), None);
+        assert_eq!(
+            slope_through_origin(&[(1.0, 2.0), (2.0, 4.0)], &[1.0, 1.0]),
+            Some(2.0)
+        );
+        assert_eq!(slope_through_origin(&[(0.0, 2.0)], &[1.0]), None);
+    }
+
+    #[test]
+    fn each_point_weighs_in_the_line_by_its_own_spread() {
+        // The clamp + wear session on identify.toml (m against N s; BENCHMARKS.md, "Wear
+        // points weighted by their own spread"): a hidden 2e-5 m/(N s), the low-level down
+        // test's flat valley +78 um with a spread of 65 um.
+        let pts = [(0.0, 78e-6), (0.46, -2e-6), (1.36, 51e-6), (6.87, 152e-6)];
+        let spreads = [65e-6, 31e-6, 7e-6, 19e-6];
+        let plain = line(&pts).unwrap();
+        assert!(plain.slope < 3.0 * plain.slope_se, "{plain:?}");
+        let w = weights_of(&spreads);
+        let weighted = weighted_line(&pts, &w).unwrap();
+        assert!(weighted.slope > 3.0 * weighted.slope_se, "{weighted:?}");
+        assert!((weighted.slope / 2e-5 - 1.0).abs() < 0.1, "{weighted:?}");
+        // Equal weights at any scale are the plain line.
+        let same = weighted_line(&pts, &[4e10; 4]).unwrap();
+        assert!((same.slope / plain.slope - 1.0).abs() < 1e-12);
+        assert!((same.slope_se / plain.slope_se - 1.0).abs() < 1e-9);
+        assert!((same.intercept_se / plain.intercept_se - 1.0).abs() < 1e-9);
+        // A point without a spread: equal weights for all.
+        assert_eq!(weights_of(&[1.0, f64::NAN]), vec![1.0, 1.0]);
+        assert_eq!(weights_of(&[2.0, 0.5]), vec![0.25, 4.0]);
+        // Through the origin: the tight point decides.
+        let k = slope_through_origin(&[(1.0, 1.0), (1.0, 3.0)], &weights_of(&[1.0, 0.1])).unwrap();
+        assert!((k - 2.98).abs() < 0.01, "{k}");
     }
 }

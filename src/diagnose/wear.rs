@@ -443,9 +443,21 @@ pub(super) fn wear_stage(
         p.train = train.contains(&p.test_index);
     }
     if validation.is_empty() {
+        let seen: Vec<String> = points
+            .iter()
+            .map(|p| {
+                format!(
+                    "{} {:.0} +- {:.0} um at {:.2e} N s",
+                    p.test,
+                    p.clearance_m * 1e6,
+                    p.spread_m * 1e6,
+                    p.contact_impulse_ns
+                )
+            })
+            .collect();
         work.undecided(
             "wear",
-            format!("no test left to validate on: the line ({k_all:.2e} m/(N s)) predicts a growth above 2 % of the plan's clearance at no test that is not fitted"),
+            format!("a trend (slope {k_all:.2e} m/(N s), standard error {se_all:.1e}, growth {growth:.2e} m over the session; clearances {}) but no test left to validate on: the line predicts a growth above 2 % of the plan's clearance at no test that is not fitted", seen.join(", ")),
         );
         return Ok(false);
     }

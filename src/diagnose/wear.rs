@@ -604,7 +604,7 @@ pub(super) fn wear_stage(
     let gain = impulse_error_gain(&slopes_of(&runs));
     if let Some(g) = gain.filter(|&g| g > CONDITIONED_GAIN) {
         (work.progress)(DiagnoseProgress::Note(format!(
-            "wear: a 10 % error in the model's contact impulse moves the coefficient {:.0} %: the train tests' slope follows the coefficient at {:.2} of its rate (the growth limits itself: a grown clearance closes less)",
+            "wear: a 10 % error in the model's contact impulse moves the coefficient {:.0} %: the train tests' slope follows the coefficient at {:.2} of its rate (as where the growth limits itself: a grown clearance closes less, so a larger coefficient buys little more growth)",
             10.0 * g,
             1.0 - 1.0 / g
         )));

@@ -62,7 +62,7 @@ fn fixed_point(runs: &[(f64, f64)]) -> Option<f64> {
 /// the fixed point `a / (1 - b)` by `e / (1 - b)`). `None` where [`fixed_point`] has no line,
 /// or one as steep as 1.
 ///
-/// NOTE: 1.0-1.5 where the wear was found within 20 % on `identify.toml` and the six-probe
+/// NOTE: 1.0-1.7 where the wear was found within 20 % on `identify.toml` and the six-probe
 /// plan; 2.9 and 3.8 on two diagnoses of one `identify.toml` session with a hidden 3.5e-5
 /// m/(N s) (+57 % and +96 %): there the clearance grows by 600 um, 85 % of the plan's, and
 /// the contact that wears it fades as it grows, so a larger coefficient buys little more

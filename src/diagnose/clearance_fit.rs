@@ -53,7 +53,7 @@ pub(super) fn valley_spread(tried: &[(f64, f64)], best: (f64, f64), null: f64) -
 }
 
 /// How many times finer than the twin's own step the runs that fit a test's clearance are.
-const FIT_REFINEMENT: u32 = 3;
+pub(super) const FIT_REFINEMENT: u32 = 3;
 
 /// How many steps past a test's first measured contact the runs that fit its clearance go.
 const STEPS_PAST_FIRST_CONTACT: usize = 2;

@@ -671,8 +671,14 @@ impl<'a> Work<'a> {
         let accepted = self.accepted.clone();
         let own = self.runner.refinement();
         self.runner.set_refinement(own * w.refinement);
+        // A wear candidate's tests each from their lead-in, worn as the twin's step left them
+        // (as the confirmation runs them); any other candidate's as it was fitted.
+        if c.ext.wear.is_some() && c.ext.wear != accepted.wear {
+            self.runner.set_wear_from(Some(own));
+        }
         let fitted_step = self.errors_before_after(&accepted, &c, true);
         self.runner.set_refinement(own);
+        self.runner.set_wear_from(None);
         let (before, after) = fitted_step?;
         let (ok, reason) = self.assess_with(&c, before, after, true);
         c.evidence["judged_on"] = serde_json::json!({

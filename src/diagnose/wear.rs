@@ -254,13 +254,6 @@ fn split(
             train.push(i);
         }
     }
-    if validation.is_empty() {
-        validation = contact
-            .iter()
-            .filter(|&&(i, p)| grows(p) && !train.contains(&i))
-            .map(|&(i, _)| i)
-            .collect();
-    }
     let span = |tests: &[usize]| {
         let ps: Vec<f64> = bracketed
             .iter()
@@ -271,21 +264,26 @@ fn split(
             - ps.iter().copied().fold(f64::INFINITY, f64::min)
     };
     if span(&train) < LEVER_SHARE * span(&idx) {
-        return lever_split(bracketed, contact, &grows);
+        (train, validation) = lever_split(bracketed, &grows);
+    }
+    if validation.is_empty() {
+        validation = contact
+            .iter()
+            .filter(|&&(i, p)| grows(p) && !train.contains(&i))
+            .map(|&(i, _)| i)
+            .collect();
     }
     train.sort_unstable();
     validation.sort_unstable();
     (train, validation)
 }
 
-/// [`split`] where the alternate train tests span less than [`LEVER_SHARE`] of the impulse:
-/// the bracketed tests with the least and the most impulse train (the line's lever), the
-/// ones between them that the line predicts a growth at validate alternately (the first of
-/// them validates), the rest train; without one, the tests with contact that are not
-/// bracketed validate as in [`split`].
+/// The train and validation tests of [`split`] where the alternate train tests span less than
+/// [`LEVER_SHARE`] of the impulse: the bracketed tests with the least and the most impulse
+/// train (the line's lever); of the ones between them, those the line predicts a growth at
+/// (`grows`) validate alternately, the first of them first, and the rest train.
 fn lever_split(
     bracketed: &[(usize, f64)],
-    contact: &[(usize, f64)],
     grows: &dyn Fn(f64) -> bool,
 ) -> (Vec<usize>, Vec<usize>) {
     let by_p = |a: &&(usize, f64), b: &&(usize, f64)| a.1.total_cmp(&b.1);
@@ -306,15 +304,6 @@ fn lever_split(
         }
         validates ^= grows(p);
     }
-    if validation.is_empty() {
-        validation = contact
-            .iter()
-            .filter(|&&(i, p)| grows(p) && !train.contains(&i))
-            .map(|&(i, _)| i)
-            .collect();
-    }
-    train.sort_unstable();
-    validation.sort_unstable();
     (train, validation)
 }
 

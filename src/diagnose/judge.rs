@@ -255,6 +255,15 @@ impl Candidate {
         self
     }
 
+    /// Every step of its train and validation tests, in session order: what it is judged on
+    /// unless it names where it was fitted.
+    pub(super) fn whole_tests(&self) -> Vec<Span> {
+        let mut all: Vec<usize> = self.train.iter().chain(&self.validation).copied().collect();
+        all.sort_unstable();
+        all.dedup();
+        all.into_iter().map(Span::whole).collect()
+    }
+
     /// Judged on the features of `channel` only (when given): the one channel it acts on.
     pub(super) fn on_channel(mut self, channel: Option<String>) -> Candidate {
         self.channel = channel;
@@ -508,12 +517,7 @@ impl<'a> Work<'a> {
     fn judged_spans(c: &Candidate, where_fitted: bool) -> Vec<Span> {
         match c.where_fitted.as_ref().filter(|_| where_fitted) {
             Some(w) => w.spans.clone(),
-            None => {
-                let mut all: Vec<usize> = c.train.iter().chain(&c.validation).copied().collect();
-                all.sort_unstable();
-                all.dedup();
-                all.into_iter().map(Span::whole).collect()
-            }
+            None => c.whole_tests(),
         }
     }
 

@@ -37,7 +37,6 @@ use super::clearance::{ClearanceEvidence, TestClearance};
 use super::clearance_fit::{test_clearance_by_runs, FIT_REFINEMENT};
 use super::judge::{alternate, Candidate, Steps, Work};
 use super::outcome::EffectResult;
-use super::rerun::Span;
 use super::{DiagnoseError, DiagnoseProgress};
 
 /// The share of the bracketed tests' impulse span below which the alternate train tests'
@@ -254,16 +253,15 @@ fn split(
             train.push(i);
         }
     }
-    let span = |tests: &[usize]| {
-        let ps: Vec<f64> = bracketed
-            .iter()
-            .filter(|b| tests.contains(&b.0))
-            .map(|b| b.1)
-            .collect();
-        ps.iter().copied().fold(f64::NEG_INFINITY, f64::max)
-            - ps.iter().copied().fold(f64::INFINITY, f64::min)
+    let span_of = |tests: &[usize]| {
+        span(
+            bracketed
+                .iter()
+                .filter(|b| tests.contains(&b.0))
+                .map(|b| b.1),
+        )
     };
-    if span(&train) < LEVER_SHARE * span(&idx) {
+    if span_of(&train) < LEVER_SHARE * span_of(&idx) {
         (train, validation) = lever_split(bracketed, &grows);
     }
     if validation.is_empty() {
@@ -297,14 +295,23 @@ fn lever_split(
         if i == least.0 || i == most.0 {
             continue;
         }
-        if grows(p) && validates {
+        let grown = grows(p);
+        if grown && validates {
             validation.push(i);
         } else {
             train.push(i);
         }
-        validates ^= grows(p);
+        validates ^= grown;
     }
     (train, validation)
+}
+
+/// The largest of `ps` less the smallest (an impulse span, N s); -inf without any.
+fn span(ps: impl Iterator<Item = f64>) -> f64 {
+    let (lo, hi) = ps.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
+        (lo.min(p), hi.max(p))
+    });
+    hi - lo
 }
 
 /// What the wear stage measured, for the evidence figure.
@@ -379,17 +386,13 @@ pub(super) fn wear_stage(
         .collect();
     let p_of = |t: &TestClearance| impulse.get(t.test_index).copied().flatten();
     let ps: Vec<f64> = bracketed.iter().filter_map(p_of).collect();
-    let (pmin, pmax) = ps
-        .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &p| {
-            (a.min(p), b.max(p))
-        });
+    let p_span = span(ps.iter().copied());
     // NOTE: no threshold in N s: any impulse between the tests can carry a growth; whether it
     // did is the trend's test below (3 standard errors and 2 % of the plan's clearance).
-    if ps.len() < 3 || (pmax - pmin).is_nan() || pmax - pmin <= 0.0 {
+    if ps.len() < 3 || p_span.is_nan() || p_span <= 0.0 {
         work.undecided(
             "wear",
-            format!("the model's contact exchanges {:.2e} N s of normal impulse between the first and last bracketed tests: nothing for wear to grow with", (pmax - pmin).max(0.0)),
+            format!("the model's contact exchanges {:.2e} N s of normal impulse between the first and last bracketed tests: nothing for wear to grow with", p_span.max(0.0)),
         );
         return Ok(false);
     }
@@ -461,7 +464,7 @@ pub(super) fn wear_stage(
         );
         return Ok(false);
     };
-    let growth = k_all * (pmax - pmin);
+    let growth = k_all * p_span;
     let evidence = json!({
         "points": points,
         "line": {"intercept_m": a_all, "slope_m_per_ns": k_all, "slope_standard_error_m_per_ns": se_all},
@@ -717,9 +720,6 @@ pub(super) fn wear_stage(
     // with it at the finer step (3.72 -> 2.06). A 2.5e-5 m/(N s) wear on six probes, which
     // the twin's step rejected (10.53 -> 6.13, 50 % asked), is accepted there (9.72 -> 1.52;
     // BENCHMARKS.md, "The lever in training, judged at the finer step").
-    let mut tests: Vec<usize> = train.iter().chain(&validation).copied().collect();
-    tests.sort_unstable();
-    let spans = tests.into_iter().map(Span::whole).collect();
     let cand = Candidate::new(
         "wear",
         ext,
@@ -728,9 +728,9 @@ pub(super) fn wear_stage(
         evidence,
         (train, validation),
         Steps::All,
-    )
-    .judged_where_fitted(spans, FIT_REFINEMENT, "the whole tests");
-    work.judge(cand)
+    );
+    let whole = cand.whole_tests();
+    work.judge(cand.judged_where_fitted(whole, FIT_REFINEMENT, "the whole tests"))
 }
 
 #[cfg(test)]

@@ -105,15 +105,22 @@ struct Line {
 /// The least-squares line through `points`; `None` with fewer than two points or no spread in
 /// `x`.
 fn line(points: &[(f64, f64)]) -> Option<Line> {
-    weighted_line(points, &vec![1.0; points.len()])
+    weighted_line(points, &Weights::equal(points.len()))
 }
 
-/// The weighted least-squares line through `points` (`weights`, one per point, positive: the
-/// inverse of each point's variance); `None` with fewer than two points or no spread in `x`.
-/// The standard errors scale with the residuals (the weights give the points' relative
-/// variances, not their absolute ones): equal weights are [`line`].
-fn weighted_line(points: &[(f64, f64)], weights: &[f64]) -> Option<Line> {
-    let n = points.len();
+/// The weighted least-squares line through `points` (`weights`, one per point); `None` with
+/// fewer than two points or no spread in `x`. The standard errors scale with the residuals;
+/// with [`Weights::absolute`] (each point's own inverse variance) they are at least the ones
+/// those variances give, also with two points: three points that happen to fall on a line
+/// do not make a slope exact. Equal weights are [`line`].
+///
+/// NOTE: with the residuals alone, a hidden clearance offset of -10 % and no wear on
+/// `identify.toml` read as a trend: the two low-level tests 617 +- 10 and 617 +- 21 um at
+/// 0 and 0.46 N s, high-down 649 +- 10 um at 26.3 N s, a slope of 1.2e-6 m/(N s) with a
+/// standard error of 6e-9 from residuals of a few nanometres; from the points' own spreads
+/// it is 5e-7 (BENCHMARKS.md, "The wear line's standard error from the points' spreads").
+fn weighted_line(points: &[(f64, f64)], weights: &Weights) -> Option<Line> {
+    let (weights_absolute, weights, n) = (weights.absolute, &weights.w[..], points.len());
     if n < 2 || weights.len() != n {
         return None;
     }
@@ -133,11 +140,17 @@ fn weighted_line(points: &[(f64, f64)], weights: &[f64]) -> Option<Line> {
     let sxy = wsum(&|p| (p.0 - mx) * (p.1 - my));
     let k = sxy / sxx;
     let a = my - k * mx;
-    // The residuals' variance at unit weight, NaN with two points (no degree of freedom left).
+    // The residuals' variance at unit weight, NaN with two points (no degree of freedom
+    // left); with absolute weights at least 1 (the points' own variances).
     let s2 = if n > 2 {
         wsum(&|p| (p.1 - a - k * p.0).powi(2)) / (nf - 2.0)
     } else {
         f64::NAN
+    };
+    let s2 = if weights_absolute && !(s2 >= 1.0) {
+        1.0
+    } else {
+        s2
     };
     Some(Line {
         intercept: a,
@@ -163,11 +176,33 @@ fn slope_through_origin(points: &[(f64, f64)], weights: &[f64]) -> Option<f64> {
 /// down test's runs found a flat valley over 680-770 um). Unweighted, that point's +78 um
 /// (the rig's had not grown) made the slope 1.66e-5 m/(N s) +- 8.0e-6, no trend; weighted,
 /// 1.86e-5 +- 3.6e-6 (BENCHMARKS.md, "Wear points weighted by their own spread").
-fn weights_of(spreads: &[f64]) -> Vec<f64> {
+fn weights_of(spreads: &[f64]) -> Weights {
     if spreads.iter().all(|s| s.is_finite() && *s > 0.0) {
-        spreads.iter().map(|s| 1.0 / (s * s)).collect()
+        Weights {
+            w: spreads.iter().map(|s| 1.0 / (s * s)).collect(),
+            absolute: true,
+        }
     } else {
-        vec![1.0; spreads.len()]
+        Weights::equal(spreads.len())
+    }
+}
+
+/// The weights of a line's points ([`weighted_line`]).
+#[derive(Clone, Debug, PartialEq)]
+struct Weights {
+    /// One per point, positive.
+    w: Vec<f64>,
+    /// Each the inverse of its point's variance, in the points' units squared (else relative).
+    absolute: bool,
+}
+
+impl Weights {
+    /// `n` equal relative weights: the residuals alone give the standard errors.
+    fn equal(n: usize) -> Weights {
+        Weights {
+            w: vec![1.0; n],
+            absolute: false,
+        }
     }
 }
 
@@ -556,7 +591,7 @@ pub(super) fn wear_stage(
         if shown {
             weighted_line(tr, &w_tr).map(|l| l.slope)
         } else {
-            slope_through_origin(tr, &w_tr)
+            slope_through_origin(tr, &w_tr.w)
         }
     };
     let k0 = slope(&tr).filter(|k| *k > 0.0).unwrap_or(k_line);
@@ -893,15 +928,62 @@ mod tests {
         assert!(weighted.slope > 3.0 * weighted.slope_se, "{weighted:?}");
         assert!((weighted.slope / 2e-5 - 1.0).abs() < 0.1, "{weighted:?}");
         // Equal weights at any scale are the plain line.
-        let same = weighted_line(&pts, &[4e10; 4]).unwrap();
+        let same = weighted_line(
+            &pts,
+            &Weights {
+                w: vec![4e10; 4],
+                absolute: false,
+            },
+        )
+        .unwrap();
         assert!((same.slope / plain.slope - 1.0).abs() < 1e-12);
         assert!((same.slope_se / plain.slope_se - 1.0).abs() < 1e-9);
         assert!((same.intercept_se / plain.intercept_se - 1.0).abs() < 1e-9);
         // A point without a spread: equal weights for all.
-        assert_eq!(weights_of(&[1.0, f64::NAN]), vec![1.0, 1.0]);
-        assert_eq!(weights_of(&[2.0, 0.5]), vec![0.25, 4.0]);
+        assert_eq!(weights_of(&[1.0, f64::NAN]), Weights::equal(2));
+        assert_eq!(weights_of(&[2.0, 0.5]).w, vec![0.25, 4.0]);
+        assert!(weights_of(&[2.0, 0.5]).absolute);
         // Through the origin: the tight point decides.
-        let k = slope_through_origin(&[(1.0, 1.0), (1.0, 3.0)], &weights_of(&[1.0, 0.1])).unwrap();
+        let k =
+            slope_through_origin(&[(1.0, 1.0), (1.0, 3.0)], &weights_of(&[1.0, 0.1]).w).unwrap();
         assert!((k - 2.98).abs() < 0.01, "{k}");
+    }
+
+    #[test]
+    fn points_on_a_line_keep_the_error_of_their_own_spreads() {
+        // The -10 % clearance offset on identify.toml, no wear (m against N s): the residuals
+        // are nanometres, the points' spreads 10-21 um.
+        let pts = [(0.0, -82e-6), (0.4589, -82e-6), (26.34, -50e-6)];
+        let w = weights_of(&[10e-6, 21e-6, 10e-6]);
+        let l = weighted_line(&pts, &w).unwrap();
+        assert!((l.slope / 1.215e-6 - 1.0).abs() < 0.05, "{l:?}");
+        assert!(l.slope < 3.0 * l.slope_se, "no trend: {l:?}");
+        // The error from the spreads alone: about sqrt(10^2 + 9^2) um over 26.3 N s.
+        assert!(l.slope_se > 4e-7 && l.slope_se < 6e-7, "{l:?}");
+        // Relative weights of the same points: the residuals alone, a false trend.
+        let relative = weighted_line(
+            &pts,
+            &Weights {
+                absolute: false,
+                ..w.clone()
+            },
+        )
+        .unwrap();
+        assert!(relative.slope > 3.0 * relative.slope_se, "{relative:?}");
+        // Scattered beyond their spreads: the residuals decide.
+        let pts = [(0.0, 0.0), (1.0, 40e-6), (2.0, 0.0), (3.0, 40e-6)];
+        let w = weights_of(&[1e-6; 4]);
+        let wide = weighted_line(&pts, &w).unwrap();
+        let plain = line(&pts).unwrap();
+        assert!(
+            (wide.slope_se / plain.slope_se - 1.0).abs() < 1e-9,
+            "{wide:?} {plain:?}"
+        );
+        // Two points: the spreads' error, not NaN.
+        let two = weighted_line(&pts[..2], &weights_of(&[1e-6, 1e-6])).unwrap();
+        assert!(
+            (two.slope_se / (2f64.sqrt() * 1e-6) - 1.0).abs() < 1e-9,
+            "{two:?}"
+        );
     }
 }

@@ -164,6 +164,23 @@ pub struct ClearanceEvidence {
     pub trend: Option<ClearanceTrend>,
 }
 
+impl ClearanceEvidence {
+    /// Why only `n` tests bracket the clearance where a stage needs more (`needs`, e.g. "two
+    /// are needed, one to fit and one to validate"): with no measured contact in any test,
+    /// that the contact physics leaves no trace in the session.
+    pub(crate) fn too_few_brackets(&self, n: usize, needs: &str) -> String {
+        if self
+            .tests
+            .iter()
+            .all(|t| t.first_contact_omega_ratio.is_none())
+        {
+            format!("no test of the session has measured contact: the clearance, its wear and the contact face's tilt leave no trace in it (a plan with levels that reach the contact, or a smaller planned clearance, would carry them); {needs}")
+        } else {
+            format!("{n} test(s) bracket the clearance (impact-free steps, then contact); {needs}")
+        }
+    }
+}
+
 /// The clearance per test of the recording `rec` (as recorded, no sensor corrections).
 ///
 /// Errors: those of [`session_evidence`]; a beam length that is not > 0.
@@ -342,6 +359,28 @@ mod tests {
             accumulated_contact_impulse_ns: None,
             note: String::new(),
         }
+    }
+
+    #[test]
+    fn a_session_without_contact_says_so_where_a_stage_lacks_brackets() {
+        let mut ce = ClearanceEvidence {
+            options: ClearanceOptions {
+                beam_length: 0.3,
+                contact_over_sensor: 1.0,
+                static_offset: 0.0,
+            },
+            tests: (0..3).map(|i| test(i, None)).collect(),
+            trend: None,
+        };
+        let why = ce.too_few_brackets(0, "two are needed");
+        assert!(
+            why.starts_with("no test of the session has measured contact"),
+            "{why}"
+        );
+        assert!(why.ends_with("two are needed"), "{why}");
+        ce.tests[1].first_contact_omega_ratio = Some(1.0);
+        let why = ce.too_few_brackets(0, "two are needed");
+        assert!(why.starts_with("0 test(s) bracket the clearance"), "{why}");
     }
 
     #[test]

@@ -189,7 +189,10 @@ pub(super) fn clearance_stage(
     if bracketed.len() < 2 {
         work.undecided(
             "clearance",
-            format!("{} test(s) bracket the clearance (impact-free steps, then contact); two are needed, one to fit and one to validate", bracketed.len()),
+            ce.too_few_brackets(
+                bracketed.len(),
+                "two are needed, one to fit and one to validate",
+            ),
         );
         return Ok(());
     }

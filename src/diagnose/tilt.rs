@@ -114,7 +114,10 @@ pub(super) fn tilt_stage(
     if bracketed.len() < 2 {
         work.undecided(
             "tilt",
-            format!("{} test(s) bracket the first contact; a tilt is fitted on one and validated on another", bracketed.len()),
+            ce.too_few_brackets(
+                bracketed.len(),
+                "a tilt is fitted on one and validated on another",
+            ),
         );
         return Ok(());
     }

@@ -399,7 +399,10 @@ pub(super) fn wear_stage(
     if n < 3 {
         work.undecided(
             "wear",
-            format!("{n} test(s) bracket the clearance (impact-free steps, then contact); its trend with the contact impulse needs three or more, two to fit and one to validate"),
+            ce.too_few_brackets(
+                n,
+                "its trend with the contact impulse needs three or more, two to fit and one to validate",
+            ),
         );
         return Ok(false);
     }

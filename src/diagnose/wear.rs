@@ -147,7 +147,7 @@ fn weighted_line(points: &[(f64, f64)], weights: &Weights) -> Option<Line> {
     } else {
         f64::NAN
     };
-    let s2 = if weights_absolute && !(s2 >= 1.0) {
+    let s2 = if weights_absolute && (s2.is_nan() || s2 < 1.0) {
         1.0
     } else {
         s2

@@ -336,7 +336,9 @@ fn a_sensor_gain_and_clamp_friction_at_once_are_both_named() {
     assert_eq!(g.len(), 1, "{d:#}");
     assert_eq!(g[0]["parameters"]["channel"], "lower_tip");
     let fit = g[0]["parameters"]["gain"].as_f64().unwrap();
-    assert!((fit / gain - 1.0).abs() < 0.01, "gain {fit} for {gain}");
+    // Refined by model runs that observe the gain (its first measured/model ratio carries
+    // the base's share off the beam's resonance).
+    assert!((fit / gain - 1.0).abs() < 0.003, "gain {fit} for {gain}");
     let (b, a) = (
         g[0]["error_before"]["validation"].as_f64().unwrap(),
         g[0]["error_after"]["validation"].as_f64().unwrap(),

@@ -660,7 +660,16 @@ pub fn diagnose(
         .filter(|r| r.regime != Regime::Impacts)
         .any(|r| r.median_max_score > opts.threshold);
     let band_mismatch = band.is_some_and(|b| b.beyond);
-    let verdict = if any || free_mismatch || band_mismatch {
+    // A clearance offset rejected on its validation test but far beyond its error on the
+    // tests it was fitted on: the first contact there is not the model's, whatever the cause.
+    let unexplained: Vec<String> = (work.effects.iter())
+        .filter_map(super::clearance_fit::unexplained_offset)
+        .collect();
+    let contact_mismatch = !unexplained.is_empty();
+    for why in unexplained {
+        work.undecided("clearance", why);
+    }
+    let verdict = if any || free_mismatch || band_mismatch || contact_mismatch {
         Verdict::Mismatch
     } else {
         Verdict::NoSignificantMismatch

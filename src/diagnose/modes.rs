@@ -230,6 +230,17 @@ pub(super) fn linear_stage(
             .collect();
         let train = vec![low[0]];
         let validation: Vec<usize> = tests.iter().copied().filter(|t| *t != low[0]).collect();
+        // NOTE: validated on the tests without measured contact where there are any: a test
+        // with contact also holds impact-free steps where the model as given touches and
+        // the rig does not (a grown clearance), whose errors no linear value moves. With a
+        // hidden 1FU correction (51.7 Hz, damping 0.0025) beside wear, the damping, fitted
+        // within 0.2 %, fell only 10.21 -> 10.15 over all six tests and was rejected
+        // (BENCHMARKS.md, "Concealed values on `identify.toml`").
+        let with_contact = work.steps.tests_with(false);
+        let free: Vec<usize> = (validation.iter().copied())
+            .filter(|t| !with_contact.contains(t))
+            .collect();
+        let validation = if free.is_empty() { validation } else { free };
         let train_fits: Vec<&ModeFit> = fits
             .iter()
             .copied()

@@ -7,6 +7,7 @@
 use serde_json::json;
 
 use crate::config::{ClearanceSpec, PhysicsSpec};
+use crate::signal::features::standard_error;
 
 use super::clearance::{ClearanceEvidence, TestClearance};
 use super::judge::{alternate, grid_then_refine, set_error, Candidate, Steps, Work};
@@ -290,8 +291,7 @@ fn offset_standard_error(offs: &[f64], spreads: &[f64]) -> f64 {
         f64::NAN
     };
     let from_scatter = if offs.len() > 1 {
-        let mean = offs.iter().sum::<f64>() / n;
-        (offs.iter().map(|o| (o - mean).powi(2)).sum::<f64>() / (n - 1.0) / n).sqrt()
+        standard_error(offs)
     } else {
         f64::NAN
     };

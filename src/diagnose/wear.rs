@@ -118,7 +118,7 @@ fn line(points: &[(f64, f64)]) -> Option<Line> {
 /// `identify.toml` read as a trend: the two low-level tests 617 +- 10 and 617 +- 21 um at
 /// 0 and 0.46 N s, high-down 649 +- 10 um at 26.3 N s, a slope of 1.2e-6 m/(N s) with a
 /// standard error of 6e-9 from residuals of a few nanometres; from the points' own spreads
-/// it is 5e-7 (BENCHMARKS.md, "The wear line's standard error from the points' spreads").
+/// it is 5e-7 (BENCHMARKS.md, "Concealed values on `identify.toml`").
 fn weighted_line(points: &[(f64, f64)], weights: &Weights) -> Option<Line> {
     let (weights_absolute, weights, n) = (weights.absolute, &weights.w[..], points.len());
     if n < 2 || weights.len() != n {

@@ -696,6 +696,55 @@ impl<'a> Work<'a> {
         Ok(self.record(c, before, after, ok, reason))
     }
 
+    /// Judges candidate `c`, a refit of an accepted effect with as many parameters (the same
+    /// physics on the same evidence, so no null spread or penalty to clear), against the
+    /// accepted model on every step of its tests: accepted if it lowers both the train and the
+    /// validation error. Accepted, it replaces the accepted effects `replaces` picks. Returns
+    /// whether accepted.
+    pub(super) fn judge_refit(
+        &mut self,
+        c: Candidate,
+        replaces: impl Fn(&EffectResult) -> bool,
+    ) -> Result<bool, DiagnoseError> {
+        self.show(&c, Some("a refit of an accepted effect: it must lower both errors"));
+        let accepted = self.accepted.clone();
+        let (before, after) = self.errors_before_after(&accepted, &c, false)?;
+        let (ok, reason) = match (before, after) {
+            (Some(b), Some(a)) if a.train < b.train && a.validation < b.validation => (
+                true,
+                format!(
+                    "a refit: the train error falls {:.3} -> {:.3}, the validation error {:.3} -> {:.3}",
+                    b.train, a.train, b.validation, a.validation
+                ),
+            ),
+            (Some(b), Some(a)) => (
+                false,
+                format!(
+                    "a refit that does not lower both errors (train {:.3} -> {:.3}, validation {:.3} -> {:.3})",
+                    b.train, a.train, b.validation, a.validation
+                ),
+            ),
+            _ => (false, "no compared step: cannot be judged".to_string()),
+        };
+        let mut c = c;
+        let mut before = before;
+        if ok {
+            // The error before is the model's before the first effect this one replaces, when
+            // that was judged on the same tests: the refit's own fall is in the evidence.
+            let (train, validation) = (self.names(&c.train), self.names(&c.validation));
+            let first = (self.effects.iter())
+                .find(|e| e.accepted && replaces(e))
+                .filter(|e| e.train_tests == train && e.validation_tests == validation)
+                .and_then(|e| e.error_before);
+            if let Some(b) = first {
+                c.evidence["refit"] = serde_json::json!({"error_before": before, "error_after": after});
+                before = Some(b);
+            }
+            self.supersede(replaces, &format!("refitted as the {} that follows", c.effect));
+        }
+        Ok(self.record(c, before, after, ok, reason))
+    }
+
     /// [`Work::judge`] with the errors `before` and `after` computed elsewhere, on what
     /// `judged_on` names (a redundancy of channels rather than model runs).
     pub(super) fn judge_on(
@@ -822,6 +871,15 @@ impl<'a> Work<'a> {
             error_after: after,
         });
         ok
+    }
+
+    /// Withdraws the accepted effects `which` picks (a later effect explains their evidence
+    /// in their place; the accepted model no longer holds them), saying `why`.
+    pub(super) fn supersede(&mut self, which: impl Fn(&EffectResult) -> bool, why: &str) {
+        for e in self.effects.iter_mut().filter(|e| e.accepted && which(e)) {
+            e.accepted = false;
+            e.reason = format!("{}; superseded: {why}", e.reason);
+        }
     }
 
     pub(super) fn undecided(&mut self, effect: &str, reason: impl Into<String>) {

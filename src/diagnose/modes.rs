@@ -29,7 +29,7 @@ use super::runfit::{signed_scores, RunProblem, RunResiduals};
 use super::DiagnoseError;
 
 /// The model's natural frequency (Hz) and damping ratio of mode `label` under `ext`.
-fn model_mode(rom: &Rom, ext: &PhysicsSpec, label: &str) -> Option<(f64, f64)> {
+pub(super) fn model_mode(rom: &Rom, ext: &PhysicsSpec, label: &str) -> Option<(f64, f64)> {
     let i = rom.labels.iter().position(|l| l == label)?;
     let mut f = rom.omega[i] / (2.0 * PI);
     let mut z = rom.damping_ratio[i];

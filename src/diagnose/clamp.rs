@@ -97,6 +97,16 @@ impl Run {
     }
 }
 
+/// Whether run `x` cannot be told from run `best` on the same features: its sum of squared
+/// scores within 1 of the best's, in units of the comparison's spread, or of the best's
+/// residual where that is wider (the Birge ratio: a model that misses the features by more
+/// than their spread at its best point has a flatter valley than the spread says; a hidden
+/// share 0.2 beside a gain left the best share's train error at 2.6 and the grid's shares
+/// 0.05-0.2 within 1 % of it).
+fn indistinct(x: &Run, best: &Run) -> bool {
+    x.ssr() - best.ssr() <= (best.rms * best.rms).max(1.0)
+}
+
 /// [`ClampFit`] of the joint in `base` from `start` (share, ratio): every run it made.
 fn clamp_lm(
     work: &mut Work<'_>,
@@ -432,6 +442,7 @@ fn fit_joint(work: &mut Work<'_>, fit: &JointFit<'_>) -> Result<Option<FittedJoi
     };
     let best = |v: &[Run]| v.iter().copied().min_by(|a, b| a.rms.total_cmp(&b.rms));
     let mut tried = scan(work, &SHARE_GRID, r1)?;
+    let first_scan = tried.clone();
     let share_scan: Vec<serde_json::Value> = tried
         .iter()
         .map(|t| json!({"stiffness_fraction": t.share, "train_error": t.rms}))
@@ -450,14 +461,18 @@ fn fit_joint(work: &mut Work<'_>, fit: &JointFit<'_>) -> Result<Option<FittedJoi
     // The share again at the fitted ratio: at the first scan's ratio the share's valley can be
     // flat (a hidden 0.15: errors 1.08-1.09 for shares 0.1-0.28, the fit went on to 0.27).
     // A better share there starts a second fit. The grid's shares within a factor 2 of the
-    // fitted one (the first scan already ruled out the rest at a ratio close to this one).
+    // fitted one, and beyond where the first scan could not tell them from its best (it ruled
+    // out the rest at a ratio close to this one).
     let Some(first) = best(&tried) else {
         return Ok(None);
+    };
+    let flat_in_first = |share: f64| {
+        (first_scan.iter()).any(|t| t.share == share && indistinct(t, &start))
     };
     let near: Vec<f64> = SHARE_GRID
         .iter()
         .copied()
-        .filter(|s| (s / first.share).ln().abs() <= 2f64.ln() + 1e-9)
+        .filter(|&s| (s / first.share).ln().abs() <= 2f64.ln() + 1e-9 || flat_in_first(s))
         .collect();
     let rescan = scan(work, &near, first.ratio)?;
     tried.extend(rescan.iter().copied());
@@ -475,11 +490,10 @@ fn fit_joint(work: &mut Work<'_>, fit: &JointFit<'_>) -> Result<Option<FittedJoi
     };
     let (sf, r, e) = (fitted_run.share, fitted_run.ratio, fitted_run.rms);
     // The shares the session cannot tell from the fitted one: those of the scan at the fitted
-    // ratio (within a factor 2 of the first fit's share) whose sum of squared scores is within
-    // 1 of the best's (the scores are in units of the comparison's spread).
+    // ratio ([`indistinct`] from the best).
     let within: Vec<f64> = rescan
         .iter()
-        .filter(|x| x.ssr() - fitted_run.ssr() <= 1.0)
+        .filter(|x| indistinct(x, &fitted_run))
         .map(|x| x.share)
         .chain([sf])
         .collect();
@@ -503,7 +517,7 @@ fn fit_joint(work: &mut Work<'_>, fit: &JointFit<'_>) -> Result<Option<FittedJoi
     Ok(Some(FittedJoint {
         share: sf,
         ratio: r,
-        evidence: json!({"stiffness_fraction_over_half_slip_amplitude_per_m": r, "runs": ratio_runs.len() + tried.len(), "ratio_fitted_on": work.names(fitted), "share_fitted_on": work.names(train), "share_scan": share_scan, "shares_not_told_apart": [lo, hi]}),
+        evidence: json!({"stiffness_fraction_over_half_slip_amplitude_per_m": r, "runs": ratio_runs.len() + tried.len(), "ratio_fitted_on": work.names(fitted), "share_fitted_on": work.names(train), "share_scan": share_scan, "share_rescan": rescan.iter().map(|t| json!({"stiffness_fraction": t.share, "train_error": t.rms})).collect::<Vec<_>>(), "shares_not_told_apart": [lo, hi]}),
         alternatives,
     }))
 }
@@ -971,6 +985,51 @@ fn repeated_level_test(fits: &[ModeFit], with: &[&AmplitudeDependence]) -> Optio
 mod tests {
     use super::*;
     use crate::physics::iwan::Iwan;
+
+    fn fit_at(frequency_hz: f64, damping_ratio: f64, amplitude: f64) -> ModeFit {
+        ModeFit {
+            mode: "1FU".into(),
+            test: "low".into(),
+            test_index: 0,
+            level: 1e-6,
+            base_amplitude_m: 3e-6,
+            steps: 17,
+            omega_ratio_range: [0.98, 1.02],
+            frequency_hz,
+            frequency_hz_standard_error: 0.02,
+            frequency_ratio: frequency_hz / 51.27,
+            damping_ratio,
+            damping_ratio_standard_error: 2e-4,
+            participation: [1.0, 0.0],
+            residual_terms: [0.0, 0.0],
+            peak_tip_amplitude_m: amplitude,
+            relative_residual: 0.01,
+            transient_share: 0.0,
+        }
+    }
+
+    /// A joint's microslip gives one share per slip amplitude from the damping's rise and the
+    /// frequency's fall; a linear error of either alone, or of both out of that proportion,
+    /// is no joint's.
+    #[test]
+    fn microslip_ties_the_damping_rise_to_the_frequency_fall() {
+        let (f0, z0, a, rho) = (51.27, 0.00183, 3.2e-5, 3000.0);
+        let dz = rho * a / (6.0 * PI);
+        let df = rho * iwan_softening_integral() * a * f0 / 4.0;
+        let m = microslip(&fit_at(f0 - df, z0 + dz, a), (f0, z0)).expect("a joint's microslip");
+        assert!((m.from_damping / rho - 1.0).abs() < 1e-9, "{m:?}");
+        assert!((m.from_frequency / rho - 1.0).abs() < 1e-9, "{m:?}");
+        assert!((m.ratio() / rho - 1.0).abs() < 1e-9);
+        // A softer mode with the model's damping, a more damped one at the model's frequency.
+        assert!(microslip(&fit_at(f0 - df, z0, a), (f0, z0)).is_none());
+        assert!(microslip(&fit_at(f0, z0 + dz, a), (f0, z0)).is_none());
+        // A stiffer, more damped mode (the model's clamp layers too soft).
+        assert!(microslip(&fit_at(f0 + df, z0 + dz, a), (f0, z0)).is_none());
+        // Both, but the frequency's fall three times what the damping's rise gives.
+        assert!(microslip(&fit_at(f0 - 3.0 * df, z0 + dz, a), (f0, z0)).is_none());
+        // Within the factor two either way.
+        assert!(microslip(&fit_at(f0 - 1.8 * df, z0 + dz, a), (f0, z0)).is_some());
+    }
 
     /// The slope relations the clamp stage inverts, checked against the Iwan element itself:
     /// cycled at amplitude `a = x delta_max` (x <= 1), its lost in-phase stiffness is

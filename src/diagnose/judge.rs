@@ -699,14 +699,19 @@ impl<'a> Work<'a> {
     /// Judges candidate `c`, a refit of an accepted effect with as many parameters (the same
     /// physics on the same evidence, so no null spread or penalty to clear), against the
     /// accepted model on every step of its tests: accepted if it lowers both the train and the
-    /// validation error. Accepted, it replaces the accepted effects `replaces` picks. Returns
-    /// whether accepted.
+    /// validation error. Accepted, it replaces the accepted effects `replaces` picks, and its
+    /// `error_before` is that of the model `without` the effect (the refit's own fall is in
+    /// its evidence, `refit`). Returns whether accepted.
     pub(super) fn judge_refit(
         &mut self,
-        c: Candidate,
+        mut c: Candidate,
+        without: &PhysicsSpec,
         replaces: impl Fn(&EffectResult) -> bool,
     ) -> Result<bool, DiagnoseError> {
-        self.show(&c, Some("a refit of an accepted effect: it must lower both errors"));
+        self.show(
+            &c,
+            Some("a refit of an accepted effect: it must lower both errors"),
+        );
         let accepted = self.accepted.clone();
         let (before, after) = self.errors_before_after(&accepted, &c, false)?;
         let (ok, reason) = match (before, after) {
@@ -726,23 +731,16 @@ impl<'a> Work<'a> {
             ),
             _ => (false, "no compared step: cannot be judged".to_string()),
         };
-        let mut c = c;
-        let mut before = before;
-        if ok {
-            // The error before is the model's before the first effect this one replaces, when
-            // that was judged on the same tests: the refit's own fall is in the evidence.
-            let (train, validation) = (self.names(&c.train), self.names(&c.validation));
-            let first = (self.effects.iter())
-                .find(|e| e.accepted && replaces(e))
-                .filter(|e| e.train_tests == train && e.validation_tests == validation)
-                .and_then(|e| e.error_before);
-            if let Some(b) = first {
-                c.evidence["refit"] = serde_json::json!({"error_before": before, "error_after": after});
-                before = Some(b);
-            }
-            self.supersede(replaces, &format!("refitted as the {} that follows", c.effect));
+        if !ok {
+            return Ok(self.record(c, before, after, ok, reason));
         }
-        Ok(self.record(c, before, after, ok, reason))
+        c.evidence["refit"] = serde_json::json!({"error_before": before, "error_after": after});
+        let without_error = self.errors(without, &c, false)?;
+        self.supersede(
+            replaces,
+            &format!("refitted as the {} that follows", c.effect),
+        );
+        Ok(self.record(c, without_error.or(before), after, ok, reason))
     }
 
     /// [`Work::judge`] with the errors `before` and `after` computed elsewhere, on what

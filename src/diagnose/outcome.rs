@@ -328,7 +328,7 @@ pub struct DiagnosisCost {
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct StageCost {
     /// The stage (`locate`, `sensor_gain`, `linear`, `clamp_friction`, `sensor_gain_again`,
-    /// `discretisation`, `wear`, `clearance`, `tilt`, `show`).
+    /// `clamp_friction_again`, `discretisation`, `wear`, `clearance`, `tilt`, `show`).
     pub stage: String,
     /// Model runs (whole or per test).
     pub model_runs: usize,

@@ -527,6 +527,18 @@ pub fn diagnose(
         let accepted = work.accepted.clone();
         let scores = work.scores(&accepted, &free)?;
         unpartnered_gains(&mut work, &scores, &free_train, &free_validation)?;
+        // The joint fitted before a gain found now carries the gain's misfit.
+        let gains = |w: &Work<'_>| w.accepted.sensor_gains.len();
+        if gains(&work) > accepted.sensor_gains.len() && work.accepted.clamp_friction.is_some() {
+            work.stage(
+                "clamp_friction_again",
+                "identify: the clamp's friction against the model with the beam channels' gains",
+            );
+            super::clamp::refit_joint(
+                &mut work,
+                "against the model with the beam channel gain found after it",
+            )?;
+        }
     }
 
     // 3. The twin's own discretisation, before the contact effects that would absorb it.

@@ -344,6 +344,17 @@ pub(super) fn refit_joint(work: &mut Work<'_>, why: &str) -> Result<(), Diagnose
         Some(index(&v)).filter(|v| !v.is_empty())
     };
     let (train, validation) = (index(&last.train_tests), index(&last.validation_tests));
+    // NOTE: judged on the validation tests without measured contact where there are any, as
+    // the linear stage judges: a band test's impact-free steps beside its contact move with
+    // where the twin's contact begins, which the joint moves too. On `ug` the refit to the
+    // hidden joint (0.2, 2.5e-4 m) lowered the train error 0.64 -> 0.36 and raised the
+    // validation error 0.47 -> 1.86 over 1fu-low, 1fu-high, 1fu-low-again and the three band
+    // tests (BENCHMARKS.md, "A clamp slipping at the lowest level").
+    let with_contact = work.steps.tests_with(false);
+    let free: Vec<usize> = (validation.iter().copied())
+        .filter(|t| !with_contact.contains(t))
+        .collect();
+    let validation = if free.is_empty() { validation } else { free };
     let fitted = named("ratio_fitted_on").unwrap_or_else(|| train.clone());
     let share_train = named("share_fitted_on").unwrap_or_else(|| train.clone());
     let base = PhysicsSpec {

@@ -285,6 +285,9 @@ pub(super) struct Work<'a> {
     pub(super) accepted: PhysicsSpec,
     pub(super) effects: Vec<EffectResult>,
     pub(super) undecided: Vec<Undecided>,
+    /// Mismatches a stage located beyond their errors that no accepted effect explains, in
+    /// words: each makes the verdict `mismatch` (and is said in `undecided` as well).
+    pub(super) unexplained: Vec<String>,
     /// Runs made: (model, steps, twin step refinement, ensemble member) -> scores.
     cache: HashMap<(String, Vec<Span>, u32, usize), Vec<StepScores>>,
     pub(super) progress: &'a mut dyn FnMut(DiagnoseProgress),
@@ -312,6 +315,7 @@ impl<'a> Work<'a> {
             accepted: given,
             effects: Vec::new(),
             undecided: Vec::new(),
+            unexplained: Vec::new(),
             cache: HashMap::new(),
             progress,
             stage_costs: Vec::new(),

@@ -677,7 +677,9 @@ pub fn diagnose(
     let unexplained: Vec<String> = (work.effects.iter())
         .filter_map(super::clearance_fit::unexplained_offset)
         .collect();
-    let contact_mismatch = !unexplained.is_empty();
+    // So is a trend of the clearance over the session that no effect explained (the wear
+    // stage's).
+    let contact_mismatch = !unexplained.is_empty() || !work.unexplained.is_empty();
     for why in unexplained {
         work.undecided("clearance", why);
     }

@@ -557,6 +557,8 @@ pub(super) fn wear_stage(
             "wear",
             format!("a trend (slope {k_all:.2e} m/(N s), standard error {se_all:.1e}, growth {growth:.2e} m over the session; clearances {}) but no test left to validate on: the line predicts a growth above 2 % of the plan's clearance at no test that is not fitted", seen.join(", ")),
         );
+        work.unexplained
+            .push(unexplained_trend(k_all, se_all, growth));
         return Ok(false);
     }
     let said = format!(
@@ -768,7 +770,25 @@ pub(super) fn wear_stage(
         Steps::All,
     );
     let whole = cand.whole_tests();
-    work.judge(cand.judged_where_fitted(whole, FIT_REFINEMENT, "the whole tests"))
+    let accepted =
+        work.judge(cand.judged_where_fitted(whole, FIT_REFINEMENT, "the whole tests"))?;
+    if !accepted {
+        let why = unexplained_trend(k_all, se_all, growth);
+        work.undecided("wear", why.clone());
+        work.unexplained.push(why);
+    }
+    Ok(accepted)
+}
+
+/// A trend of the clearance with the contact impulse (slope `k` m/(N s), standard error `se`,
+/// `growth` m over the session) that no accepted effect explains: the model's clearance is
+/// one for the whole session, the rig's moved beyond its error.
+fn unexplained_trend(k: f64, se: f64, growth: f64) -> String {
+    format!(
+        "wear: the clearance per test moves with the contact impulse ({k:.2e} m/(N s), {:.1} standard errors, {:.0} um over the session) and no effect fitted to it was accepted",
+        k / se,
+        growth * 1e6
+    )
 }
 
 #[cfg(test)]

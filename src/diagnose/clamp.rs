@@ -729,17 +729,22 @@ fn clamp_by_runs(work: &mut Work<'_>, lin: &LinearEvidence) -> Result<Vec<String
     // The joint in place of the linear corrections where the lowest level's resonance is
     // already the joint's (the model's linear values hold, its microslip softens and damps).
     let rom = work.runner.rom();
-    let mut base = work.accepted.clone();
-    base.modes
+    let mut nominal = work.accepted.clone();
+    nominal
+        .modes
         .retain(|m| !cases.iter().any(|c| c.mode == m.mode));
     let signatures: Vec<(&OneLevel<'_>, Microslip)> = (cases.iter())
         .filter_map(|c| {
             Some((
                 c,
-                microslip(c.low, super::modes::model_mode(rom, &base, c.mode)?)?,
+                microslip(c.low, super::modes::model_mode(rom, &nominal, c.mode)?)?,
             ))
         })
         .collect();
+    // Only the modes with the joint's signature lose their linear corrections.
+    let mut base = work.accepted.clone();
+    base.modes
+        .retain(|m| !signatures.iter().any(|(c, _)| c.mode == m.mode));
     if !signatures.is_empty() {
         for (c, _) in &signatures {
             judged.push(c.mode.to_string());

@@ -544,7 +544,46 @@ fn fit_joint(
         .copied()
         .filter(|&s| (s / first.share).ln().abs() <= 2f64.ln() + 1e-9 || flat_in_first(s))
         .collect();
-    let rescan = scan(work, &near, first.ratio)?;
+    let mut rescan = scan(work, &near, first.ratio)?;
+    // Past either end of the rescan while its end cannot be told from its best: the
+    // shares the session leaves open are named whole (a hidden 0.3 beside a linear 1FU came
+    // out at 0.14, the rescan flat from 0.1 to its end at 0.14).
+    for upward in [true, false] {
+        loop {
+            let (Some(b), Some(end)) = (
+                best(&rescan),
+                (rescan.iter().copied()).max_by(|a, b| {
+                    let o = a.share.total_cmp(&b.share);
+                    if upward {
+                        o
+                    } else {
+                        o.reverse()
+                    }
+                }),
+            ) else {
+                break;
+            };
+            let next = if upward {
+                SHARE_GRID
+                    .iter()
+                    .copied()
+                    .find(|&s| s > end.share * (1.0 + 1e-9))
+            } else {
+                SHARE_GRID
+                    .iter()
+                    .rev()
+                    .copied()
+                    .find(|&s| s < end.share * (1.0 - 1e-9))
+            };
+            let Some(next) = next.filter(|_| indistinct(&end, &b)) else {
+                break;
+            };
+            rescan.extend(scan(work, &[next], first.ratio)?);
+            if !rescan.iter().any(|t| t.share == next) {
+                break;
+            }
+        }
+    }
     tried.extend(rescan.iter().copied());
     if let Some(b) = best(&rescan).filter(|b| (b.share / first.share - 1.0).abs() > 0.1) {
         tried.extend(clamp_lm(

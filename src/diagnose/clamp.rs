@@ -549,33 +549,19 @@ fn fit_joint(
     // shares the session leaves open are named whole (a hidden 0.3 beside a linear 1FU came
     // out at 0.14, the rescan flat from 0.1 to its end at 0.14).
     for upward in [true, false] {
-        loop {
-            let (Some(b), Some(end)) = (
-                best(&rescan),
-                (rescan.iter().copied()).max_by(|a, b| {
-                    let o = a.share.total_cmp(&b.share);
-                    if upward {
-                        o
-                    } else {
-                        o.reverse()
-                    }
-                }),
-            ) else {
-                break;
-            };
-            let next = if upward {
-                SHARE_GRID
-                    .iter()
-                    .copied()
-                    .find(|&s| s > end.share * (1.0 + 1e-9))
-            } else {
-                SHARE_GRID
-                    .iter()
-                    .rev()
-                    .copied()
-                    .find(|&s| s < end.share * (1.0 - 1e-9))
-            };
-            let Some(next) = next.filter(|_| indistinct(&end, &b)) else {
+        // The rescan's end in this direction, and the grid's next share past it.
+        let end_of = |v: &[Run]| {
+            (v.iter().copied()).max_by(|a, b| match upward {
+                true => a.share.total_cmp(&b.share),
+                false => b.share.total_cmp(&a.share),
+            })
+        };
+        let past = |end: f64| match upward {
+            true => SHARE_GRID.iter().copied().find(|&s| s > end * (1.0 + 1e-9)),
+            false => (SHARE_GRID.iter().rev().copied()).find(|&s| s < end * (1.0 - 1e-9)),
+        };
+        while let (Some(b), Some(end)) = (best(&rescan), end_of(&rescan)) {
+            let Some(next) = past(end.share).filter(|_| indistinct(&end, &b)) else {
                 break;
             };
             rescan.extend(scan(work, &[next], first.ratio)?);

@@ -334,54 +334,68 @@ pub(super) fn refit_joint(work: &mut Work<'_>, why: &str) -> Result<(), Diagnose
     else {
         return Ok(());
     };
-    let index = |names: &[String]| -> Vec<usize> {
-        (names.iter())
-            .filter_map(|n| work.steps.tests.iter().position(|t| t == n))
-            .collect()
-    };
+    let steps = work.steps;
     let named = |key: &str| -> Option<Vec<usize>> {
         let v: Vec<String> = serde_json::from_value(last.evidence[key].clone()).ok()?;
-        Some(index(&v)).filter(|v| !v.is_empty())
+        Some(steps.indices_of(&v)).filter(|v| !v.is_empty())
     };
-    let (train, validation) = (index(&last.train_tests), index(&last.validation_tests));
+    let train = steps.indices_of(&last.train_tests);
     // NOTE: judged on the validation tests without measured contact where there are any, as
     // the linear stage judges: a band test's impact-free steps beside its contact move with
     // where the twin's contact begins, which the joint moves too. On `ug` the refit to the
     // hidden joint (0.2, 2.5e-4 m) lowered the train error 0.64 -> 0.36 and raised the
     // validation error 0.47 -> 1.86 over 1fu-low, 1fu-high, 1fu-low-again and the three band
     // tests (BENCHMARKS.md, "A clamp slipping at the lowest level").
-    let with_contact = work.steps.tests_with(false);
-    let free: Vec<usize> = (validation.iter().copied())
-        .filter(|t| !with_contact.contains(t))
-        .collect();
-    let validation = if free.is_empty() { validation } else { free };
+    let validation = steps.without_contact_where_any(steps.indices_of(&last.validation_tests));
     let fitted = named("ratio_fitted_on").unwrap_or_else(|| train.clone());
     let share_train = named("share_fitted_on").unwrap_or_else(|| train.clone());
-    let base = PhysicsSpec {
-        clamp_friction: None,
-        ..work.accepted.clone()
-    };
     (work.progress)(DiagnoseProgress::Note(format!(
         "clamp_friction fitted again: {why}"
     )));
-    let fit = JointFit {
-        base: &base,
-        beams: &joint.beams,
-        rho: joint.stiffness_fraction / joint.half_slip_tip_amplitude,
-        fitted: &fitted,
-        train: &share_train,
-    };
-    let Some(refit) = fit_joint(work, &fit)? else {
-        return Ok(());
-    };
-    let mut evidence = refit.evidence.clone();
-    evidence["refitted"] = json!(why);
+    let mut evidence = json!({"refitted": why});
     for key in ["modes", "mode", "microslip", "in_place_of", "fitted_by"] {
         if !last.evidence[key].is_null() {
             evidence[key] = last.evidence[key].clone();
         }
     }
-    let cand = refit.candidate(&base, &joint.beams, evidence, (train, validation));
+    refit_accepted(
+        work,
+        &joint,
+        (&fitted, &share_train),
+        (train, validation),
+        evidence,
+    )
+}
+
+/// The accepted joint `joint` fitted again ([`fit_joint`] from its share per slip amplitude,
+/// on `fitted` and `share_train`) in the accepted model without it, and judged as a refit
+/// ([`Work::judge_refit`]) on `train` and `validation`, with `evidence` besides the fit's.
+fn refit_accepted(
+    work: &mut Work<'_>,
+    joint: &ClampFrictionSpec,
+    (fitted, share_train): (&[usize], &[usize]),
+    (train, validation): (Vec<usize>, Vec<usize>),
+    evidence: serde_json::Value,
+) -> Result<(), DiagnoseError> {
+    let base = PhysicsSpec {
+        clamp_friction: None,
+        ..work.accepted.clone()
+    };
+    let fit = JointFit {
+        base: &base,
+        beams: &joint.beams,
+        rho: joint.stiffness_fraction / joint.half_slip_tip_amplitude,
+        fitted,
+        train: share_train,
+    };
+    let Some(refitted) = fit_joint(work, &fit)? else {
+        return Ok(());
+    };
+    let mut all = refitted.evidence.clone();
+    if let (Some(all), serde_json::Value::Object(extra)) = (all.as_object_mut(), evidence) {
+        all.extend(extra);
+    }
+    let cand = refitted.candidate(&base, &joint.beams, all, (train, validation));
     work.judge_refit(cand, &base, |e| e.effect == "clamp_friction")?;
     Ok(())
 }
@@ -407,14 +421,20 @@ struct FittedJoint {
     alternatives: Vec<String>,
 }
 
+/// The clamp's joint of stiffness share `share` and share per slip amplitude `ratio` (1/m)
+/// on `beams`.
+fn joint_spec(share: f64, ratio: f64, beams: &[Beam]) -> ClampFrictionSpec {
+    ClampFrictionSpec {
+        stiffness_fraction: share,
+        half_slip_tip_amplitude: share / ratio,
+        sliders: 64,
+        beams: beams.to_vec(),
+    }
+}
+
 impl FittedJoint {
     fn spec(&self, beams: &[Beam]) -> ClampFrictionSpec {
-        ClampFrictionSpec {
-            stiffness_fraction: self.share,
-            half_slip_tip_amplitude: self.share / self.ratio,
-            sliders: 64,
-            beams: beams.to_vec(),
-        }
+        joint_spec(self.share, self.ratio, beams)
     }
 
     /// The candidate: the joint on `beams` in `base`, judged on the impact-free steps.
@@ -450,12 +470,7 @@ fn fit_joint(
     fit: &JointFit<'_>,
 ) -> Result<Option<FittedJoint>, DiagnoseError> {
     let (beams, rho, fitted, train) = (fit.beams, fit.rho, fit.fitted, fit.train);
-    let spec = |sf: f64, r: f64| ClampFrictionSpec {
-        stiffness_fraction: sf,
-        half_slip_tip_amplitude: sf / r,
-        sliders: 64,
-        beams: beams.to_vec(),
-    };
+    let spec = |sf: f64, r: f64| joint_spec(sf, r, beams);
     // NOTE: the fit's runs cover each test's steps near its resonance before its first
     // measured contact ([`super::rerun::SessionSteps::near_resonance`]), each from rest at
     // its lead-in: the clamp is fitted on impact-free steps, a band test's contact and
@@ -521,11 +536,10 @@ fn fit_joint(
     let Some(start) = best(&tried) else {
         return Ok(None);
     };
-    let lm_spec = |sf: f64, r: f64| spec(sf, r);
     tried.extend(clamp_lm(
         work,
         fit.base,
-        &lm_spec,
+        &spec,
         (train, &train_spans),
         (start.share, start.ratio),
     )?);
@@ -575,7 +589,7 @@ fn fit_joint(
         tried.extend(clamp_lm(
             work,
             fit.base,
-            &lm_spec,
+            &spec,
             (train, &train_spans),
             (b.share, b.ratio),
         )?);
@@ -648,13 +662,10 @@ fn other_beam(
     else {
         return Ok(());
     };
-    let index = |names: &[String]| -> Vec<usize> {
-        names
-            .iter()
-            .filter_map(|n| work.steps.tests.iter().position(|t| t == n))
-            .collect()
-    };
-    let (train, validation) = (index(&last.train_tests), index(&last.validation_tests));
+    let (train, validation) = (
+        work.steps.indices_of(&last.train_tests),
+        work.steps.indices_of(&last.validation_tests),
+    );
     let mut both = joint.clone();
     both.beams = vec![Beam::Upper, Beam::Lower];
     let cand = Candidate::new(
@@ -673,25 +684,13 @@ fn other_beam(
     if !work.judge(cand)? {
         return Ok(());
     }
-    let base = PhysicsSpec {
-        clamp_friction: None,
-        ..work.accepted.clone()
-    };
-    let fit = JointFit {
-        base: &base,
-        beams: &both.beams,
-        rho: both.stiffness_fraction / both.half_slip_tip_amplitude,
-        fitted,
-        train: fit_train,
-    };
-    let Some(joint) = fit_joint(work, &fit)? else {
-        return Ok(());
-    };
-    let mut evidence = joint.evidence.clone();
-    evidence["refitted"] = json!("on both beams, from the joint extended with the same parameters");
-    let cand = joint.candidate(&base, &both.beams, evidence, (train, validation));
-    work.judge_refit(cand, &base, |e| e.effect == "clamp_friction")?;
-    Ok(())
+    refit_accepted(
+        work,
+        &both,
+        (fitted, fit_train),
+        (train, validation),
+        json!({"refitted": "on both beams, from the joint extended with the same parameters"}),
+    )
 }
 
 /// The clamp fitted by model runs where the resonance estimator saw one level only: a mode

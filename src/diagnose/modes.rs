@@ -236,11 +236,7 @@ pub(super) fn linear_stage(
         // hidden 1FU correction (51.7 Hz, damping 0.0025) beside wear, the damping, fitted
         // within 0.2 %, fell only 10.21 -> 10.15 over all six tests and was rejected
         // (BENCHMARKS.md, "Concealed values on `identify.toml`").
-        let with_contact = work.steps.tests_with(false);
-        let free: Vec<usize> = (validation.iter().copied())
-            .filter(|t| !with_contact.contains(t))
-            .collect();
-        let validation = if free.is_empty() { validation } else { free };
+        let validation = work.steps.without_contact_where_any(validation);
         let train_fits: Vec<&ModeFit> = fits
             .iter()
             .copied()

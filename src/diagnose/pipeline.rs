@@ -528,8 +528,8 @@ pub fn diagnose(
         let scores = work.scores(&accepted, &free)?;
         unpartnered_gains(&mut work, &scores, &free_train, &free_validation)?;
         // The joint fitted before a gain found now carries the gain's misfit.
-        let gains = |w: &Work<'_>| w.accepted.sensor_gains.len();
-        if gains(&work) > accepted.sensor_gains.len() && work.accepted.clamp_friction.is_some() {
+        let gain_found = work.accepted.sensor_gains.len() > accepted.sensor_gains.len();
+        if gain_found && work.accepted.clamp_friction.is_some() {
             work.stage(
                 "clamp_friction_again",
                 "identify: the clamp's friction against the model with the beam channels' gains",
@@ -678,11 +678,12 @@ pub fn diagnose(
         .filter_map(super::clearance_fit::unexplained_offset)
         .collect();
     // So is a trend of the clearance over the session that no effect explained (the wear
-    // stage's).
-    let contact_mismatch = !unexplained.is_empty() || !work.unexplained.is_empty();
+    // stage's, already in `work.unexplained`).
     for why in unexplained {
-        work.undecided("clearance", why);
+        work.undecided("clearance", why.clone());
+        work.unexplained.push(why);
     }
+    let contact_mismatch = !work.unexplained.is_empty();
     let verdict = if any || free_mismatch || band_mismatch || contact_mismatch {
         Verdict::Mismatch
     } else {

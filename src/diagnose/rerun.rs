@@ -83,6 +83,21 @@ pub fn had_contact(s: &StepResult) -> bool {
 }
 
 impl SessionSteps {
+    /// Those of `tests` without measured contact, where there are any; else `tests`. What
+    /// impact-free evidence is validated on: a test with contact also holds impact-free steps
+    /// beside its contact, which move with where the model's contact begins.
+    pub fn without_contact_where_any(&self, tests: Vec<usize>) -> Vec<usize> {
+        let with_contact = self.tests_with(false);
+        let free: Vec<usize> = (tests.iter().copied())
+            .filter(|t| !with_contact.contains(t))
+            .collect();
+        if free.is_empty() {
+            tests
+        } else {
+            free
+        }
+    }
+
     /// The indices of the tests named in `names`, in session order.
     pub fn indices_of(&self, names: &[String]) -> Vec<usize> {
         (self.tests.iter().enumerate())

@@ -97,14 +97,17 @@ impl Run {
     }
 }
 
-/// Whether run `x` cannot be told from run `best` on the same features: its sum of squared
+/// Whether run `x` cannot be told from run `best` on the same features: its RMS score within
+/// `null_spread` of the best's (the judge's own resolution: a model that a validation could
+/// not tell from the best one; on the short plan a hidden share 0.3 on both beams was fitted
+/// at 0.134 with the shares 0.1-0.4 within 0.05 of its train error), or its sum of squared
 /// scores within 1 of the best's, in units of the comparison's spread, or of the best's
 /// residual where that is wider (the Birge ratio: a model that misses the features by more
 /// than their spread at its best point has a flatter valley than the spread says; a hidden
 /// share 0.2 beside a gain left the best share's train error at 2.6 and the grid's shares
 /// 0.05-0.2 within 1 % of it).
-fn indistinct(x: &Run, best: &Run) -> bool {
-    x.ssr() - best.ssr() <= (best.rms * best.rms).max(1.0)
+fn indistinct(x: &Run, best: &Run, null_spread: f64) -> bool {
+    x.rms <= best.rms + null_spread || x.ssr() - best.ssr() <= (best.rms * best.rms).max(1.0)
 }
 
 /// [`ClampFit`] of the joint in `base` from `start` (share, ratio): every run it made.
@@ -551,8 +554,9 @@ fn fit_joint(
     let Some(first) = best(&tried) else {
         return Ok(None);
     };
+    let null = work.opts.null_spread;
     let flat_in_first =
-        |share: f64| (first_scan.iter()).any(|t| t.share == share && indistinct(t, &start));
+        |share: f64| (first_scan.iter()).any(|t| t.share == share && indistinct(t, &start, null));
     let near: Vec<f64> = SHARE_GRID
         .iter()
         .copied()
@@ -575,7 +579,7 @@ fn fit_joint(
             false => (SHARE_GRID.iter().rev().copied()).find(|&s| s < end * (1.0 - 1e-9)),
         };
         while let (Some(b), Some(end)) = (best(&rescan), end_of(&rescan)) {
-            let Some(next) = past(end.share).filter(|_| indistinct(&end, &b)) else {
+            let Some(next) = past(end.share).filter(|_| indistinct(&end, &b, null)) else {
                 break;
             };
             rescan.extend(scan(work, &[next], first.ratio)?);
@@ -602,7 +606,7 @@ fn fit_joint(
     // ratio ([`indistinct`] from the best).
     let within: Vec<f64> = rescan
         .iter()
-        .filter(|x| indistinct(x, &fitted_run))
+        .filter(|x| indistinct(x, &fitted_run, null))
         .map(|x| x.share)
         .chain([sf])
         .collect();

@@ -1,8 +1,8 @@
-//! Twin benchmark on the default ROM (modes to 180 x f(1FU), 192 pairs), one core: the
-//! twin's real-time factor (seconds of data per wall second) and steps per second, fed with
-//! DAQ blocks of the default simulated DAQ layout (10240 Hz, 256-sample blocks, three 24-bit
-//! platform accelerometers) carrying a synthesised sine base acceleration, at the twin's
-//! default step (5 steps per sample, about 1000 per 1FU period):
+//! Twin benchmark on the default rig's twin (modes to 180 x f(1FU); 192 pairs, 88 in held
+//! contact), one core: the twin's real-time factor (seconds of data per wall second) and steps
+//! per second, fed with DAQ blocks of the default simulated DAQ layout (10240 Hz, 256-sample
+//! blocks, three 24-bit platform accelerometers) carrying a synthesised sine base
+//! acceleration, at the twin's default step (5 steps per sample, about 1000 per 1FU period):
 //! - `open`: Omega = 0.90 omega_2, base level 2e-5 l, clearance 2.78e-3 l (no contact);
 //! - `impacts`: Omega = omega_2, high level 6e-5 l, clearance 2.78e-3 l (sustained impacts);
 //! - `touching L`: Omega = omega_2, clearance 0 (the probes touch at rest: most pairs closed
@@ -18,9 +18,13 @@
 //!   beams), `wear`, `tilt` (2e-3 rad), `sensor gains` (a platform accelerometer and a tip),
 //!   and `all` of them at once: the cost of each extension against `impacts`.
 //!
-//! `--case TEXT` runs only the cases whose name contains TEXT. `--contact-nodes AxB` gives the
-//! twin's ROM a coarser contact patch (`[reduction] contact_nodes`, a model change; issue 16,
-//! fourth pass).
+//! Each case's twin runs on the ROM a session of that case gives it: the held-contact cases
+//! (touching, small clearance, pre-load) on the coarser patch of `[twin.held_contact]` (8 x 11,
+//! 88 pairs; `RigConfig::held_contact_twin`), the others on the default patch.
+//!
+//! `--case TEXT` runs only the cases whose name contains TEXT. `--contact-nodes AxB` gives
+//! every case's twin that contact patch instead (`[reduction] contact_nodes`, e.g. `12x16` for
+//! the default patch in held contact).
 //!
 //! Each case settles for `--settle` periods, then runs `--seconds` of data `--repeat` times
 //! from the settled twin (sync core, `Twin::push_block`, one JSON line per run), then once
@@ -140,14 +144,20 @@ fn main() {
     let dir = std::env::var_os("RIGTWIN_CACHE")
         .map(PathBuf::from)
         .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/rom-cache"));
-    let (rom, _, _) = rigtwin::rom::cache::load_or_build(
-        cfg.model(),
-        &BuildOptions::default(),
-        &dir,
-        false,
-        &mut |_| {},
-    )
-    .expect("default ROM");
+    let build = |cfg: &RigConfig| {
+        let (rom, _, _) = rigtwin::rom::cache::load_or_build(
+            cfg.model(),
+            &BuildOptions::default(),
+            &dir,
+            false,
+            &mut |_| {},
+        )
+        .expect("ROM");
+        rom
+    };
+    let rom = build(&cfg);
+    let held = |clearance: f64| cfg.held_contact_twin(&[clearance]);
+    let held_rom = held(0.0).map(|c| build(&c));
     let l = rom.meta.beam_length;
     let w2 = rom.omega_ref();
     let layout = rigtwin::rig::channels::layout(&DaqSpec::default());
@@ -264,8 +274,12 @@ axis = [0.6, 0.8]"#;
         }
         let omega = case.omega_ratio * w2;
         let clearance = case.clearance * l;
+        let case_rom = match (held(case.clearance), &held_rom) {
+            (Some(_), Some(coarse)) => coarse,
+            _ => &rom,
+        };
         let mut twin = Twin::new(
-            &TwinModel::nominal(&rom).with_extensions(case.model.clone()),
+            &TwinModel::nominal(case_rom).with_extensions(case.model.clone()),
             &spec,
             &layout,
             clearance,
@@ -302,8 +316,9 @@ axis = [0.6, 0.8]"#;
             factors.push(data_s / secs);
             rates.push(steps as f64 / secs);
             println!(
-                "{{\"case\":\"{}\",\"run\":{run},\"data_seconds\":{data_s:.3},\"wall_seconds\":{secs:.4},\"realtime_factor\":{:.2},\"steps_per_second\":{:.0},\"steps_per_sample\":{},\"contact_sample_fraction\":{:.4},\"solves_per_step\":{:.4},\"closed_step_fraction\":{:.4},\"sweeps_per_solve\":{:.1},\"newton_solve_fraction\":{:.3},\"newton_iterations_per_newton_solve\":{:.2},\"solver_failures\":{}}}",
+                "{{\"case\":\"{}\",\"pairs\":{},\"run\":{run},\"data_seconds\":{data_s:.3},\"wall_seconds\":{secs:.4},\"realtime_factor\":{:.2},\"steps_per_second\":{:.0},\"steps_per_sample\":{},\"contact_sample_fraction\":{:.4},\"solves_per_step\":{:.4},\"closed_step_fraction\":{:.4},\"sweeps_per_solve\":{:.1},\"newton_solve_fraction\":{:.3},\"newton_iterations_per_newton_solve\":{:.2},\"solver_failures\":{}}}",
                 case.name,
+                case_rom.n_pairs(),
                 data_s / secs,
                 steps as f64 / secs,
                 t.steps_per_sample(),
@@ -338,6 +353,7 @@ axis = [0.6, 0.8]"#;
         );
         summary.push((
             case.name,
+            case_rom.n_pairs(),
             median(&mut factors),
             median(&mut rates),
             status.realtime_factor,
@@ -348,7 +364,9 @@ axis = [0.6, 0.8]"#;
          core; task: one run):",
         args.repeat, args.seconds
     );
-    for (c, f, r, tf) in summary {
-        eprintln!("  {c:>16}: {f:>6.2} x real time, {r:>9.0} steps/s (task: {tf:.2} x real time)");
+    for (c, pairs, f, r, tf) in summary {
+        eprintln!(
+            "  {c:>16}: {f:>6.2} x real time, {r:>9.0} steps/s (task: {tf:.2} x real time; {pairs} pairs)"
+        );
     }
 }

@@ -734,3 +734,92 @@ impl TwinSink for FailsAtSecondStep {
         Ok(())
     }
 }
+
+/// A plan whose every test holds the probes in contact (issue 16): the live twin runs on the
+/// coarser patch of `[twin.held_contact]`, says so and logs its ROM, and `replay --twin`
+/// chooses the same patch from the logged plan (the same bits). A plan with a test at the
+/// reference's clearance, or `enabled = false`, keeps the model's patch.
+#[test]
+fn a_session_that_holds_contact_runs_the_twin_on_the_coarser_patch() {
+    const HELD: &str = r#"
+name = "held-contact-test"
+[defaults]
+level = 0.5e-5
+steps = 1
+settle_periods = 20
+record_periods = 20
+steps_per_period = 1000
+direction = "up"
+omega_start = 1.0
+omega_end = 1.0
+
+[[test]]
+name = "small-clearance"
+clearance = 1.0e-5
+"#;
+    let dir = tempfile::tempdir().unwrap();
+    let run = |name: &str, plan_text: &str, rig: Option<&std::path::Path>| {
+        let plan = dir.path().join(format!("{name}.toml"));
+        std::fs::write(&plan, plan_text).unwrap();
+        let mcap = dir.path().join(format!("{name}.mcap"));
+        let json = dir.path().join(format!("{name}.json"));
+        let mut args = vec!["run", "--plan", plan.to_str().unwrap(), "--quiet", "--twin"];
+        if let Some(rig) = rig {
+            args.push(rig.to_str().unwrap());
+        }
+        args.extend([
+            "--out",
+            mcap.to_str().unwrap(),
+            "--json",
+            json.to_str().unwrap(),
+        ]);
+        let o = rigtwin(&args);
+        assert!(o.status.success(), "{}", text(&o));
+        let rom = rigtwin::log::read_session(&mcap)
+            .unwrap()
+            .metadata(rigtwin::session::topics::ROM_METADATA)
+            .unwrap()
+            .clone();
+        (mcap, json, text(&o), rom)
+    };
+    let (mcap, live, out, rom) = run("held", HELD, None);
+    assert!(
+        out.contains("twin: contact patch 8 x 11 (88 pairs) in place of the model's 12 x 16"),
+        "{out}"
+    );
+    assert_eq!(rom["pairs"], "192", "{rom:?}");
+    assert_eq!(rom["twin_pairs"], "88", "{rom:?}");
+    assert!(json(&live)["tests"][0]["steps"][0]["twin"].is_object());
+    let replayed = dir.path().join("replay.json");
+    let o = rigtwin(&[
+        "replay",
+        mcap.to_str().unwrap(),
+        "--twin",
+        "--ensemble",
+        "0",
+        "--json",
+        replayed.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(
+        text(&o).contains("twin: contact patch 8 x 11"),
+        "{}",
+        text(&o)
+    );
+    assert_eq!(
+        std::fs::read_to_string(&live).unwrap(),
+        std::fs::read_to_string(&replayed).unwrap(),
+        "live twin and replayed twin differ"
+    );
+
+    // A test at the reference's clearance: impacts, where the coarse patch rings differently.
+    let mixed = format!("{HELD}\n[[test]]\nname = \"apart\"\nclearance = 2.78e-3\n");
+    let (_, _, out, rom) = run("mixed", &mixed, None);
+    assert!(!out.contains("twin: contact patch"), "{out}");
+    assert!(!rom.contains_key("twin_pairs"), "{rom:?}");
+    // Switched off.
+    let rig = default_rig_with(dir.path(), "[twin.held_contact]\nenabled = false\n");
+    let (_, _, out, rom) = run("off", HELD, Some(&rig));
+    assert!(!out.contains("twin: contact patch"), "{out}");
+    assert!(!rom.contains_key("twin_pairs"), "{rom:?}");
+}

@@ -58,6 +58,28 @@ pub(crate) fn cached_rom(
     ))
 }
 
+/// The twin's own ROM and its file where the session's tests, with the clearances
+/// `clearances` (/ l), hold the probes in contact ([`RigConfig::held_contact_twin`]: a
+/// coarser contact patch); says so on the terminal. None: the twin runs on `cfg`'s ROM.
+pub(crate) fn held_contact_twin_rom(
+    cfg: &RigConfig,
+    clearances: &[f64],
+    rebuild: bool,
+    quiet: bool,
+) -> anyhow::Result<Option<(Rom, PathBuf)>> {
+    let Some(twin) = cfg.held_contact_twin(clearances) else {
+        return Ok(None);
+    };
+    let (rom, path, _) = cached_rom(&twin, rebuild, quiet)?;
+    let ([y, x], [fy, fx]) = (twin.twin.held_contact.contact_nodes, cfg.contact.nodes);
+    println!(
+        "twin: contact patch {y} x {x} ({} pairs) in place of the model's {fy} x {fx}: every test holds the probes in contact (clearance <= {:e} l, [twin.held_contact])",
+        rom.n_pairs(),
+        twin.twin.held_contact.max_clearance
+    );
+    Ok(Some((rom, path)))
+}
+
 /// The simulated rig's truth ROM: the rig description's structure with modes up to
 /// `[truth] cutoff_ratio` x f(1FU) (more than the twin's), on the `[contact] nodes` patch
 /// (the model's `[reduction] contact_nodes`, if any, is the twin's only).

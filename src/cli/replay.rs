@@ -120,7 +120,16 @@ pub(crate) fn run(a: ReplayArgs) -> anyhow::Result<()> {
                 (rom, model.source.clone())
             }
             TwinRom::Description(cfg) => {
-                let (rom, path, _) = models::cached_rom(cfg, a.rebuild, true)?;
+                // The live twin's patch: a coarser one where the plan holds the probes in
+                // contact.
+                let (rom, path) =
+                    match models::held_contact_twin_rom(cfg, &r.clearances, a.rebuild, true)? {
+                        Some(twin) => twin,
+                        None => {
+                            let (rom, path, _) = models::cached_rom(cfg, a.rebuild, true)?;
+                            (rom, path)
+                        }
+                    };
                 let source = format!("{} (ROM {})", model.source, path.display());
                 (rom, source)
             }

@@ -191,12 +191,16 @@ pub(crate) fn run_session_on(
     let runtime = crate::session::runtime()?;
     let (model, model_path, _) = models::cached_rom(cfg, session.rebuild, session.quiet)?;
     super::check_extensions(&model, &cfg.model, &cfg.source)?;
-    if session.twin {
+    let twin_model = if session.twin {
         println!(
             "twin model extensions: {}",
             super::extensions_line(&cfg.model)
         );
-    }
+        let clearances: Vec<f64> = session.plan.tests.iter().map(|t| t.clearance).collect();
+        models::held_contact_twin_rom(cfg, &clearances, session.rebuild, session.quiet)?
+    } else {
+        None
+    };
     let mut metadata = BackendMetadata::default();
     metadata
         .session
@@ -220,6 +224,7 @@ pub(crate) fn run_session_on(
         out: session.out,
         model: &model,
         model_path: &model_path,
+        twin_model: twin_model.as_ref().map(|(rom, path)| (rom, path.as_path())),
         twin: session.twin,
         live,
         backend_metadata: metadata,

@@ -43,7 +43,7 @@ pub use schema::{
 };
 pub use shaker::ShakerSpec;
 pub use truth::TruthSpec;
-pub use twin::{AfterGap, TwinSpec};
+pub use twin::{AfterGap, HeldContactSpec, TwinSpec};
 
 /// Text of the embedded default rig description.
 pub const DEFAULT_RIG_TOML: &str = include_str!("../../rig-config/two-beam.toml");
@@ -257,6 +257,26 @@ impl RigConfig {
         cfg.source = file;
         cfg.validate()?;
         Ok(cfg)
+    }
+
+    /// The description the twin runs on in a session whose tests have the clearances
+    /// `clearances` (/ l), where that differs from this one: `[reduction] contact_nodes` set
+    /// to `[twin.held_contact] contact_nodes` when every test holds the probes in contact
+    /// ([`twin::HeldContactSpec`]), this description sets no patch of its own, and the
+    /// held-contact patch has fewer pairs than `[contact] nodes`. None: the twin runs on this
+    /// description's model.
+    pub fn held_contact_twin(&self, clearances: &[f64]) -> Option<RigConfig> {
+        if self.reduction.contact_nodes.is_some() {
+            return None;
+        }
+        let nodes = self.twin.held_contact.patch_for(clearances)?;
+        let pairs = |n: [usize; 2]| n[0] * n[1];
+        if pairs(nodes) >= pairs(self.contact.nodes) {
+            return None;
+        }
+        let mut twin = self.clone();
+        twin.reduction.contact_nodes = Some(nodes);
+        Some(twin)
     }
 
     /// The model sections: what the FE model and its reduction are built from, and what the

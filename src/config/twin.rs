@@ -62,6 +62,55 @@ pub struct TwinSpec {
     pub tolerance: ComparisonTolerance,
     /// The comparison's discretisation member (`[twin.discretisation]`).
     pub discretisation: DiscretisationSpec,
+    /// The twin's contact patch in a session that holds the probes in contact
+    /// (`[twin.held_contact]`).
+    pub held_contact: HeldContactSpec,
+}
+
+/// `[twin.held_contact]`: a coarser contact patch for the twin in a session whose every test
+/// holds the probes in contact (touching, pre-loaded, or a gap of a few micrometres).
+///
+/// There most pairs close at once, step after step, and the contact solve on the model's own
+/// patch (`[contact] nodes`: 192 pairs on the default rig) keeps the twin at about 2x real
+/// time; on 8 x 11 (88 pairs) it runs at 6.5-7.3x, its response within the fine patch's own
+/// spread in held contact and as close to the simulated rig's (BENCHMARKS.md, "Held contact:
+/// the twin's patch chosen by the plan"). In impacts the coarse patch rings differently
+/// (more, shorter contacts), so a session with any test at a larger clearance keeps the
+/// model's patch, and so does a description that sets its own `[reduction] contact_nodes`.
+/// The simulated rig's truth is not affected.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct HeldContactSpec {
+    /// Whether the twin takes `contact_nodes` in such a session. Default true.
+    pub enabled: bool,
+    /// The twin's patch `[across y, along x]` there (at least 2 nodes per edge; used only
+    /// when it has fewer pairs than `[contact] nodes`). Default [8, 11].
+    pub contact_nodes: [usize; 2],
+    /// A test holds contact when its clearance / l is at most this (in [-1e-4, 0.1]).
+    /// Default 2e-5 (6 um on the default rig's 300 mm beams, whose planned gap is 2.33e-3 l):
+    /// at 1e-5 l and a base level of 0.5e-5 l the probes are in contact 7 % of the time, with
+    /// 100-192 pairs in each solve.
+    pub max_clearance: f64,
+}
+
+impl Default for HeldContactSpec {
+    fn default() -> Self {
+        HeldContactSpec {
+            enabled: true,
+            contact_nodes: [8, 11],
+            max_clearance: 2e-5,
+        }
+    }
+}
+
+impl HeldContactSpec {
+    /// The twin's patch for a session whose tests have the clearances `clearances` (/ l):
+    /// `contact_nodes` when enabled and every test holds contact; none otherwise (no tests
+    /// included).
+    pub fn patch_for(&self, clearances: &[f64]) -> Option<[usize; 2]> {
+        let held = !clearances.is_empty() && clearances.iter().all(|&c| c <= self.max_clearance);
+        (self.enabled && held).then_some(self.contact_nodes)
+    }
 }
 
 /// `[twin.discretisation]`: a run of a finer model beside the ensemble (`rigtwin replay
@@ -152,6 +201,7 @@ impl Default for TwinSpec {
             ensemble_perturbation: 1e-3,
             tolerance: ComparisonTolerance::default(),
             discretisation: DiscretisationSpec::default(),
+            held_contact: HeldContactSpec::default(),
         }
     }
 }
@@ -217,6 +267,23 @@ impl TwinSpec {
                 "twin.discretisation.steps_per_sample",
                 0,
                 "at least 1 step per DAQ sample",
+            ));
+        }
+        let h = &self.held_contact;
+        let [y, x] = h.contact_nodes;
+        if y < 2 || x < 2 || y.saturating_mul(x) > 10_000 {
+            return Err(SpecError::new(
+                "twin.held_contact.contact_nodes",
+                format!("[{y}, {x}]"),
+                "at least 2 nodes along each edge of the patch ([across y, along x]), at most 10000 pairs",
+            ));
+        }
+        let m = h.max_clearance;
+        if !(m.is_finite() && (-1e-4..=0.1).contains(&m)) {
+            return Err(SpecError::new(
+                "twin.held_contact.max_clearance",
+                m,
+                "a clearance / l in [-1e-4, 0.1]",
             ));
         }
         let t = &self.tolerance;
@@ -341,10 +408,70 @@ mod tests {
                 },
                 "twin.discretisation.steps_per_sample = 0",
             ),
+            (
+                TwinSpec {
+                    held_contact: HeldContactSpec {
+                        contact_nodes: [1, 11],
+                        ..HeldContactSpec::default()
+                    },
+                    ..TwinSpec::default()
+                },
+                "twin.held_contact.contact_nodes = [1, 11]",
+            ),
+            (
+                TwinSpec {
+                    held_contact: HeldContactSpec {
+                        max_clearance: 0.5,
+                        ..HeldContactSpec::default()
+                    },
+                    ..TwinSpec::default()
+                },
+                "twin.held_contact.max_clearance = 0.5",
+            ),
         ] {
             let msg = spec.validate().unwrap_err().to_string();
             assert!(msg.contains(key), "{msg}");
         }
+    }
+
+    #[test]
+    fn the_held_contact_patch_only_where_every_test_holds_contact() {
+        let h = HeldContactSpec::default();
+        // `rig-config/plans/held-contact.toml`: touching, 1e-5 l, pre-load.
+        assert_eq!(h.patch_for(&[0.0, 1e-5, -1e-5]), Some([8, 11]));
+        assert_eq!(h.patch_for(&[2e-5]), Some([8, 11]));
+        // One test at the reference's clearance: impacts, the model's patch.
+        assert_eq!(h.patch_for(&[0.0, 2.33e-3]), None);
+        assert_eq!(h.patch_for(&[]), None);
+        let off = HeldContactSpec {
+            enabled: false,
+            ..h.clone()
+        };
+        assert_eq!(off.patch_for(&[0.0]), None);
+
+        let rig = RigConfig::default_rig();
+        let twin = rig.held_contact_twin(&[0.0, 1e-5]).unwrap();
+        assert_eq!(twin.reduction.contact_nodes, Some([8, 11]));
+        assert_eq!(twin.contact.nodes, rig.contact.nodes);
+        assert_ne!(twin.canonical_hash(), rig.canonical_hash());
+        assert!(rig.held_contact_twin(&[2.33e-3]).is_none());
+        // A patch of the description's own wins; so does a model patch already as coarse.
+        let mut own = rig.clone();
+        own.reduction.contact_nodes = Some([10, 12]);
+        assert!(own.held_contact_twin(&[0.0]).is_none());
+        let mut coarse = rig.clone();
+        coarse.contact.nodes = [6, 8];
+        assert!(coarse.held_contact_twin(&[0.0]).is_none());
+        // From TOML.
+        let cfg = RigConfig::from_str(
+            &format!(
+                "{DEFAULT_RIG_TOML}\n[twin.held_contact]\ncontact_nodes = [6, 8]\nmax_clearance = 0.0\n"
+            ),
+            "test",
+        )
+        .unwrap();
+        assert_eq!(cfg.twin.held_contact.patch_for(&[0.0]), Some([6, 8]));
+        assert_eq!(cfg.twin.held_contact.patch_for(&[1e-5]), None);
     }
 
     #[test]

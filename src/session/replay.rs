@@ -60,6 +60,10 @@ pub struct Replay {
     pub note: Option<String>,
     /// The rig description the session ran with (the log's `rig.toml` attachment), if any.
     pub rig_toml: Option<String>,
+    /// The clearances / l of the session's tests: the plan's (the log's `plan.toml`
+    /// attachment), else those of the tests recorded. They chose the live twin's contact
+    /// patch ([`RigConfig::held_contact_twin`]).
+    pub clearances: Vec<f64>,
     /// The raw recording (layout, blocks, events).
     pub recording: Recording,
 }
@@ -649,6 +653,10 @@ fn replay_of(
     let rig_toml = session
         .attachment(RIG_ATTACHMENT)
         .map(|a| String::from_utf8_lossy(&a.data).into_owned());
+    let clearances = match logged_plan(session) {
+        Some(plan) => plan.tests.iter().map(|t| t.clearance).collect(),
+        None => summary.tests.iter().map(|t| t.clearance).collect(),
+    };
     mark_missing(&mut summary, session, &rec, steps_lost);
     Ok(Replay {
         summary,
@@ -657,8 +665,16 @@ fn replay_of(
         complete: session.complete,
         note: session.note.clone(),
         rig_toml,
+        clearances,
         recording: rec,
     })
+}
+
+/// The plan the session ran (the log's `plan.toml` attachment), if it holds a valid one.
+fn logged_plan(session: &SessionRead) -> Option<crate::plan::Plan> {
+    let a = session.attachment(PLAN_ATTACHMENT)?;
+    let text = String::from_utf8_lossy(&a.data);
+    crate::plan::Plan::from_str(&text, "plan.toml (attached to the log)").ok()
 }
 
 /// Marks `summary` incomplete with what is missing when the log was cut off or damaged, or the
@@ -676,12 +692,8 @@ fn mark_missing(
     if session_end && !damaged_or_cut(session) && rec.gaps.is_empty() {
         return;
     }
-    let steps_planned = session.attachment(PLAN_ATTACHMENT).and_then(|a| {
-        let text = String::from_utf8_lossy(&a.data);
-        crate::plan::Plan::from_str(&text, "plan.toml (attached to the log)")
-            .ok()
-            .map(|p| p.tests.iter().map(|t| t.steps as usize).sum::<usize>())
-    });
+    let steps_planned =
+        logged_plan(session).map(|p| p.tests.iter().map(|t| t.steps as usize).sum::<usize>());
     let steps_finished = summary.steps().count();
     let recorded_until_s = rec.rig_seconds();
     let lost_blocks: u64 = rec.gaps.iter().map(|g| g.blocks).sum();

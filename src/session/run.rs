@@ -66,6 +66,10 @@ pub struct SessionRequest<'a> {
     pub model: &'a Rom,
     /// Where the model's ROM file is (for the log's metadata).
     pub model_path: &'a Path,
+    /// The live twin's own ROM and its file where it is not the model's: a coarser contact
+    /// patch for a session that holds the probes in contact
+    /// ([`crate::config::RigConfig::held_contact_twin`]).
+    pub twin_model: Option<(&'a Rom, &'a Path)>,
     /// Run the live twin beside the session.
     pub twin: bool,
     /// The live view, started by the caller (so that a port in use fails before anything
@@ -145,6 +149,14 @@ fn log_records(r: &SessionRequest<'_>) -> (Vec<MetadataRecord>, Vec<Attachment>)
     rom_meta.insert("config_hash".to_string(), model.meta.config_hash.clone());
     rom_meta.insert("modes".to_string(), model.n_modes().to_string());
     rom_meta.insert("pairs".to_string(), model.n_pairs().to_string());
+    if let Some((twin, path)) = r.twin_model {
+        rom_meta.insert("twin_path".to_string(), path.display().to_string());
+        rom_meta.insert(
+            "twin_config_hash".to_string(),
+            twin.meta.config_hash.clone(),
+        );
+        rom_meta.insert("twin_pairs".to_string(), twin.n_pairs().to_string());
+    }
     let mut attachments = vec![Attachment {
         name: RIG_ATTACHMENT.into(),
         media_type: "application/toml".into(),
@@ -193,7 +205,8 @@ pub fn run<B: RigBackend>(
     // that name either.)
     Procedure::new(&setup, backend.layout()).map_err(SessionError::from)?;
     let twin_engine = if request.twin {
-        let model = TwinModel::of_config(request.model, cfg);
+        let rom = request.twin_model.map_or(request.model, |(rom, _)| rom);
+        let model = TwinModel::of_config(rom, cfg);
         Some(Twin::new(
             &model,
             &cfg.twin,

@@ -13,6 +13,8 @@
 //!   named first, within 20 % (here 1 %);
 //! - a platform accelerometer and the vibrometer off at once: both named, judged on their
 //!   redundant partners;
+//! - the vibrometer off beside a wrong 1FU: the two readings of the upper tip's sensors tie
+//!   against the nominal model and the vibrometer is chosen against the corrected one;
 //! - the linear case the other way round: the rig nominal (noise seed 1, the second null
 //!   case), the model a wrong rig description given by `--config` (upper clamp layers 4x
 //!   softer, 1FU damping 1.6x): `linear_frequency` and `linear_damping` of 1FU found within
@@ -260,6 +262,47 @@ fn a_nominal_session_against_a_wrong_rig_description_finds_its_1fu() {
         );
         assert!(b > a, "validation {b} -> {a}: {e:#}");
     }
+}
+
+#[test]
+fn a_vibrometer_gain_beside_a_wrong_1fu_is_the_vibrometers() {
+    // A vibrometer off beside a 1FU the model has wrong: against the nominal model the
+    // upper beam's resonance misses in both of the upper tip's sensors, and the two readings
+    // of their ratio (the accelerometer low or the vibrometer high) tie; against the model
+    // with the 1FU corrected, the vibrometer's is the one (`gains::spot_gain_again`).
+    let dir = tempfile::tempdir().unwrap();
+    let (vibrometer, f_1fu) = (1.04, 50.8);
+    let truth = format!(
+        "[truth.variants]\nsensor_gains = [{{ channel = \"vibrometer\", gain = {vibrometer} }}]\n\
+         modes = [{{ mode = \"1FU\", frequency_hz = {f_1fu} }}]\n"
+    );
+    let (_, stripped) = sim_session(dir.path(), "spot", &truth, PLAN);
+    let d = diagnose(&stripped, dir.path(), "spot", &[]);
+    assert_eq!(d["verdict"], "mismatch");
+    let g = accepted(&d, "sensor_gain");
+    assert_eq!(g.len(), 1, "{d:#}");
+    assert_eq!(g[0]["parameters"]["channel"], "vibrometer", "{:#}", g[0]);
+    let fit = g[0]["parameters"]["gain"].as_f64().unwrap();
+    assert!(
+        (fit / vibrometer - 1.0).abs() < 0.005,
+        "{fit} for {vibrometer}"
+    );
+    // Chosen again against the corrected model, where the first pass tied.
+    let again = &g[0]["evidence"]["chosen_again"]["errors"];
+    let (v, u) = (
+        again["train_error_vibrometer"].as_f64().unwrap(),
+        again["train_error_upper_tip"].as_f64().unwrap(),
+    );
+    assert!(v + 0.3 < u, "vibrometer {v}, upper tip {u}: {:#}", g[0]);
+    assert!(
+        g[0]["alternatives"].as_array().unwrap().is_empty(),
+        "{:#}",
+        g[0]
+    );
+    let f = accepted(&d, "linear_frequency");
+    assert_eq!(f.len(), 1, "{d:#}");
+    let fit = f[0]["parameters"]["frequency_hz"].as_f64().unwrap();
+    assert!((fit / f_1fu - 1.0).abs() < 0.005, "1FU {fit} for {f_1fu}");
 }
 
 #[test]

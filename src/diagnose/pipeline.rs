@@ -524,6 +524,7 @@ pub fn diagnose(
             "sensor_gain_again",
             "identify: the beam channels' sensitivities against the corrected model",
         );
+        super::gains::spot_gain_again(&mut work, &free, &free_train)?;
         let accepted = work.accepted.clone();
         let scores = work.scores(&accepted, &free)?;
         unpartnered_gains(&mut work, &scores, &free_train, &free_validation)?;

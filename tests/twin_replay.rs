@@ -58,6 +58,32 @@ fn record(dir: &std::path::Path) -> PathBuf {
     mcap
 }
 
+/// `replay --twin --ensemble 0` of the log `mcap` into `out`, asserted equal to the live
+/// twin's summary `live` (the live twin runs no ensemble, issue 14, part 4: its replay without
+/// one is its twin); returns the replay's output.
+fn assert_replay_equals_live(
+    mcap: &std::path::Path,
+    live: &std::path::Path,
+    out: &std::path::Path,
+) -> String {
+    let o = rigtwin(&[
+        "replay",
+        mcap.to_str().unwrap(),
+        "--twin",
+        "--ensemble",
+        "0",
+        "--json",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert_eq!(
+        std::fs::read_to_string(live).unwrap(),
+        std::fs::read_to_string(out).unwrap(),
+        "live twin and replayed twin differ"
+    );
+    text(&o)
+}
+
 #[test]
 fn replay_with_the_twin_compares_every_step_deterministically() {
     let dir = tempfile::tempdir().unwrap();
@@ -218,23 +244,7 @@ fn the_live_twin_equals_its_replay_and_is_logged() {
     ]);
     assert!(o.status.success(), "{}", text(&o));
     assert!(text(&o).contains("2 of 2 steps compared"), "{}", text(&o));
-    let replayed = dir.path().join("replay.json");
-    // The live twin runs no ensemble (issue 14, part 4): its replay without one is its twin.
-    let o = rigtwin(&[
-        "replay",
-        mcap.to_str().unwrap(),
-        "--twin",
-        "--ensemble",
-        "0",
-        "--json",
-        replayed.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", text(&o));
-    assert_eq!(
-        std::fs::read_to_string(&live).unwrap(),
-        std::fs::read_to_string(&replayed).unwrap(),
-        "live twin and replayed twin differ"
-    );
+    assert_replay_equals_live(&mcap, &live, &dir.path().join("replay.json"));
     let s = rigtwin::log::read_session(&mcap).unwrap();
     let steps = s
         .decode::<rigtwin::session::topics::TwinStepMessage>(
@@ -790,27 +800,8 @@ clearance = 1.0e-5
     assert_eq!(rom["pairs"], "192", "{rom:?}");
     assert_eq!(rom["twin_pairs"], "88", "{rom:?}");
     assert!(json(&live)["tests"][0]["steps"][0]["twin"].is_object());
-    let replayed = dir.path().join("replay.json");
-    let o = rigtwin(&[
-        "replay",
-        mcap.to_str().unwrap(),
-        "--twin",
-        "--ensemble",
-        "0",
-        "--json",
-        replayed.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", text(&o));
-    assert!(
-        text(&o).contains("twin: contact patch 8 x 11"),
-        "{}",
-        text(&o)
-    );
-    assert_eq!(
-        std::fs::read_to_string(&live).unwrap(),
-        std::fs::read_to_string(&replayed).unwrap(),
-        "live twin and replayed twin differ"
-    );
+    let out = assert_replay_equals_live(&mcap, &live, &dir.path().join("replay.json"));
+    assert!(out.contains("twin: contact patch 8 x 11"), "{out}");
 
     // A test at the reference's clearance: impacts, where the coarse patch rings differently.
     let mixed = format!("{HELD}\n[[test]]\nname = \"apart\"\nclearance = 2.78e-3\n");

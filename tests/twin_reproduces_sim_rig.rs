@@ -18,11 +18,10 @@ use std::f64::consts::PI;
 use rigtwin::config::RigConfig;
 use rigtwin::rig::daq::{ChannelKind, DaqBlock, DriveCommand};
 use rigtwin::rig::sim::{base_acceleration_frf, SimRig, SimRigSpec, TruthTrace};
-use rigtwin::rom::build::BuildOptions;
 use rigtwin::rom::Rom;
 use rigtwin::twin::{Pushed, Twin, TwinBlock, TwinEvent, TwinModel, TwinSpec, TwinTask};
 
-use default_rom::default_rom;
+use default_rom::{default_rom, rom_of};
 
 /// Beam length of the default rig, m.
 const L: f64 = 0.3;
@@ -164,20 +163,7 @@ fn contact_activity_matches_the_measurement_in_sustained_impacts() {
     let fs = rig.layout().sample_rate;
     let from = (1.0 * fs) as usize;
     let truth_contact: Vec<bool> = trace.closed_steps[from..].iter().map(|&c| c > 0).collect();
-    // The contact channel as the step summary reads it (below the default threshold).
-    let lay = rig.layout();
-    let kc = lay.index("contact_voltage").unwrap();
-    let threshold = rigtwin::config::ControlSpec::default().contact_threshold_v;
-    let measured_contact: Vec<bool> = blocks
-        .iter()
-        .flat_map(|b| {
-            b.channel(kc)
-                .iter()
-                .map(|&c| lay.channels[kc].value(c) < threshold)
-                .collect::<Vec<_>>()
-        })
-        .collect::<Vec<_>>()[from..]
-        .to_vec();
+    let measured_contact = measured_contact(&rig, &blocks)[from..].to_vec();
     let twin_contact: Vec<bool> = twin
         .iter()
         .flat_map(|b| b.contact.clone())
@@ -321,15 +307,7 @@ fn the_held_contact_twin_keeps_to_the_measurement_on_its_coarser_patch() {
     let coarse_cfg = RigConfig::default_rig()
         .held_contact_twin(&[1e-5])
         .expect("a held-contact patch for the default rig");
-    let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("rom-cache");
-    let (coarse, _, _) = rigtwin::rom::cache::load_or_build(
-        coarse_cfg.model(),
-        &BuildOptions::default(),
-        &dir,
-        false,
-        &mut |_| {},
-    )
-    .unwrap();
+    let coarse = rom_of(&coarse_cfg);
     assert_eq!(coarse.n_pairs(), 88);
     let fine = run_twin(&rig, &blocks, clearance);
     let held = run_twin_on(&coarse, &rig, &blocks, clearance);

@@ -327,15 +327,16 @@ fn the_held_contact_twin_keeps_to_the_measurement_on_its_coarser_patch() {
         rms(&twin_upper_tip(&fine)[from..]),
         rms(&twin_upper_tip(&held)[from..]),
     );
+    let (fine_contact, held_contact) = (contact(&fine), contact(&held));
     let (fm, cf, ch) = (
         fraction(&measured),
-        fraction(&contact(&fine)),
-        fraction(&contact(&held)),
+        fraction(&fine_contact),
+        fraction(&held_contact),
     );
     let (om, of, oh) = (
         onsets(&measured),
-        onsets(&contact(&fine)),
-        onsets(&contact(&held)),
+        onsets(&fine_contact),
+        onsets(&held_contact),
     );
     println!(
         "contact fraction: measured {fm:.4}, twin 12 x 16 {cf:.4}, twin 8 x 11 {ch:.4}; onsets: \

@@ -270,12 +270,12 @@ impl TwinSpec {
             ));
         }
         let h = &self.held_contact;
-        let [y, x] = h.contact_nodes;
-        if y < 2 || x < 2 || y.saturating_mul(x) > 10_000 {
+        if let Some(expected) = super::validate::patch_nodes_problem(h.contact_nodes) {
+            let [y, x] = h.contact_nodes;
             return Err(SpecError::new(
                 "twin.held_contact.contact_nodes",
                 format!("[{y}, {x}]"),
-                "at least 2 nodes along each edge of the patch ([across y, along x]), at most 10000 pairs",
+                expected,
             ));
         }
         let m = h.max_clearance;

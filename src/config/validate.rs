@@ -255,24 +255,24 @@ fn layers(c: &Check, cfg: &RigModel) -> Result<(), ConfigError> {
     Ok(())
 }
 
-/// A contact patch grid `[across y, along x]` (`[contact] nodes`, `[reduction]
-/// contact_nodes`): at least 2 nodes along each edge, at most 10000 pairs.
-fn patch_nodes(c: &Check, key: &str, nodes: [usize; 2]) -> Result<(), ConfigError> {
+/// What is wrong with a contact patch grid `[across y, along x]` (`[contact] nodes`,
+/// `[reduction] contact_nodes`, `[twin.held_contact] contact_nodes`), if anything: at least 2
+/// nodes along each edge, at most 10000 pairs.
+pub(super) fn patch_nodes_problem(nodes: [usize; 2]) -> Option<&'static str> {
     if nodes.iter().any(|&n| n < 2) {
-        return Err(c.fail(
-            key,
-            format!("[{}, {}]", nodes[0], nodes[1]),
-            "at least 2 nodes along each edge of the patch ([across y, along x])",
-        ));
+        Some("at least 2 nodes along each edge of the patch ([across y, along x])")
+    } else if nodes[0].saturating_mul(nodes[1]) > 10_000 {
+        Some("at most 10000 contact pairs")
+    } else {
+        None
     }
-    if nodes[0].saturating_mul(nodes[1]) > 10_000 {
-        return Err(c.fail(
-            key,
-            format!("[{}, {}]", nodes[0], nodes[1]),
-            "at most 10000 contact pairs",
-        ));
+}
+
+fn patch_nodes(c: &Check, key: &str, nodes: [usize; 2]) -> Result<(), ConfigError> {
+    match patch_nodes_problem(nodes) {
+        Some(expected) => Err(c.fail(key, format!("[{}, {}]", nodes[0], nodes[1]), expected)),
+        None => Ok(()),
     }
-    Ok(())
 }
 
 fn contact(c: &Check, cfg: &RigModel) -> Result<(), ConfigError> {

@@ -653,11 +653,12 @@ fn replay_of(
     let rig_toml = session
         .attachment(RIG_ATTACHMENT)
         .map(|a| String::from_utf8_lossy(&a.data).into_owned());
-    let clearances = match logged_plan(session) {
+    let plan = logged_plan(session);
+    let clearances = match &plan {
         Some(plan) => plan.tests.iter().map(|t| t.clearance).collect(),
         None => summary.tests.iter().map(|t| t.clearance).collect(),
     };
-    mark_missing(&mut summary, session, &rec, steps_lost);
+    mark_missing(&mut summary, session, plan.as_ref(), &rec, steps_lost);
     Ok(Replay {
         summary,
         logged_steps,
@@ -678,10 +679,12 @@ fn logged_plan(session: &SessionRead) -> Option<crate::plan::Plan> {
 }
 
 /// Marks `summary` incomplete with what is missing when the log was cut off or damaged, or the
-/// session did not log its end; a session cut off while it ran is marked aborted.
+/// session did not log its end (the steps `plan`, the log's, had planned); a session cut off
+/// while it ran is marked aborted.
 fn mark_missing(
     summary: &mut SessionSummary,
     session: &SessionRead,
+    plan: Option<&crate::plan::Plan>,
     rec: &Recording,
     steps_lost: Vec<String>,
 ) {
@@ -692,8 +695,7 @@ fn mark_missing(
     if session_end && !damaged_or_cut(session) && rec.gaps.is_empty() {
         return;
     }
-    let steps_planned =
-        logged_plan(session).map(|p| p.tests.iter().map(|t| t.steps as usize).sum::<usize>());
+    let steps_planned = plan.map(|p| p.tests.iter().map(|t| t.steps as usize).sum::<usize>());
     let steps_finished = summary.steps().count();
     let recorded_until_s = rec.rig_seconds();
     let lost_blocks: u64 = rec.gaps.iter().map(|g| g.blocks).sum();

@@ -248,7 +248,7 @@ pub(super) fn tilt_stage(
         json!({"angle": angle, "axis": AXIS}),
         1,
         evidence,
-        (train, validation),
+        (train.clone(), validation.clone()),
         Steps::All,
     );
     let tilt_ok = work.judge(cand)?;
@@ -270,7 +270,48 @@ pub(super) fn tilt_stage(
     };
     let null = work.opts.contact_null_spread;
     if !tilt_ok {
-        work.accepted = after_clearance;
+        work.accepted = after_clearance.clone();
+        // Rejected on the whole tests beside an accepted clearance offset: the two compared
+        // where a tilt acts. Within the null spread of each other there, the session cannot
+        // tell them apart.
+        let spans = contact_spans(work, base, &bracketed, &all, closing_max)?;
+        let cmp = Candidate::new(
+            "tilt",
+            with(angle),
+            json!({}),
+            1,
+            json!({}),
+            (train, validation),
+            Steps::All,
+        )
+        .judged_where_fitted(spans, 1, IN_CONTACT);
+        let (Some(t), Some(c)) = (
+            work.errors(&with(angle), &cmp, true)?,
+            work.errors(&after_clearance, &cmp, true)?,
+        ) else {
+            return Ok(());
+        };
+        let c_param = work.effects[ci].parameters.clone();
+        let tilt = &mut work.effects[ti];
+        tilt.evidence["in_contact_against_clearance"] = json!({
+            "steps": IN_CONTACT,
+            "validation_with_tilt": t.validation,
+            "validation_with_clearance": c.validation,
+        });
+        if t.validation <= c.validation + null {
+            tilt.reason = format!(
+                "{}; where a tilt acts ({IN_CONTACT}) its validation error {:.3} is within the impact band's null spread {null} of the clearance offset's {:.3}: an equal alternative of it, the channels cannot tell a tilted face from a smaller clearance here",
+                tilt.reason, t.validation, c.validation
+            );
+            tilt.alternatives.push(format!(
+                "clearance {c_param} (equal where a tilt acts: validation {:.3})",
+                c.validation
+            ));
+            work.effects[ci].alternatives.push(format!(
+                "tilt: {angle:.3e} rad about y (equal where a tilt acts, {IN_CONTACT}: validation {:.3} against {:.3}; rejected on the whole tests)",
+                t.validation, c.validation
+            ));
+        }
         return Ok(());
     }
     let c_param = work.effects[ci].parameters.clone();
@@ -301,6 +342,37 @@ pub(super) fn tilt_stage(
         ));
     }
     Ok(())
+}
+
+/// What [`contact_spans`] compares, in words.
+const IN_CONTACT: &str =
+    "each test's steps from two before its first measured contact to two past its last";
+
+/// The steps of tests `tests` where a tilt acts, from two before each one's first measured
+/// contact to two past its last, each from a state of open contact captured with the
+/// clearances of `base` closed by `closing` (m; [`Work::open_span`]).
+fn contact_spans(
+    work: &mut Work<'_>,
+    base: &PhysicsSpec,
+    bracketed: &[&TestClearance],
+    tests: &[usize],
+    closing: f64,
+) -> Result<Vec<Span>, DiagnoseError> {
+    let mut closest = base.clone();
+    for &ti in tests {
+        let name = work.steps.tests[ti].clone();
+        let plan = (bracketed.iter())
+            .find(|b| b.test_index == ti)
+            .map_or(0.0, |b| b.plan_clearance_m);
+        closest = closest.with_test_clearance(&name, base.test_clearance(&name, plan) - closing);
+    }
+    let mut spans = Vec::new();
+    for &ti in tests {
+        let from = work.steps.before_first_contact(ti, 2);
+        let through = work.steps.past_contact(ti, 2, false);
+        spans.push(work.open_span(&closest, ti, from, through)?);
+    }
+    Ok(spans)
 }
 
 #[cfg(test)]

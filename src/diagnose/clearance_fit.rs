@@ -181,8 +181,7 @@ fn fit_in_bracket(
 /// (m, to each test's clearance in the accepted model) whose runs match every train test's
 /// steps around its first contact best ([`evidence_steps`], at the fit's finer twin step), on
 /// a grid of 9 over the offsets every test's bracket admits, refined once around the best
-/// point; (offset, its valley's spread). `None` with fewer than two tests, or where their
-/// brackets admit no common offset.
+/// point. `None` with fewer than two tests, or where their brackets admit no common offset.
 ///
 /// NOTE: a test's runs tell its clearance only to within the frequency steps of its first
 /// contact (every clearance that first closes at the same step scores alike, up to how much
@@ -194,7 +193,7 @@ fn fit_in_bracket(
 fn joint_offset_by_runs(
     work: &mut Work<'_>,
     tests: &[&TestClearance],
-) -> Result<Option<(f64, f64)>, DiagnoseError> {
+) -> Result<Option<JointOffset>, DiagnoseError> {
     if tests.len() < 2 {
         return Ok(None);
     }
@@ -258,7 +257,27 @@ fn joint_offset_by_runs(
         hi * 1e6,
         tried.len(),
     ));
-    Ok(Some((best, spread)))
+    Ok(Some(JointOffset {
+        offset_m: best,
+        spread_m: spread,
+        runs: tried,
+    }))
+}
+
+/// The clearance offset fitted on the train tests together ([`joint_offset_by_runs`]).
+///
+/// NOTE: the best run, not the vertex of a parabola through the runs about it: the valley is
+/// a V with one steep side (on the four-sweep CI plan with +80 um hidden, 15.7 at +11 um, 2.48
+/// at +60, 1.92 at +85, 2.84 at +109, 2.61 at +134, 4.47 at +158), and the vertex of a
+/// least-squares parabola there lay at +145 um.
+#[derive(Clone, Debug, PartialEq)]
+struct JointOffset {
+    /// The best run's offset, m.
+    offset_m: f64,
+    /// The runs' own spread, m ([`valley_spread`]).
+    spread_m: f64,
+    /// Every run, (offset m, error -).
+    runs: Vec<(f64, f64)>,
 }
 
 /// The offsets (m) to the clearances `current` (m, one per test) that lie within every one
@@ -336,7 +355,7 @@ pub(super) fn clearance_stage(
     // (`joint_offset_by_runs`), else the mean of their own.
     let train_tests: Vec<&TestClearance> = fitted.iter().map(|f| f.0).collect();
     let joint = joint_offset_by_runs(work, &train_tests)?;
-    let offset = joint.map_or(mean_offset, |j| j.0);
+    let offset = joint.as_ref().map_or(mean_offset, |j| j.offset_m);
     let plan = bracketed[0].plan_clearance_m;
     if offset.abs() < 0.02 * plan {
         (work.progress)(DiagnoseProgress::Note(format!(
@@ -388,7 +407,7 @@ pub(super) fn clearance_stage(
         ext,
         json!({"offset": base_offset + offset, "tests": bracketed.iter().map(|t| json!({"test": t.test, "clearance": accepted.test_clearance(&t.test, t.plan_clearance_m) + offset})).collect::<Vec<_>>()}),
         1,
-        json!({"offset_m": offset, "train_tests_one_by_one": fitted.iter().map(|(t, c, s)| json!({"test": t.test, "clearance_m": c, "spread_m": s})).collect::<Vec<_>>(), "offset_by_tests_together": joint.map(|j| json!({"offset_m": j.0, "spread_m": j.1})), "offset_mean_of_tests_m": mean_offset, "offset_spread_m": spread.is_finite().then_some(spread), "offset_standard_error_m": standard_error.is_finite().then_some(standard_error), "plan_clearance_m": plan, "brackets_m": bracketed.iter().map(|t| json!({"test": t.test, "lower": t.lower_bound_m, "upper": t.upper_bound_m})).collect::<Vec<_>>()}),
+        json!({"offset_m": offset, "train_tests_one_by_one": fitted.iter().map(|(t, c, s)| json!({"test": t.test, "clearance_m": c, "spread_m": s})).collect::<Vec<_>>(), "offset_by_tests_together": joint.as_ref().map(|j| json!({"offset_m": j.offset_m, "spread_m": j.spread_m, "runs": j.runs.iter().map(|r| json!({"offset_m": r.0, "error": r.1})).collect::<Vec<_>>()})), "offset_mean_of_tests_m": mean_offset, "offset_spread_m": spread.is_finite().then_some(spread), "offset_standard_error_m": standard_error.is_finite().then_some(standard_error), "plan_clearance_m": plan, "brackets_m": bracketed.iter().map(|t| json!({"test": t.test, "lower": t.lower_bound_m, "upper": t.upper_bound_m})).collect::<Vec<_>>()}),
         (train, validation),
         Steps::All,
     )

@@ -327,7 +327,7 @@ pub fn clearance_trend(
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use super::*;
 
     #[test]
@@ -338,7 +338,8 @@ mod tests {
         assert!((r - 0.9312).abs() < 1e-3, "{r}");
     }
 
-    fn test(i: usize, c: Option<f64>) -> TestClearance {
+    /// A test `t{i}` of clearance `c` (m; uncertain by 10 um where given), nothing else.
+    pub(crate) fn test(i: usize, c: Option<f64>) -> TestClearance {
         TestClearance {
             test: format!("t{i}"),
             test_index: i,

@@ -148,6 +148,17 @@ fn evidence_spans(
     Ok(spans)
 }
 
+/// The points a clearance search refines around its best one `best`, the first grid's spacing
+/// `h` apart: half and a quarter of it either side.
+fn refined_around(best: f64, h: f64) -> Vec<f64> {
+    vec![
+        best - 0.5 * h,
+        best - 0.25 * h,
+        best + 0.25 * h,
+        best + 0.5 * h,
+    ]
+}
+
 /// The grid search of [`test_clearance_by_runs`]: (clearance, error) of every run.
 fn fit_in_bracket(
     work: &mut Work<'_>,
@@ -164,14 +175,7 @@ fn fit_in_bracket(
     grid_then_refine(
         work,
         grid,
-        |best| {
-            vec![
-                best - 0.5 * h,
-                best - 0.25 * h,
-                best + 0.25 * h,
-                best + 0.5 * h,
-            ]
-        },
+        |best| refined_around(best, h),
         &|work, c| (with_clearance(work, c), vec![span]),
         |_, _, s| set_error(s, &[t.test_index], Steps::All),
     )
@@ -230,14 +234,7 @@ fn joint_offset_by_runs(
         tried = grid_then_refine(
             work,
             grid,
-            |best| {
-                vec![
-                    best - 0.5 * h,
-                    best - 0.25 * h,
-                    best + 0.25 * h,
-                    best + 0.5 * h,
-                ]
-            },
+            |best| refined_around(best, h),
             &|work, o| (with_offset(work, o), spans.clone()),
             |_, _, s| set_error(s, &idx, Steps::All),
         );
@@ -536,23 +533,10 @@ mod tests {
         use super::super::clearance::TestClearance;
         let test = |name: &str, bounds: Option<(f64, f64)>| TestClearance {
             test: name.into(),
-            test_index: 0,
-            level: 2e-5,
-            start_s: 0.0,
             plan_clearance_m: 699e-6,
-            clearance_m: bounds.map(|b| b.1),
-            clearance_l: None,
-            uncertainty_m: None,
             lower_bound_m: bounds.map(|b| b.0),
             upper_bound_m: bounds.map(|b| b.1),
-            lower_bound_omega_ratio: None,
-            first_contact_omega_ratio: None,
-            impact_free_windows: 3,
-            onset_clearance_m: None,
-            onsets: 0,
-            onset_standard_error_m: None,
-            accumulated_contact_impulse_ns: None,
-            note: String::new(),
+            ..super::super::clearance::tests::test(0, bounds.map(|b| b.1))
         };
         // identify.toml with a +8e-5 m offset: low-down 439-1065 um, high-down 591-1523 um,
         // both about the plan's 699 um.

@@ -215,30 +215,10 @@ fn joint_offset_by_runs(
         ext.wear = None;
         ext
     };
-    let h = (hi - lo) / 8.0;
+    let idx: Vec<usize> = tests.iter().map(|t| t.test_index).collect();
     let own = work.runner.refinement();
     work.runner.set_refinement(own * FIT_REFINEMENT);
-    let closest = with_offset(work, lo - h);
-    let idx: Vec<usize> = tests.iter().map(|t| t.test_index).collect();
-    let mut spans = Vec::new();
-    let mut tried = Ok(Vec::new());
-    for t in tests {
-        let (from, through) = evidence_steps(work, t.test_index);
-        match work.open_span(&closest, t.test_index, from, through) {
-            Ok(s) => spans.push(s),
-            Err(e) => tried = Err(e),
-        }
-    }
-    if tried.is_ok() {
-        let grid: Vec<f64> = (0..9).map(|k| lo + (hi - lo) * k as f64 / 8.0).collect();
-        tried = grid_then_refine(
-            work,
-            grid,
-            |best| refined_around(best, h),
-            &|work, o| (with_offset(work, o), spans.clone()),
-            |_, _, s| set_error(s, &idx, Steps::All),
-        );
-    }
+    let tried = fit_together(work, &idx, (lo, hi), &with_offset);
     work.runner.set_refinement(own);
     let tried = tried?;
     let Some(&(best, error)) = tried.iter().min_by(|a, b| a.1.total_cmp(&b.1)) else {
@@ -259,6 +239,32 @@ fn joint_offset_by_runs(
         spread_m: spread,
         runs: tried,
     }))
+}
+
+/// The grid search of [`joint_offset_by_runs`] over the offsets `lo..=hi` on the tests `idx`
+/// (each from a state of open contact captured with the smallest offset tried): (offset,
+/// error) of every run.
+fn fit_together(
+    work: &mut Work<'_>,
+    idx: &[usize],
+    (lo, hi): (f64, f64),
+    with_offset: &dyn Fn(&Work<'_>, f64) -> PhysicsSpec,
+) -> Result<Vec<(f64, f64)>, DiagnoseError> {
+    let h = (hi - lo) / 8.0;
+    let closest = with_offset(work, lo - h);
+    let mut spans = Vec::new();
+    for &ti in idx {
+        let (from, through) = evidence_steps(work, ti);
+        spans.push(work.open_span(&closest, ti, from, through)?);
+    }
+    let grid: Vec<f64> = (0..9).map(|k| lo + (hi - lo) * k as f64 / 8.0).collect();
+    grid_then_refine(
+        work,
+        grid,
+        |best| refined_around(best, h),
+        &|work, o| (with_offset(work, o), spans.clone()),
+        |_, _, s| set_error(s, idx, Steps::All),
+    )
 }
 
 /// The clearance offset fitted on the train tests together ([`joint_offset_by_runs`]).

@@ -81,14 +81,13 @@ pub(super) fn test_clearance_by_runs(
         ext.wear = None;
         ext
     };
-    let (from, through) = evidence_steps(work, t.test_index);
     // NOTE: at a twin step FIT_REFINEMENT times finer than the given one: at its own step the
     // twin over-counts contact in the band (BENCHMARKS.md, "Why the nominal twin over-counts
     // contact"), which a smaller clearance absorbs (-6 % on identify.toml with nothing
     // hidden); the few steps run make the finer step affordable.
     let own = work.runner.refinement();
     work.runner.set_refinement(own * FIT_REFINEMENT);
-    let tried = fit_in_bracket(work, t, (lo, hi), from, through, &with_clearance);
+    let tried = fit_on_grid(work, &[t.test_index], (lo, hi), &with_clearance);
     work.runner.set_refinement(own);
     let mut tried = tried?;
     tried.sort_by(|a, b| a.0.total_cmp(&b.0));
@@ -159,28 +158,6 @@ fn refined_around(best: f64, h: f64) -> Vec<f64> {
     ]
 }
 
-/// The grid search of [`test_clearance_by_runs`]: (clearance, error) of every run.
-fn fit_in_bracket(
-    work: &mut Work<'_>,
-    t: &TestClearance,
-    (lo, hi): (f64, f64),
-    from: usize,
-    through: Option<usize>,
-    with_clearance: &dyn Fn(&Work<'_>, f64) -> PhysicsSpec,
-) -> Result<Vec<(f64, f64)>, DiagnoseError> {
-    let h = (hi - lo) / 8.0;
-    let closest = with_clearance(work, lo - h);
-    let span = work.open_span(&closest, t.test_index, from, through)?;
-    let grid: Vec<f64> = (0..9).map(|k| lo + (hi - lo) * k as f64 / 8.0).collect();
-    grid_then_refine(
-        work,
-        grid,
-        |best| refined_around(best, h),
-        &|work, c| (with_clearance(work, c), vec![span]),
-        |_, _, s| set_error(s, &[t.test_index], Steps::All),
-    )
-}
-
 /// One clearance offset fitted by model runs on the train tests `tests` together: the offset
 /// (m, to each test's clearance in the accepted model) whose runs match every train test's
 /// steps around its first contact best ([`evidence_steps`], at the fit's finer twin step), on
@@ -218,7 +195,7 @@ fn joint_offset_by_runs(
     let idx: Vec<usize> = tests.iter().map(|t| t.test_index).collect();
     let own = work.runner.refinement();
     work.runner.set_refinement(own * FIT_REFINEMENT);
-    let tried = fit_together(work, &idx, (lo, hi), &with_offset);
+    let tried = fit_on_grid(work, &idx, (lo, hi), &with_offset);
     work.runner.set_refinement(own);
     let tried = tried?;
     let Some(&(best, error)) = tried.iter().min_by(|a, b| a.1.total_cmp(&b.1)) else {
@@ -241,10 +218,11 @@ fn joint_offset_by_runs(
     }))
 }
 
-/// The grid search of [`joint_offset_by_runs`] over the offsets `lo..=hi` on the tests `idx`
-/// (each from a state of open contact captured with the smallest offset tried): (offset,
-/// error) of every run.
-fn fit_together(
+/// The grid search of [`test_clearance_by_runs`] and [`joint_offset_by_runs`] over the values
+/// `lo..=hi` (a test's clearance, an offset) on the tests `idx` (their steps that carry the
+/// clearance, [`evidence_steps`], each from a state of open contact captured with the smallest
+/// value tried): (value, error) of every run.
+fn fit_on_grid(
     work: &mut Work<'_>,
     idx: &[usize],
     (lo, hi): (f64, f64),

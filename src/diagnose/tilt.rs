@@ -184,21 +184,7 @@ pub(super) fn tilt_stage(
     // once: with the clearance closed by the largest edge closing tried, nothing closes there.
     let widest = grid.iter().fold(0.0f64, |m, a| m.max(a.abs())) * 1.1;
     let closing_max = widest.sin() * tip_edge.max(clamp_edge);
-    let mut closest = base.clone();
-    for &ti in &train {
-        let name = &work.steps.tests[ti];
-        let plan = bracketed
-            .iter()
-            .find(|b| b.test_index == ti)
-            .map_or(0.0, |b| b.plan_clearance_m);
-        closest = closest.with_test_clearance(name, base.test_clearance(name, plan) - closing_max);
-    }
-    let mut train_spans: Vec<Span> = Vec::new();
-    for &ti in &train {
-        let from = work.steps.before_first_contact(ti, 2);
-        let through = work.steps.past_contact(ti, 2, false);
-        train_spans.push(work.open_span(&closest, ti, from, through)?);
-    }
+    let train_spans = contact_spans(work, base, &bracketed, &train, closing_max)?;
     let tried = grid_then_refine(
         work,
         grid,

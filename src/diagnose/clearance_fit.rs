@@ -10,7 +10,7 @@ use crate::config::{ClearanceSpec, PhysicsSpec};
 use crate::signal::features::standard_error;
 
 use super::clearance::{ClearanceEvidence, TestClearance};
-use super::judge::{alternate, grid_then_refine, set_error, Candidate, Steps, Work};
+use super::judge::{alternate, grid_then_refine, members_error, Candidate, Steps, Work};
 use super::outcome::EffectResult;
 use super::rerun::Span;
 use super::{DiagnoseError, DiagnoseProgress};
@@ -87,7 +87,7 @@ pub(super) fn test_clearance_by_runs(
     // hidden); the few steps run make the finer step affordable.
     let own = work.runner.refinement();
     work.runner.set_refinement(own * FIT_REFINEMENT);
-    let tried = fit_on_grid(work, &[t.test_index], (lo, hi), &with_clearance);
+    let tried = fit_on_grid(work, &[t.test_index], (lo, hi), &with_clearance, 1);
     work.runner.set_refinement(own);
     let mut tried = tried?;
     tried.sort_by(|a, b| a.0.total_cmp(&b.0));
@@ -162,7 +162,9 @@ fn refined_around(best: f64, h: f64) -> Vec<f64> {
 /// (m, to each test's clearance in the accepted model) whose runs match every train test's
 /// steps around its first contact best ([`evidence_steps`], at the fit's finer twin step), on
 /// a grid of 9 over the offsets every test's bracket admits, refined once around the best
-/// point. `None` with fewer than two tests, or where their brackets admit no common offset.
+/// point, each offset's error the median per step over the band's draws
+/// ([`DiagnoseOptions::band_members`](super::DiagnoseOptions::band_members), as the judge's).
+/// `None` with fewer than two tests, or where their brackets admit no common offset.
 ///
 /// NOTE: a test's runs tell its clearance only to within the frequency steps of its first
 /// contact (every clearance that first closes at the same step scores alike, up to how much
@@ -171,6 +173,11 @@ fn refined_around(best: f64, h: f64) -> Vec<f64> {
 /// `identify.toml` with a +8e-5 m offset beside a 1FU damping of 0.001, the tests fitted one
 /// by one gave 771 and 708 um (hidden 779 um, a mean offset of half the hidden one), the
 /// high-level test's bracket (591-1523 um) searched in steps of 116 um.
+///
+/// NOTE: each run is a draw of the band too, and one run per offset left the valley's floor
+/// to chance: on `identify.toml` with +1e-4 m hidden alone the errors of +76..+185 um lay
+/// within 0.66 of each other and the best was +130 um; over three draws, +112 um (2.1x on
+/// the validation test against 1.8x).
 fn joint_offset_by_runs(
     work: &mut Work<'_>,
     tests: &[&TestClearance],
@@ -195,7 +202,8 @@ fn joint_offset_by_runs(
     let idx: Vec<usize> = tests.iter().map(|t| t.test_index).collect();
     let own = work.runner.refinement();
     work.runner.set_refinement(own * FIT_REFINEMENT);
-    let tried = fit_on_grid(work, &idx, (lo, hi), &with_offset);
+    let members = work.opts.band_members;
+    let tried = fit_on_grid(work, &idx, (lo, hi), &with_offset, members);
     work.runner.set_refinement(own);
     let tried = tried?;
     let Some(&(best, error)) = tried.iter().min_by(|a, b| a.1.total_cmp(&b.1)) else {
@@ -221,12 +229,14 @@ fn joint_offset_by_runs(
 /// The grid search of [`test_clearance_by_runs`] and [`joint_offset_by_runs`] over the values
 /// `lo..=hi` (a test's clearance, an offset) on the tests `idx` (their steps that carry the
 /// clearance, [`evidence_steps`], each from a state of open contact captured with the smallest
-/// value tried): (value, error) of every run.
+/// value tried), each value's error over `members` runs of it ([`members_error`]): (value,
+/// error) of every value tried.
 fn fit_on_grid(
     work: &mut Work<'_>,
     idx: &[usize],
     (lo, hi): (f64, f64),
     with_offset: &dyn Fn(&Work<'_>, f64) -> PhysicsSpec,
+    members: usize,
 ) -> Result<Vec<(f64, f64)>, DiagnoseError> {
     let h = (hi - lo) / 8.0;
     let closest = with_offset(work, lo - h);
@@ -241,7 +251,8 @@ fn fit_on_grid(
         grid,
         |best| refined_around(best, h),
         &|work, o| (with_offset(work, o), spans.clone()),
-        |_, _, s| set_error(s, idx, Steps::All),
+        members,
+        |_, _, runs| members_error(runs, idx, Steps::All, None),
     )
 }
 

@@ -898,31 +898,38 @@ pub(super) type PointRun<'p> = &'p dyn Fn(&Work<'_>, f64) -> (PhysicsSpec, Vec<S
 /// A one-parameter search by model runs: the error of every point of `grid`, then of the
 /// points `refine(best)` around the best one (a point tried before is not run again).
 /// Returns every (value, error) tried. A point's model run is `plan`'s (its extensions and
-/// the steps scored); the points' runs are made side by side on the runner's threads before
-/// each round ([`Work::prefetch`]), and `error` turns a point's scores into its error
+/// the steps scored), made `members` times (member 0 the model as given, the others draws
+/// from perturbed states in the band, common to every point: [`ModelRunner::run_members`]);
+/// the points' runs are made side by side on the runner's threads before each round
+/// ([`Work::prefetch_members`]), and `error` turns a point's runs' scores into its error
 /// (`None` where nothing was compared).
 pub(super) fn grid_then_refine(
     work: &mut Work<'_>,
     grid: Vec<f64>,
     refine: impl Fn(f64) -> Vec<f64>,
     plan: PointRun<'_>,
-    mut error: impl FnMut(&mut Work<'_>, f64, &[StepScores]) -> Option<f64>,
+    members: usize,
+    mut error: impl FnMut(&mut Work<'_>, f64, &[Vec<StepScores>]) -> Option<f64>,
 ) -> Result<Vec<(f64, f64)>, DiagnoseError> {
+    let members = members.max(1);
     let mut tried: Vec<(f64, f64)> = Vec::new();
     let mut grid = grid;
     for round in 0..2 {
         let runs = grid
             .iter()
             .filter(|&&x| !tried.iter().any(|p| p.0 == x))
-            .map(|&x| plan(work, x))
+            .flat_map(|&x| {
+                let (ext, spans) = plan(work, x);
+                (0..members).map(move |m| (ext.clone(), spans.clone(), m))
+            })
             .collect();
-        work.prefetch(runs)?;
+        work.prefetch_members(runs)?;
         for &x in &grid {
             if tried.iter().any(|p| p.0 == x) {
                 continue;
             }
             let (ext, spans) = plan(work, x);
-            let s = work.scores_spans(&ext, &spans)?;
+            let s = work.member_runs(&ext, &spans, members)?;
             if let Some(e) = error(work, x, &s) {
                 tried.push((x, e));
             }

@@ -190,11 +190,12 @@ pub(super) fn tilt_stage(
         grid,
         |best| vec![0.9 * best, 1.1 * best],
         &|_, angle| (with(angle), train_spans.clone()),
+        1,
         |work, angle, s| {
             (work.progress)(DiagnoseProgress::Evaluation(format!(
                 "tilt {angle:.3e} rad about y on the train tests"
             )));
-            set_error(s, &train, Steps::All)
+            set_error(&s[0], &train, Steps::All)
         },
     )?;
     let Some((angle, train_error, floor)) = valley_floor(&tried) else {

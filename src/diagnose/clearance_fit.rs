@@ -87,6 +87,10 @@ pub(super) fn test_clearance_by_runs(
     // hidden); the few steps run make the finer step affordable.
     let own = work.runner.refinement();
     work.runner.set_refinement(own * FIT_REFINEMENT);
+    // One run per clearance, not the band's draws as the joint offset's: the clearance, wear
+    // and tilt stages share these fits (13 runs per bracketed test, three times as many with
+    // the draws), and the offset the diagnosis reports is fitted over the draws
+    // (`joint_offset_by_runs`) wherever two train tests share a range.
     let tried = fit_on_grid(work, &[t.test_index], (lo, hi), &with_clearance, 1);
     work.runner.set_refinement(own);
     let mut tried = tried?;

@@ -397,6 +397,19 @@ fn clearance_is_found(offset: f64, plan: &str) -> serde_json::Value {
             "{d:#}"
         );
     }
+    // Every run of the fit is in the evidence, each train test's against its clearance in the
+    // model, and drawn against the offset.
+    for t in c[0]["evidence"]["train_tests_one_by_one"]
+        .as_array()
+        .unwrap()
+    {
+        assert!(t["runs"].as_array().unwrap().len() >= 9, "{t}");
+        assert!(t["model_clearance_m"].is_f64(), "{t}");
+    }
+    for ext in ["png", "svg"] {
+        let f = (dir.path().join("clearance")).join(format!("evidence-clearance-fit.{ext}"));
+        assert!(f.is_file(), "no {}", f.display());
+    }
     // A smaller clearance closes the face early, as a tilt would: the tilt is fitted, and its
     // landscape (the train error against the angle, through the face as given) drawn.
     if offset < 0.0 {

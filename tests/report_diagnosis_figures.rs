@@ -389,6 +389,44 @@ fn full() -> Diagnosis {
             validation: 1.52,
         }),
     };
+    // The clearance offset's runs: a valley about +85 um, together and per train test.
+    let valley = |o: f64| 1.2 + 0.0004 * (o - 85.0) * (o - 85.0);
+    let together: Vec<serde_json::Value> = [-100.0, 0.0, 60.0, 85.0, 110.0, 200.0]
+        .iter()
+        .map(|o: &f64| serde_json::json!({"offset_m": o * 1e-6, "error": valley(*o)}))
+        .collect();
+    let alone = |shift: f64| {
+        [-80.0, 20.0, 90.0, 150.0]
+            .iter()
+            .map(|o: &f64| serde_json::json!({"clearance_m": (699.0 + o) * 1e-6, "error": valley(o - shift) + 0.3}))
+            .collect::<Vec<_>>()
+    };
+    let clearance_fit = EffectResult {
+        effect: "clearance".into(),
+        rank: 3,
+        accepted: true,
+        parameters: serde_json::json!({"offset": 85e-6}),
+        alternatives: Vec::new(),
+        evidence: serde_json::json!({
+            "offset_m": 85e-6,
+            "offset_by_tests_together": {"offset_m": 85e-6, "runs": together},
+            "train_tests_one_by_one": [
+                {"test": "low-up", "model_clearance_m": 699e-6, "runs": alone(10.0)},
+                {"test": "high-up", "model_clearance_m": 699e-6, "runs": alone(-30.0)},
+            ],
+        }),
+        reason: "validated where it was fitted".into(),
+        train_tests: vec!["low-up".into(), "high-up".into()],
+        validation_tests: vec!["mid-up".into()],
+        error_before: Some(SetError {
+            train: 12.6,
+            validation: 2.73,
+        }),
+        error_after: Some(SetError {
+            train: 1.24,
+            validation: 0.875,
+        }),
+    };
     let (before, after) = (scores(1.01, 1.0), scores(0.991, 1.04));
     Diagnosis {
         verdict: Verdict::Mismatch,
@@ -397,7 +435,7 @@ fn full() -> Diagnosis {
         discretisation: Some(discretisation(&before, 2.5)),
         scores_before: before,
         scores_after: after,
-        effects: vec![effect, tilt],
+        effects: vec![effect, tilt, clearance_fit],
         validation_tests: vec!["high-up".into()],
         sensors: Some(sensors()),
         linear: Some(linear()),
@@ -444,7 +482,7 @@ fn assert_svg(path: &Path, labels: &[&str]) {
 fn a_diagnosis_draws_every_figure_as_png_and_svg() {
     let dir = out_dir("report_diagnosis_figures");
     let written = draw_diagnosis(&full(), &dir).unwrap();
-    let figures: [(&str, &[&str]); 9] = [
+    let figures: [(&str, &[&str]); 10] = [
         (
             "mismatch-map",
             &["Mismatch map", "upper_tip", "contact", "high-up"],
@@ -454,6 +492,16 @@ fn a_diagnosis_draws_every_figure_as_png_and_svg() {
         (
             "evidence-clearance",
             &["clearance (mm)", "high-up", "plan clearance"],
+        ),
+        (
+            "evidence-clearance-fit",
+            &[
+                "offset to the model",
+                "together",
+                "low-up alone",
+                "fitted: 85 µm; validation 2.73",
+                "0.875, accepted",
+            ],
         ),
         ("evidence-sensors", &["lower_tip", "RMS measured"]),
         (
@@ -520,6 +568,12 @@ fn missing_data_leaves_figures_out() {
         c.tests.iter_mut().for_each(|t| t.clearance_m = None);
     }
     d.effects[1].evidence = serde_json::json!({});
+    // Clearance runs without an error or an offset, a test without its model clearance.
+    d.effects[2].evidence = serde_json::json!({
+        "offset_m": 85e-6,
+        "offset_by_tests_together": {"runs": [{"offset_m": null, "error": 1.0}, {"offset_m": 1e-5}]},
+        "train_tests_one_by_one": [{"test": "low-up", "runs": [{"clearance_m": 7e-4, "error": 1.0}]}],
+    });
     if let Some(e) = &mut d.discretisation {
         for t in std::iter::once(&mut e.given).chain(&mut e.options) {
             t.steps.iter_mut().for_each(|s| {
@@ -555,6 +609,7 @@ fn missing_data_leaves_figures_out() {
         "angles_tried": [{"angle": f64::NAN, "train_error": 1.0}, {"angle": 0.01}],
         "train_error_without_tilt": null,
     });
+    d.effects[2].evidence = serde_json::json!({});
     if let Some(e) = &mut d.discretisation {
         for t in std::iter::once(&mut e.given).chain(&mut e.options) {
             t.steps.iter_mut().for_each(|s| {
@@ -603,9 +658,14 @@ fn single_and_extreme_values_draw() {
             }
         }
     }
+    // One joint run, at the fitted offset, and no test alone.
+    d.effects[2].evidence = serde_json::json!({
+        "offset_m": 85e-6,
+        "offset_by_tests_together": {"runs": [{"offset_m": 85e-6, "error": 1.2}]},
+    });
     let dir = out_dir("report_diagnosis_figures_degenerate");
     let written = draw_diagnosis(&d, &dir).unwrap();
-    assert_eq!(written.len(), 18, "{written:?}");
+    assert_eq!(written.len(), 20, "{written:?}");
     for p in written.iter().filter(|p| p.extension().unwrap() == "png") {
         assert_png(p);
     }

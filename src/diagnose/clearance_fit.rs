@@ -338,20 +338,32 @@ pub(super) fn clearance_stage(
     let mut fitted = Vec::new();
     for t in bracketed.iter().filter(|t| train.contains(&t.test_index)) {
         if let Some(best) = test_clearance_by_runs(work, t)? {
-            fitted.push((*t, best.clearance_m, best.spread_m));
+            fitted.push((*t, best.clearance_m, best.spread_m, best.tried));
         }
     }
     if fitted.is_empty() {
         return Ok(());
     }
-    let current = |t: &TestClearance| work.accepted.test_clearance(&t.test, t.plan_clearance_m);
-    let offs: Vec<f64> = fitted.iter().map(|(t, c, _)| c - current(t)).collect();
+    // Each train test's clearance in the model as accepted so far.
+    let current: Vec<f64> = (fitted.iter())
+        .map(|(t, ..)| work.accepted.test_clearance(&t.test, t.plan_clearance_m))
+        .collect();
+    let offs: Vec<f64> = (fitted.iter().zip(&current))
+        .map(|((_, c, ..), m)| c - m)
+        .collect();
     let mean_offset = offs.iter().sum::<f64>() / offs.len() as f64;
     // The offset: fitted on the train tests together where their brackets share a range
     // (`joint_offset_by_runs`), else the mean of their own.
     let train_tests: Vec<&TestClearance> = fitted.iter().map(|f| f.0).collect();
     let joint = joint_offset_by_runs(work, &train_tests)?;
     let offset = joint.as_ref().map_or(mean_offset, |j| j.offset_m);
+    // Every run of both fits, for the evidence and its figure (`evidence-clearance-fit`).
+    let one_by_one: Vec<serde_json::Value> = (fitted.iter().zip(&current))
+        .map(|((t, c, s, tried), m)| {
+            json!({"test": t.test, "clearance_m": c, "spread_m": s, "model_clearance_m": m, "runs": tried.iter().map(|r| json!({"clearance_m": r.0, "error": r.1})).collect::<Vec<_>>()})
+        })
+        .collect();
+    let together = joint.as_ref().map(|j| json!({"offset_m": j.offset_m, "spread_m": j.spread_m, "runs": j.runs.iter().map(|r| json!({"offset_m": r.0, "error": r.1})).collect::<Vec<_>>()}));
     let plan = bracketed[0].plan_clearance_m;
     if offset.abs() < 0.02 * plan {
         (work.progress)(DiagnoseProgress::Note(format!(
@@ -362,7 +374,7 @@ pub(super) fn clearance_stage(
             validation_tests: work.names(&validation),
             ..EffectResult::unfitted(
                 "clearance",
-                json!({"offset_m": offset, "plan_clearance_m": plan, "tests": fitted.iter().map(|(t, c, _)| json!({"test": t.test, "clearance": c})).collect::<Vec<_>>()}),
+                json!({"offset_m": offset, "plan_clearance_m": plan, "tests": fitted.iter().map(|(t, c, ..)| json!({"test": t.test, "clearance": c})).collect::<Vec<_>>(), "train_tests_one_by_one": one_by_one, "offset_by_tests_together": together}),
                 format!("not indicated: the train tests' clearances by model runs are within 2 % of the model's (offset {offset:+.2e} m)"),
             )
         });
@@ -403,7 +415,7 @@ pub(super) fn clearance_stage(
         ext,
         json!({"offset": base_offset + offset, "tests": bracketed.iter().map(|t| json!({"test": t.test, "clearance": accepted.test_clearance(&t.test, t.plan_clearance_m) + offset})).collect::<Vec<_>>()}),
         1,
-        json!({"offset_m": offset, "train_tests_one_by_one": fitted.iter().map(|(t, c, s)| json!({"test": t.test, "clearance_m": c, "spread_m": s})).collect::<Vec<_>>(), "offset_by_tests_together": joint.as_ref().map(|j| json!({"offset_m": j.offset_m, "spread_m": j.spread_m, "runs": j.runs.iter().map(|r| json!({"offset_m": r.0, "error": r.1})).collect::<Vec<_>>()})), "offset_mean_of_tests_m": mean_offset, "offset_spread_m": spread.is_finite().then_some(spread), "offset_standard_error_m": standard_error.is_finite().then_some(standard_error), "plan_clearance_m": plan, "brackets_m": bracketed.iter().map(|t| json!({"test": t.test, "lower": t.lower_bound_m, "upper": t.upper_bound_m})).collect::<Vec<_>>()}),
+        json!({"offset_m": offset, "train_tests_one_by_one": one_by_one, "offset_by_tests_together": together, "offset_mean_of_tests_m": mean_offset, "offset_spread_m": spread.is_finite().then_some(spread), "offset_standard_error_m": standard_error.is_finite().then_some(standard_error), "plan_clearance_m": plan, "brackets_m": bracketed.iter().map(|t| json!({"test": t.test, "lower": t.lower_bound_m, "upper": t.upper_bound_m})).collect::<Vec<_>>()}),
         (train, validation),
         Steps::All,
     )

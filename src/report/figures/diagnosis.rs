@@ -8,6 +8,8 @@
 //! - `evidence-clearance`: the clearance bracket per test against the session order or the
 //!   accumulated normal contact impulse (wear): with the wear stage's clearances refined by model runs
 //!   (measured) and the fitted wear's clearance (model);
+//! - `evidence-clearance-fit`: the clearance offset's fit, the error of every model run
+//!   against the offset to the model's clearance, the train tests together and each alone;
 //! - `evidence-sensors`: measured over model RMS per motion channel on the impact-free steps
 //!   (a sensitivity error is flat in frequency);
 //! - `evidence-tilt`: the tilt's fit, the train tests' error against the face's angle through
@@ -77,6 +79,9 @@ pub fn draw_diagnosis(d: &Diagnosis, dir: &Path) -> Result<Vec<PathBuf>, ReportE
     }
     if let Some(f) = evidence_clearance(d) {
         write(dir, "evidence-clearance", &f, &mut written)?;
+    }
+    if let Some(f) = evidence_clearance_fit(d) {
+        write(dir, "evidence-clearance-fit", &f, &mut written)?;
     }
     if let Some(f) = evidence_sensors(d) {
         write(dir, "evidence-sensors", &f, &mut written)?;
@@ -1376,6 +1381,113 @@ fn evidence_tilt(d: &Diagnosis) -> Option<Panels> {
         title: format!("Tilt of the contact face{closing}"),
         cols: panels.len(),
         panels,
+        legend,
+    })
+}
+
+/// The clearance offset's fit by model runs: the error of every run against the offset to the
+/// model's clearance, the train tests together (each offset the median of the band's draws)
+/// and each train test alone (one run per clearance), with the offset fitted and the model as
+/// given (offset 0). None without runs.
+fn evidence_clearance_fit(d: &Diagnosis) -> Option<Panels> {
+    let e = d.effects.iter().find(|e| e.effect == "clearance")?;
+    let ev = &e.evidence;
+    let number = |v: &serde_json::Value| v.as_f64().filter(|x| x.is_finite());
+    let runs = |v: &serde_json::Value, key: &str, shift: f64| {
+        let mut r: Vec<(f64, f64)> = (v.as_array().into_iter().flatten())
+            .filter_map(|p| Some((1e6 * (number(&p[key])? - shift), number(&p["error"])?)))
+            .collect();
+        r.sort_by(|a, b| a.0.total_cmp(&b.0));
+        r
+    };
+    let together = runs(&ev["offset_by_tests_together"]["runs"], "offset_m", 0.0);
+    let alone: Vec<(String, Vec<(f64, f64)>)> = (ev["train_tests_one_by_one"]
+        .as_array()
+        .into_iter()
+        .flatten())
+    .filter_map(|t| {
+        let model = number(&t["model_clearance_m"])?;
+        let name = t["test"].as_str()?.to_string();
+        Some((name, runs(&t["runs"], "clearance_m", model)))
+    })
+    .filter(|(_, r)| !r.is_empty())
+    .collect();
+    if together.is_empty() && alone.is_empty() {
+        return None;
+    }
+    let all = || together.iter().chain(alone.iter().flat_map(|a| a.1.iter()));
+    let xs: Vec<f64> = all().map(|p| p.0).chain([0.0]).collect();
+    let ys: Vec<f64> = all().map(|p| p.1).chain([0.0]).collect();
+    let desc = (
+        "offset to the model's clearance (µm)",
+        "error, the steps about the first contact (-)",
+    );
+    let caption = format!("train tests: {}", e.train_tests.join(", "));
+    let mut p = Panel::over(caption, desc, &xs, &ys)?;
+    let (y0, y1) = p.y;
+    p.series.push(line(
+        vec![(0.0, y0), (0.0, y1)],
+        GREY,
+        LineKind::Dashed,
+        width(),
+    ));
+    let mut legend = Vec::new();
+    for (k, (name, r)) in alone.iter().enumerate() {
+        p.series
+            .push(line(r.clone(), palette(k + 1), LineKind::Markers, width()));
+        legend.push(entry(
+            format!("{name} alone (one run per clearance)"),
+            palette(k + 1),
+            LineKind::Markers,
+        ));
+    }
+    if !together.is_empty() {
+        p.series.push(line(
+            together.clone(),
+            palette(0),
+            LineKind::Markers,
+            width() + 2,
+        ));
+        legend.insert(
+            0,
+            entry(
+                "the train tests together (each offset the median of the band's draws)",
+                palette(0),
+                LineKind::Markers,
+            ),
+        );
+    }
+    let verdict = match (&e.error_before, &e.error_after) {
+        (Some(b), Some(a)) => format!(
+            "; validation {} -> {}, {}",
+            sig(b.validation),
+            sig(a.validation),
+            if e.accepted { "accepted" } else { "rejected" }
+        ),
+        _ => "; not judged".to_string(),
+    };
+    if let Some(o) = number(&ev["offset_m"]) {
+        p.series.push(line(
+            vec![(1e6 * o, y0), (1e6 * o, y1)],
+            palette(0),
+            LineKind::Dashed,
+            width(),
+        ));
+        legend.push(entry(
+            format!("fitted: {} µm{verdict}", sig(1e6 * o)),
+            palette(0),
+            LineKind::Dashed,
+        ));
+    }
+    legend.push(entry(
+        "the model as given (offset 0)",
+        GREY,
+        LineKind::Dashed,
+    ));
+    Some(Panels {
+        title: "Clearance offset by model runs".into(),
+        cols: 1,
+        panels: vec![p],
         legend,
     })
 }

@@ -28,7 +28,7 @@ use plotters::prelude::*;
 
 use super::panel::{axis_areas, grid_styles, Band, Series};
 use crate::diagnose::outcome::{
-    BandSpread, BandStep, Diagnosis, DiscretisedTwin, Regime, StepScores,
+    BandSpread, BandStep, Diagnosis, DiscretisedTwin, EffectResult, Regime, StepScores,
 };
 use crate::diagnose::TestClearance;
 use crate::report::draw::{
@@ -1339,19 +1339,7 @@ fn evidence_tilt(d: &Diagnosis) -> Option<Panels> {
             panels.push(q);
         }
     }
-    let verdict = match (&e.error_before, &e.error_after) {
-        (Some(b), Some(a)) => format!(
-            "; validation {} -> {}, {}",
-            sig(b.validation),
-            sig(a.validation),
-            match () {
-                _ if e.accepted => "accepted",
-                _ if e.reason.starts_with("an equal alternative") => "an equal alternative",
-                _ => "rejected",
-            }
-        ),
-        _ => String::new(),
-    };
+    let verdict = judged(e).unwrap_or_default();
     let mut legend = vec![entry(
         "train error per angle tried (refined once around the best)",
         palette(0),
@@ -1383,6 +1371,22 @@ fn evidence_tilt(d: &Diagnosis) -> Option<Panels> {
         panels,
         legend,
     })
+}
+
+/// How effect `e` was judged, for a legend: "; validation BEFORE -> AFTER, VERDICT" (None
+/// where it was not judged).
+fn judged(e: &EffectResult) -> Option<String> {
+    let (b, a) = (e.error_before.as_ref()?, e.error_after.as_ref()?);
+    let verdict = match () {
+        _ if e.accepted => "accepted",
+        _ if e.reason.starts_with("an equal alternative") => "an equal alternative",
+        _ => "rejected",
+    };
+    Some(format!(
+        "; validation {} -> {}, {verdict}",
+        sig(b.validation),
+        sig(a.validation)
+    ))
 }
 
 /// The clearance offset's fit by model runs: the error of every run against the offset to the
@@ -1457,15 +1461,7 @@ fn evidence_clearance_fit(d: &Diagnosis) -> Option<Panels> {
             ),
         );
     }
-    let verdict = match (&e.error_before, &e.error_after) {
-        (Some(b), Some(a)) => format!(
-            "; validation {} -> {}, {}",
-            sig(b.validation),
-            sig(a.validation),
-            if e.accepted { "accepted" } else { "rejected" }
-        ),
-        _ => "; not judged".to_string(),
-    };
+    let verdict = judged(e).unwrap_or_else(|| "; not judged".into());
     if let Some(o) = number(&ev["offset_m"]) {
         p.series.push(line(
             vec![(1e6 * o, y0), (1e6 * o, y1)],

@@ -11,7 +11,7 @@ use crate::signal::features::standard_error;
 
 use super::clearance::{ClearanceEvidence, TestClearance};
 use super::judge::{alternate, grid_then_refine, members_error, Candidate, Steps, Work};
-use super::outcome::EffectResult;
+use super::outcome::{EffectResult, StepScores};
 use super::rerun::Span;
 use super::{DiagnoseError, DiagnoseProgress};
 
@@ -91,7 +91,7 @@ pub(super) fn test_clearance_by_runs(
     // and tilt stages share these fits (13 runs per bracketed test, three times as many with
     // the draws), and the offset the diagnosis reports is fitted over the draws
     // (`joint_offset_by_runs`) wherever two train tests share a range.
-    let tried = fit_on_grid(work, &[t.test_index], (lo, hi), &with_clearance, 1);
+    let tried = fit_on_grid(work, &[(t.test_index, 1.0)], (lo, hi), &with_clearance, 1);
     work.runner.set_refinement(own);
     let mut tried = tried?;
     tried.sort_by(|a, b| a.0.total_cmp(&b.0));
@@ -167,8 +167,10 @@ fn refined_around(best: f64, h: f64) -> Vec<f64> {
 /// steps around its first contact best ([`evidence_steps`], at the fit's finer twin step), on
 /// a grid of 9 over the offsets every test's bracket admits, refined once around the best
 /// point, each offset's error the median per step over the band's draws
-/// ([`DiagnoseOptions::band_members`](super::DiagnoseOptions::band_members), as the judge's).
-/// `None` with fewer than two tests, or where their brackets admit no common offset.
+/// ([`DiagnoseOptions::band_members`](super::DiagnoseOptions::band_members), as the judge's),
+/// each test's error weighted by how sharply its own fit told its clearance (`spreads`, m, one
+/// per test: [`sharpness_weights`]). `None` with fewer than two tests, or where their brackets
+/// admit no common offset.
 ///
 /// NOTE: a test's runs tell its clearance only to within the frequency steps of its first
 /// contact (every clearance that first closes at the same step scores alike, up to how much
@@ -182,9 +184,16 @@ fn refined_around(best: f64, h: f64) -> Vec<f64> {
 /// to chance: on `identify.toml` with +1e-4 m hidden alone the errors of +76..+185 um lay
 /// within 0.66 of each other and the best was +130 um; over three draws, +112 um (2.1x on
 /// the validation test against 1.8x).
+///
+/// NOTE: pooled over the tests' steps, the widest valley's draws picked the offset: with
+/// -8e-5 m hidden beside 1FU at 50.9 Hz, high-down's runs lay on a floor within 0.2 of each
+/// other over 200 um and the pooled best was -102 um, low-down's own -87; with each test
+/// weighted by its sharpness, -71 um (BENCHMARKS.md, "The joint offset weighted by each
+/// test's sharpness").
 fn joint_offset_by_runs(
     work: &mut Work<'_>,
     tests: &[&TestClearance],
+    spreads: &[f64],
 ) -> Result<Option<JointOffset>, DiagnoseError> {
     if tests.len() < 2 {
         return Ok(None);
@@ -204,10 +213,15 @@ fn joint_offset_by_runs(
         ext
     };
     let idx: Vec<usize> = tests.iter().map(|t| t.test_index).collect();
+    let weighted: Vec<(usize, f64)> = idx
+        .iter()
+        .copied()
+        .zip(sharpness_weights(spreads))
+        .collect();
     let own = work.runner.refinement();
     work.runner.set_refinement(own * FIT_REFINEMENT);
     let members = work.opts.band_members;
-    let tried = fit_on_grid(work, &idx, (lo, hi), &with_offset, members);
+    let tried = fit_on_grid(work, &weighted, (lo, hi), &with_offset, members);
     work.runner.set_refinement(own);
     let tried = tried?;
     let Some(&(best, error)) = tried.iter().min_by(|a, b| a.1.total_cmp(&b.1)) else {
@@ -230,14 +244,45 @@ fn joint_offset_by_runs(
     }))
 }
 
+/// The weights of tests whose clearances were fitted one by one with the valley spreads
+/// `spreads` (m) in a fit over them together: inverse variances, `1 / spread²`, normalised to
+/// a mean of 1; equal where a spread is not a positive number.
+///
+/// NOTE: the tests' valleys differ in width by up to six times (on `identify.toml`, +-12 um
+/// at low level, +-31 to +-75 um for the high-level down sweep, whose runs lie on a flat
+/// floor within 0.2 of each other over 200 um), and the pooled error let the flat test's
+/// draws pick the offset: with -8e-5 m hidden beside 1FU at 50.9 Hz, -102 um; weighted so,
+/// -71 um (BENCHMARKS.md, "The joint offset weighted by each test's sharpness").
+fn sharpness_weights(spreads: &[f64]) -> Vec<f64> {
+    if spreads.is_empty() || spreads.iter().any(|s| !(s.is_finite() && *s > 0.0)) {
+        return vec![1.0; spreads.len()];
+    }
+    let w: Vec<f64> = spreads.iter().map(|s| 1.0 / (s * s)).collect();
+    let mean = w.iter().sum::<f64>() / w.len() as f64;
+    w.iter().map(|x| x / mean).collect()
+}
+
+/// The error of runs `runs` over the tests `tests`, (index, weight): each test's own error
+/// ([`members_error`], the median per step over the runs) combined as the weighted root mean
+/// square (`None` where a test was not compared).
+fn weighted_tests_error(runs: &[Vec<StepScores>], tests: &[(usize, f64)]) -> Option<f64> {
+    let (mut sum, mut total) = (0.0, 0.0);
+    for &(ti, w) in tests {
+        let e = members_error(runs, &[ti], Steps::All, None)?;
+        sum += w * e * e;
+        total += w;
+    }
+    (total > 0.0).then(|| (sum / total).sqrt())
+}
+
 /// The grid search of [`test_clearance_by_runs`] and [`joint_offset_by_runs`] over the values
-/// `lo..=hi` (a test's clearance, an offset) on the tests `idx` (their steps that carry the
-/// clearance, [`evidence_steps`], each from a state of open contact captured with the smallest
-/// value tried), each value's error over `members` runs of it ([`members_error`]): (value,
-/// error) of every value tried.
+/// `lo..=hi` (a test's clearance, an offset) on the tests `tests`, (index, weight) (their
+/// steps that carry the clearance, [`evidence_steps`], each from a state of open contact
+/// captured with the smallest value tried), each value's error over `members` runs of it
+/// ([`weighted_tests_error`]): (value, error) of every value tried.
 fn fit_on_grid(
     work: &mut Work<'_>,
-    idx: &[usize],
+    tests: &[(usize, f64)],
     (lo, hi): (f64, f64),
     with_offset: &dyn Fn(&Work<'_>, f64) -> PhysicsSpec,
     members: usize,
@@ -245,7 +290,7 @@ fn fit_on_grid(
     let h = (hi - lo) / 8.0;
     let closest = with_offset(work, lo - h);
     let mut spans = Vec::new();
-    for &ti in idx {
+    for &(ti, _) in tests {
         let (from, through) = evidence_steps(work, ti);
         spans.push(work.open_span(&closest, ti, from, through)?);
     }
@@ -256,7 +301,7 @@ fn fit_on_grid(
         |best| refined_around(best, h),
         &|work, o| (with_offset(work, o), spans.clone()),
         members,
-        |_, _, runs| members_error(runs, idx, Steps::All, None),
+        |_, _, runs| weighted_tests_error(runs, tests),
     )
 }
 
@@ -355,7 +400,8 @@ pub(super) fn clearance_stage(
     // The offset: fitted on the train tests together where their brackets share a range
     // (`joint_offset_by_runs`), else the mean of their own.
     let train_tests: Vec<&TestClearance> = fitted.iter().map(|f| f.0).collect();
-    let joint = joint_offset_by_runs(work, &train_tests)?;
+    let train_spreads: Vec<f64> = fitted.iter().map(|f| f.2).collect();
+    let joint = joint_offset_by_runs(work, &train_tests, &train_spreads)?;
     let offset = joint.as_ref().map_or(mean_offset, |j| j.offset_m);
     // Every run of both fits, for the evidence and its figure (`evidence-clearance-fit`).
     let one_by_one: Vec<serde_json::Value> = (fitted.iter().zip(&current))
@@ -487,7 +533,67 @@ pub(super) fn unexplained_offset(e: &EffectResult) -> Option<String> {
 
 #[cfg(test)]
 mod tests {
-    use super::{offset_standard_error, valley_spread};
+    use super::{offset_standard_error, sharpness_weights, valley_spread, weighted_tests_error};
+    use crate::diagnose::outcome::{Regime, StepScores};
+
+    /// A step of test `test` whose one feature scores `score`.
+    fn step(test: usize, step: usize, score: f64) -> StepScores {
+        StepScores {
+            test: format!("t{test}"),
+            test_index: test,
+            step,
+            omega_ratio: 1.0,
+            regime: Regime::Impacts,
+            level: 2e-5,
+            features: vec![crate::twin::compare::FeatureComparison {
+                channel: "contact".to_string(),
+                feature: "fraction".to_string(),
+                measured: 1.0,
+                measured_spread: None,
+                model: 1.0,
+                model_spread: None,
+                score,
+            }],
+        }
+    }
+
+    #[test]
+    fn a_sharper_valley_weighs_more_in_the_offset_fitted_together() {
+        // Inverse variances, their mean 1: a valley of +-12 um against one of +-75 um.
+        let w = sharpness_weights(&[12e-6, 75e-6]);
+        assert!((w[0] + w[1] - 2.0).abs() < 1e-12, "{w:?}");
+        assert!(
+            (w[0] / w[1] - (75.0f64 / 12.0).powi(2)).abs() < 1e-9,
+            "{w:?}"
+        );
+        // Without a spread for every test: equal weights.
+        assert_eq!(sharpness_weights(&[12e-6, f64::NAN]), vec![1.0, 1.0]);
+        assert_eq!(sharpness_weights(&[0.0, 1e-5]), vec![1.0, 1.0]);
+        assert!(sharpness_weights(&[]).is_empty());
+    }
+
+    #[test]
+    fn the_tests_errors_combine_by_their_weights() {
+        // Test 0 scores 1 on both its steps, test 1 scores 3 on its one step.
+        let run = vec![
+            step(0, 0, 1.0),
+            step(0, 1, 1.0),
+            step(1, 0, 3.0),
+            step(2, 0, 9.0),
+        ];
+        let runs = vec![run];
+        // Equal weights: each test counts once, whatever its number of steps.
+        let e = weighted_tests_error(&runs, &[(0, 1.0), (1, 1.0)]).unwrap();
+        assert!((e - 5.0f64.sqrt()).abs() < 1e-12, "{e}");
+        // Weighted 3:1, the first test's error dominates; tests not listed do not count.
+        let e = weighted_tests_error(&runs, &[(0, 1.5), (1, 0.5)]).unwrap();
+        assert!((e - 3.0f64.sqrt()).abs() < 1e-12, "{e}");
+        // One test: its own error.
+        let e = weighted_tests_error(&runs, &[(1, 1.0)]).unwrap();
+        assert!((e - 3.0).abs() < 1e-12, "{e}");
+        // A test without a compared step: no error.
+        assert!(weighted_tests_error(&runs, &[(0, 1.0), (5, 1.0)]).is_none());
+    }
 
     #[test]
     fn the_offsets_error_is_at_least_their_own_spreads() {

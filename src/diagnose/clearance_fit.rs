@@ -248,11 +248,12 @@ fn joint_offset_by_runs(
 /// `spreads` (m) in a fit over them together: inverse variances, `1 / spread²`, normalised to
 /// a mean of 1; equal where a spread is not a positive number.
 ///
-/// NOTE: the tests' valleys differ in width by up to six times (on `identify.toml`, +-12 um
-/// at low level, +-31 to +-75 um for the high-level down sweep, whose runs lie on a flat
-/// floor within 0.2 of each other over 200 um), and the pooled error let the flat test's
-/// draws pick the offset: with -8e-5 m hidden beside 1FU at 50.9 Hz, -102 um; weighted so,
-/// -71 um (BENCHMARKS.md, "The joint offset weighted by each test's sharpness").
+/// NOTE: the train tests' valleys differ in width by up to three times within a session (on
+/// `identify.toml` over five sessions, low-down +-21 to +-46 um, high-down +-16 to +-86 um,
+/// its runs at times on a floor within 0.2 of each other over 200 um), and the pooled error
+/// let the flatter test's draws pick the offset: with -8e-5 m hidden beside 1FU at 50.9 Hz
+/// (low-down +-21, high-down +-45 um), -102 um; weighted so, -71 um (BENCHMARKS.md, "The
+/// joint offset weighted by each test's sharpness").
 fn sharpness_weights(spreads: &[f64]) -> Vec<f64> {
     if spreads.is_empty() || spreads.iter().any(|s| !(s.is_finite() && *s > 0.0)) {
         return vec![1.0; spreads.len()];

@@ -472,6 +472,23 @@ fn a_clearance_is_fitted_on_its_train_tests_together() {
         2,
         "{ev:#}"
     );
+    // Each train test weighs by its own valley's spread: inverse variances, their mean 1.
+    let weights = ev["offset_by_tests_together"]["weights"]
+        .as_array()
+        .unwrap();
+    let spreads: Vec<f64> = (ev["train_tests_one_by_one"].as_array().unwrap().iter())
+        .map(|t| t["spread_m"].as_f64().unwrap())
+        .collect();
+    assert_eq!(weights.len(), 2, "{ev:#}");
+    let w: Vec<f64> = weights
+        .iter()
+        .map(|w| w["weight"].as_f64().unwrap())
+        .collect();
+    assert!((w[0] + w[1] - 2.0).abs() < 1e-9, "{ev:#}");
+    assert!(
+        (w[0] / w[1] - (spreads[1] / spreads[0]).powi(2)).abs() < 1e-6 * w[0] / w[1],
+        "{ev:#}"
+    );
 }
 
 #[test]

@@ -229,8 +229,9 @@ fn joint_offset_by_runs(
     };
     let spread = valley_spread(&tried, (best, error), work.opts.contact_null_spread);
     work.note_once(format!(
-        "clearance offset of {} together: {:+.0} +- {:.0} um by model runs (common range {:+.0} to {:+.0} um, error {error:.3}, {} runs at a {FIT_REFINEMENT}x finer twin step)",
+        "clearance offset of {} together (weights {}): {:+.0} +- {:.0} um by model runs (common range {:+.0} to {:+.0} um, error {error:.3}, {} runs at a {FIT_REFINEMENT}x finer twin step)",
         work.names(&idx).join(", "),
+        weighted.iter().map(|w| format!("{:.2}", w.1)).collect::<Vec<_>>().join(" / "),
         best * 1e6,
         spread * 1e6,
         lo * 1e6,
@@ -241,6 +242,7 @@ fn joint_offset_by_runs(
         offset_m: best,
         spread_m: spread,
         runs: tried,
+        weights: weighted.iter().map(|w| w.1).collect(),
     }))
 }
 
@@ -320,6 +322,9 @@ struct JointOffset {
     spread_m: f64,
     /// Every run, (offset m, error -).
     runs: Vec<(f64, f64)>,
+    /// Each train test's weight in the runs' error, in the order of the tests
+    /// ([`sharpness_weights`]).
+    weights: Vec<f64>,
 }
 
 /// The offsets (m) to the clearances `current` (m, one per test) that lie within every one
@@ -410,7 +415,7 @@ pub(super) fn clearance_stage(
             json!({"test": t.test, "clearance_m": c, "spread_m": s, "model_clearance_m": m, "runs": tried.iter().map(|r| json!({"clearance_m": r.0, "error": r.1})).collect::<Vec<_>>()})
         })
         .collect();
-    let together = joint.as_ref().map(|j| json!({"offset_m": j.offset_m, "spread_m": j.spread_m, "runs": j.runs.iter().map(|r| json!({"offset_m": r.0, "error": r.1})).collect::<Vec<_>>()}));
+    let together = joint.as_ref().map(|j| json!({"offset_m": j.offset_m, "spread_m": j.spread_m, "weights": train_tests.iter().zip(&j.weights).map(|(t, w)| json!({"test": t.test, "weight": w})).collect::<Vec<_>>(), "runs": j.runs.iter().map(|r| json!({"offset_m": r.0, "error": r.1})).collect::<Vec<_>>()}));
     let plan = bracketed[0].plan_clearance_m;
     if offset.abs() < 0.02 * plan {
         (work.progress)(DiagnoseProgress::Note(format!(

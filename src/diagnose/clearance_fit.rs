@@ -247,9 +247,8 @@ fn joint_offset_by_runs(
 }
 
 /// The weights of tests whose clearances were fitted one by one with the valley spreads
-/// `spreads` (m) in a fit over them together: inverse variances, as the wear line weighs its
-/// points ([`super::wear::weights_of`]: equal where a spread is not a positive number),
-/// normalised to a mean of 1.
+/// `spreads` (m) in a fit over them together: inverse variances, `1 / spread²`, normalised to
+/// a mean of 1; equal where a spread is not a positive number.
 ///
 /// NOTE: the train tests' valleys differ in width by up to three times within a session (on
 /// `identify.toml` over five sessions, low-down +-21 to +-46 um, high-down +-16 to +-86 um,
@@ -258,7 +257,10 @@ fn joint_offset_by_runs(
 /// (low-down +-21, high-down +-45 um), -102 um; weighted so, -71 um (BENCHMARKS.md, "The
 /// joint offset weighted by each test's sharpness").
 fn sharpness_weights(spreads: &[f64]) -> Vec<f64> {
-    let w = super::wear::weights_of(spreads).w;
+    if spreads.is_empty() || spreads.iter().any(|s| !(s.is_finite() && *s > 0.0)) {
+        return vec![1.0; spreads.len()];
+    }
+    let w: Vec<f64> = spreads.iter().map(|s| 1.0 / (s * s)).collect();
     let mean = w.iter().sum::<f64>() / w.len() as f64;
     w.iter().map(|x| x / mean).collect()
 }

@@ -176,7 +176,7 @@ fn slope_through_origin(points: &[(f64, f64)], weights: &[f64]) -> Option<f64> {
 /// down test's runs found a flat valley over 680-770 um). Unweighted, that point's +78 um
 /// (the rig's had not grown) made the slope 1.66e-5 m/(N s) +- 8.0e-6, no trend; weighted,
 /// 1.86e-5 +- 3.6e-6 (BENCHMARKS.md, "Wear points weighted by their own spread").
-pub(super) fn weights_of(spreads: &[f64]) -> Weights {
+fn weights_of(spreads: &[f64]) -> Weights {
     if spreads.iter().all(|s| s.is_finite() && *s > 0.0) {
         Weights {
             w: spreads.iter().map(|s| 1.0 / (s * s)).collect(),
@@ -189,9 +189,9 @@ pub(super) fn weights_of(spreads: &[f64]) -> Weights {
 
 /// The weights of a line's points ([`weighted_line`]).
 #[derive(Clone, Debug, PartialEq)]
-pub(super) struct Weights {
+struct Weights {
     /// One per point, positive.
-    pub(super) w: Vec<f64>,
+    w: Vec<f64>,
     /// Each the inverse of its point's variance, in the points' units squared (else relative).
     absolute: bool,
 }

@@ -7,7 +7,7 @@
 use serde_json::json;
 
 use crate::config::{ClearanceSpec, PhysicsSpec};
-use crate::signal::features::standard_error;
+use crate::signal::features::{inverse_variance_weights, standard_error};
 
 use super::clearance::{ClearanceEvidence, TestClearance};
 use super::judge::{alternate, grid_then_refine, members_error, Candidate, Steps, Work};
@@ -257,12 +257,13 @@ fn joint_offset_by_runs(
 /// (low-down +-21, high-down +-45 um), -102 um; weighted so, -71 um (BENCHMARKS.md, "The
 /// joint offset weighted by each test's sharpness").
 fn sharpness_weights(spreads: &[f64]) -> Vec<f64> {
-    if spreads.is_empty() || spreads.iter().any(|s| !(s.is_finite() && *s > 0.0)) {
-        return vec![1.0; spreads.len()];
+    match inverse_variance_weights(spreads) {
+        Some(w) if !w.is_empty() => {
+            let mean = w.iter().sum::<f64>() / w.len() as f64;
+            w.iter().map(|x| x / mean).collect()
+        }
+        _ => vec![1.0; spreads.len()],
     }
-    let w: Vec<f64> = spreads.iter().map(|s| 1.0 / (s * s)).collect();
-    let mean = w.iter().sum::<f64>() / w.len() as f64;
-    w.iter().map(|x| x / mean).collect()
 }
 
 /// The error of runs `runs` over the tests `tests`, (index, weight): each test's own error

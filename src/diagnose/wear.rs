@@ -32,6 +32,7 @@
 use serde_json::json;
 
 use crate::config::{ClearanceSpec, PhysicsSpec, WearSpec};
+use crate::signal::features::inverse_variance_weights;
 
 use super::clearance::{ClearanceEvidence, TestClearance};
 use super::clearance_fit::{test_clearance_by_runs, FIT_REFINEMENT};
@@ -177,13 +178,9 @@ fn slope_through_origin(points: &[(f64, f64)], weights: &[f64]) -> Option<f64> {
 /// (the rig's had not grown) made the slope 1.66e-5 m/(N s) +- 8.0e-6, no trend; weighted,
 /// 1.86e-5 +- 3.6e-6 (BENCHMARKS.md, "Wear points weighted by their own spread").
 fn weights_of(spreads: &[f64]) -> Weights {
-    if spreads.iter().all(|s| s.is_finite() && *s > 0.0) {
-        Weights {
-            w: spreads.iter().map(|s| 1.0 / (s * s)).collect(),
-            absolute: true,
-        }
-    } else {
-        Weights::equal(spreads.len())
+    match inverse_variance_weights(spreads) {
+        Some(w) => Weights { w, absolute: true },
+        None => Weights::equal(spreads.len()),
     }
 }
 

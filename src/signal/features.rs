@@ -228,6 +228,15 @@ pub(crate) fn standard_error(x: &[f64]) -> f64 {
     sample_std(x) / (x.len() as f64).sqrt()
 }
 
+/// Inverse-variance weights `1 / spread^2` of estimates with the given spreads, or `None`
+/// where a spread is missing (not finite, or not positive): the caller then weighs them equally.
+pub(crate) fn inverse_variance_weights(spreads: &[f64]) -> Option<Vec<f64>> {
+    spreads
+        .iter()
+        .all(|s| s.is_finite() && *s > 0.0)
+        .then(|| spreads.iter().map(|s| 1.0 / (s * s)).collect())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -378,5 +387,13 @@ mod tests {
         assert_eq!(quantile(&[3.0, 1.0, 2.0], 0.5), 2.0);
         assert_eq!(quantile(&[1.0, 2.0], 0.25), 1.25);
         assert!(quantile(&[], 0.5).is_nan());
+    }
+
+    #[test]
+    fn inverse_variance_weights_need_every_spread() {
+        assert_eq!(inverse_variance_weights(&[1.0, 0.5]), Some(vec![1.0, 4.0]));
+        assert_eq!(inverse_variance_weights(&[1.0, 0.0]), None);
+        assert_eq!(inverse_variance_weights(&[f64::NAN, 1.0]), None);
+        assert_eq!(inverse_variance_weights(&[]), Some(vec![]));
     }
 }

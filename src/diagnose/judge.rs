@@ -422,6 +422,18 @@ impl<'a> Work<'a> {
             .collect()
     }
 
+    /// The band's runs of `ext` over `spans` (members 0, 1, ... [`DiagnoseOptions::band_members`])
+    /// made so far at the runner's twin step as it is now; None where one was not made.
+    pub(super) fn band_runs_made(
+        &self,
+        ext: &PhysicsSpec,
+        spans: &[Span],
+    ) -> Option<Vec<Vec<StepScores>>> {
+        (0..self.members(Steps::All))
+            .map(|m| self.cache.get(&self.cache_key(ext, spans, m)).cloned())
+            .collect()
+    }
+
     /// What a run of `ext` over `spans` is remembered by: the model, the steps, the twin step's
     /// refinement, and, with wear, where its tests start ([`ModelRunner::set_wear_from`]).
     fn cache_key(

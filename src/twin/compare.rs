@@ -108,27 +108,55 @@ fn score(
             let x = model
                 .iter()
                 .find(|x| x.channel == m.channel && x.feature == m.feature)?;
-            let t = tolerance.of(&m.feature, m.value, x.value);
-            let var = m.spread.unwrap_or(0.0).powi(2) + x.spread.unwrap_or(0.0).powi(2) + t * t;
-            let diff = (x.value - m.value).abs();
-            let score = if var > 0.0 {
-                diff / var.sqrt()
-            } else if diff == 0.0 {
-                0.0
-            } else {
-                f64::INFINITY
-            };
-            Some(FeatureComparison {
-                channel: m.channel.clone(),
-                feature: m.feature.clone(),
-                measured: m.value,
-                measured_spread: m.spread,
-                model: x.value,
-                model_spread: x.spread,
-                score,
-            })
+            Some(FeatureComparison::scored(m, x, tolerance))
         })
         .collect()
+}
+
+impl FeatureComparison {
+    /// The measured feature `m` against the model's `x` (the same channel and feature).
+    fn scored(m: &Feature, x: &Feature, tolerance: &ComparisonTolerance) -> FeatureComparison {
+        let t = tolerance.of(&m.feature, m.value, x.value);
+        let var = m.spread.unwrap_or(0.0).powi(2) + x.spread.unwrap_or(0.0).powi(2) + t * t;
+        let diff = (x.value - m.value).abs();
+        let score = if var > 0.0 {
+            diff / var.sqrt()
+        } else if diff == 0.0 {
+            0.0
+        } else {
+            f64::INFINITY
+        };
+        FeatureComparison {
+            channel: m.channel.clone(),
+            feature: m.feature.clone(),
+            measured: m.value,
+            measured_spread: m.spread,
+            model: x.value,
+            model_spread: x.spread,
+            score,
+        }
+    }
+
+    /// This comparison with another run's model value `model` in its place, both spreads
+    /// kept: another draw of the same model scored against this comparison's spreads (an
+    /// ensemble's scatter is the model's, not one run's).
+    pub fn with_model_value(
+        &self,
+        model: f64,
+        tolerance: &ComparisonTolerance,
+    ) -> FeatureComparison {
+        let feature = |value, spread| Feature {
+            channel: self.channel.clone(),
+            feature: self.feature.clone(),
+            value,
+            spread,
+        };
+        FeatureComparison::scored(
+            &feature(self.measured, self.measured_spread),
+            &feature(model, self.model_spread),
+            tolerance,
+        )
+    }
 }
 
 /// The seed of the noise laid on the model's channel `channel` over the record window of

@@ -833,6 +833,38 @@ fn the_discretisation_member_widens_the_model_spread_in_quadrature() {
     assert_eq!(d.max_score, Some(d.features[1].score));
 }
 
+/// Another draw of the model scored against a comparison's spreads: its value replaces the
+/// model's, both spreads and the tolerance's floor stay; the same value gives the same score.
+#[test]
+fn another_draw_is_scored_against_the_comparisons_spreads() {
+    use crate::signal::Feature;
+    let tol = crate::twin::ComparisonTolerance {
+        relative: 0.1,
+        contact_fraction: 0.0,
+        impacts_per_period: 0.0,
+    };
+    let f = |value: f64, spread: f64| Feature {
+        channel: "upper_tip".into(),
+        feature: "rms".into(),
+        value,
+        spread: Some(spread),
+    };
+    let c = crate::twin::TwinComparison::synthetic(&[f(10.0, 0.3)], &[f(12.0, 0.4)], &tol);
+    let same = c.features[0].with_model_value(12.0, &tol);
+    assert_eq!(same, c.features[0]);
+    let d = c.features[0].with_model_value(8.0, &tol);
+    assert_eq!(
+        (d.model, d.model_spread, d.measured_spread),
+        (8.0, Some(0.4), Some(0.3))
+    );
+    // |8 - 10| against sqrt(0.3^2 + 0.4^2 + (0.1 x 10)^2).
+    assert!(
+        (d.score - 2.0 / 1.25f64.sqrt()).abs() < 1e-12,
+        "{}",
+        d.score
+    );
+}
+
 /// Like with like for noise: the vibrometer reads the upper tip with white noise 3 % of its
 /// amplitude, which raises the measured per-period amplitudes by about 4 % (the module docs of
 /// `crate::signal::noise`); a model that is the rig exactly scores that as a mismatch unless

@@ -163,7 +163,9 @@ pub struct BandStep {
 /// pointwise. The judge's own errors ([`EffectResult::error_before`]) are pointwise at the
 /// twin's step, where the band's chaos and the twin's own step (it over-counts contact)
 /// leave a floor that a right model does not go below (BENCHMARKS.md, "The validation error
-/// with the comparison's spread"); a lone accepted band effect reports these instead.
+/// with the comparison's spread"); a lone accepted band effect reports these instead, each
+/// step the median over its draws: the locate or show run and the judge's runs of the same
+/// model, scored against the locate or show run's spreads.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ValidationWithSpread {
     /// The tests.

@@ -29,7 +29,8 @@
 //!    only if the validation error falls by more than the null spread plus a penalty per
 //!    parameter; rejected candidates are reported with the reason. The accepted effects'
 //!    validation tests are reported with the comparison's spread as well
-//!    (`validation_with_spread`, from the locate and show runs).
+//!    (`validation_with_spread`, from the locate and show runs; for a lone band effect, each
+//!    step's median over those and the judge's runs of the same models).
 //! 4. **Verdict**: a mismatch when an effect was accepted, or when a regime's typical step
 //!    (the median of the steps' largest scores) lies above the threshold: the impact-free
 //!    regimes compared pointwise, the impact band with the comparison's own spread (the
@@ -288,13 +289,13 @@ fn lone_band_effect_with_spread(
     tolerance: &ComparisonTolerance,
     before: &[StepScores],
     after: &[StepScores],
-) {
+) -> Option<(SetError, SetError)> {
     let mut accepted = work.effects.iter().filter(|e| e.accepted);
     let (Some(e), None) = (accepted.next(), accepted.next()) else {
-        return;
+        return None;
     };
     if !BAND_EFFECTS.contains(&e.effect.as_str()) {
-        return;
+        return None;
     }
     let steps = work.steps;
     let (train, validation) = (
@@ -320,14 +321,10 @@ fn lone_band_effect_with_spread(
         })
     };
     let one = |s: &[StepScores]| error(&[s.to_vec()]);
-    let (Some(b), Some(a)) = (error(&before_runs), error(&after_runs)) else {
-        return;
-    };
+    let (b, a) = (error(&before_runs)?, error(&after_runs)?);
     let draws = before_runs.len().min(after_runs.len());
     let (b1, a1) = (one(before), one(after));
-    let Some(e) = work.effects.iter_mut().find(|e| e.accepted) else {
-        return;
-    };
+    let e = work.effects.iter_mut().find(|e| e.accepted)?;
     e.evidence["pointwise"] = json!({
         "error_before": e.error_before,
         "error_after": e.error_after,
@@ -351,6 +348,7 @@ fn lone_band_effect_with_spread(
     );
     e.error_before = Some(b);
     e.error_after = Some(a);
+    Some((b, a))
 }
 
 /// The runs `draw` of a model scored against the spreads of `show`'s comparison of the same
@@ -675,9 +673,12 @@ pub fn diagnose(
         (before.clone(), None)
     };
     let refined_twin = refined.map(|r| r.0);
-    if let (Some((_, b)), Some((_, a))) = (&band_before, &band_after) {
-        lone_band_effect_with_spread(&mut work, &given, &input.cfg.twin.tolerance, b, a);
-    }
+    let lone = match (&band_before, &band_after) {
+        (Some((_, b)), Some((_, a))) => {
+            lone_band_effect_with_spread(&mut work, &given, &input.cfg.twin.tolerance, b, a)
+        }
+        _ => None,
+    };
     let mut validation_tests: Vec<String> = (work.effects.iter())
         .filter(|e| e.accepted)
         .flat_map(|e| e.validation_tests.clone())
@@ -686,8 +687,14 @@ pub fn diagnose(
     validation_tests.dedup();
     // With the twin's discretisation refined, the model as given's spread holds that
     // twin's own discretisation error (its discretisation member's difference): no before.
-    let with_spread = match (&band_before, &band_after) {
-        (Some((_, b)), Some((_, a))) if refined_twin.is_none() => {
+    // A lone band effect's are over its draws (the same tests: its validation tests).
+    let with_spread = match (&band_before, &band_after, lone) {
+        (_, _, Some((b, a))) if refined_twin.is_none() => Some(ValidationWithSpread {
+            tests: validation_tests.clone(),
+            before: b.validation,
+            after: a.validation,
+        }),
+        (Some((_, b)), Some((_, a)), _) if refined_twin.is_none() => {
             validation_with_spread(&steps, &validation_tests, b, a)
         }
         _ => None,

@@ -33,6 +33,14 @@ pub struct DiagnoseOptions {
     /// band is non-periodic and the nominal twin's own truncation scores its steps around 4-6
     /// where the rig matches the model (BENCHMARKS.md, "The comparison's spread").
     pub contact_null_spread: f64,
+    /// The null spread for a band candidate judged where it was fitted at a finer twin step
+    /// ([`Candidate::judged_where_fitted`]), -. Default 0.5. There the twin's own contact
+    /// excess, which `contact_null_spread` allows for, is gone: on `identify.toml` with
+    /// nothing hidden (two noise seeds), smaller clearances forced there by 25 and 45 um
+    /// raised the error by 0.24-5.9, and a right model's error there was 0.86-1.18; hidden
+    /// clearances of -6e-5 and -8e-5 m fell by 0.89 and 1.04, under the band's 1.1 with the
+    /// penalty (BENCHMARKS.md, "The null spread where a clearance was fitted").
+    pub fitted_steps_null_spread: f64,
     /// The share of the error before such an effect must remove, -. Default 0.5: on
     /// `identify.toml` with nothing hidden, a smaller clearance absorbs part of the twin's
     /// truncation error and lowers the validation error 1.3x; a hidden +14 % clearance
@@ -58,6 +66,7 @@ impl Default for DiagnoseOptions {
             parameter_penalty: 0.1,
             min_relative_improvement: 0.2,
             contact_null_spread: 1.0,
+            fitted_steps_null_spread: 0.5,
             contact_min_relative_improvement: 0.5,
             band_members: 3,
             jobs: 1,
@@ -658,7 +667,8 @@ impl<'a> Work<'a> {
         // which the finer step removes, while the finer twin's chaotic band lands on other
         // attractors than the default one's (a hidden +14 % clearance: 2.37 -> 0.59 at the
         // twin's step, 4.74 -> 2.53 at the 3x finer one).
-        let (ok2, reason2) = self.assess_with(c, as_set(fb, before), as_set(fa, after), false);
+        let (ok2, reason2) =
+            self.assess_with(c, as_set(fb, before), as_set(fa, after), false, None);
         c.evidence["finer_twin_step"] = serde_json::json!({
             "refinement": own * CONFIRM_REFINEMENT,
             "validation_before": fb,
@@ -674,8 +684,10 @@ impl<'a> Work<'a> {
 
     /// [`Work::judge`] of a candidate where it was fitted ([`Candidate::judged_where_fitted`]):
     /// its errors before and after on those steps at that twin step decide, by the regime's
-    /// rule (the fall beyond the null spread and the penalty, and the regime's share). What
-    /// the whole tests said is kept in the evidence (`on_whole_tests`) and the reason.
+    /// rule (the fall beyond the null spread and the penalty, and the regime's share; at a
+    /// finer twin step in the band, the null spread
+    /// [`DiagnoseOptions::fitted_steps_null_spread`]). What the whole tests said is kept in
+    /// the evidence (`on_whole_tests`) and the reason.
     ///
     /// `w` is the candidate's `where_fitted`, `whole` why the whole tests rejected it.
     fn judge_where_fitted(
@@ -700,7 +712,8 @@ impl<'a> Work<'a> {
         self.runner.set_refinement(own);
         self.runner.set_wear_from(None);
         let (before, after) = fitted_step?;
-        let (ok, reason) = self.assess_with(&c, before, after, true);
+        let null = where_fitted_null_spread(&self.opts, w, c.steps);
+        let (ok, reason) = self.assess_with(&c, before, after, true, null);
         c.evidence["judged_on"] = serde_json::json!({
             "steps": w.what,
             "refinement": own * w.refinement,
@@ -801,21 +814,23 @@ impl<'a> Work<'a> {
         before: Option<SetError>,
         after: Option<SetError>,
     ) -> (bool, String) {
-        self.assess_with(c, before, after, true)
+        self.assess_with(c, before, after, true, None)
     }
 
-    /// [`Work::assess`], asking the regime's share of the error before only with `share`.
+    /// [`Work::assess`], asking the regime's share of the error before only with `share`,
+    /// and with the null spread `null_spread` in place of the regime's where given.
     fn assess_with(
         &self,
         c: &Candidate,
         before: Option<SetError>,
         after: Option<SetError>,
         share: bool,
+        null_spread: Option<f64>,
     ) -> (bool, String) {
         match (before, after) {
             (Some(b), Some(a)) => {
                 let gain = b.validation - a.validation;
-                let (null, regime_share) = match c.steps {
+                let (regime_null, regime_share) = match c.steps {
                     Steps::All => (
                         self.opts.contact_null_spread,
                         self.opts.contact_min_relative_improvement,
@@ -825,6 +840,7 @@ impl<'a> Work<'a> {
                     }
                 };
                 let share = if share { regime_share } else { 0.0 };
+                let null = null_spread.unwrap_or(regime_null);
                 let needed = null + self.opts.parameter_penalty * c.n_params as f64;
                 if a.validation >= b.validation {
                     (
@@ -956,6 +972,13 @@ pub(super) fn grid_then_refine(
     Ok(tried)
 }
 
+/// The null spread of a candidate judged where it was fitted, `w`, on `steps`, in place of
+/// the regime's: [`DiagnoseOptions::fitted_steps_null_spread`] in the band at a finer twin
+/// step, where the twin's own contact excess is gone; None (the regime's) otherwise.
+fn where_fitted_null_spread(opts: &DiagnoseOptions, w: &WhereFitted, steps: Steps) -> Option<f64> {
+    (w.refinement > 1 && steps == Steps::All).then_some(opts.fitted_steps_null_spread)
+}
+
 /// Tests split alternately: positions 0, 2, ... train, 1, 3, ... validation.
 pub(super) fn alternate(tests: &[usize]) -> (Vec<usize>, Vec<usize>) {
     let train = tests.iter().step_by(2).copied().collect();
@@ -966,6 +989,27 @@ pub(super) fn alternate(tests: &[usize]) -> (Vec<usize>, Vec<usize>) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn only_a_band_fit_at_a_finer_step_takes_the_fitted_steps_null_spread() {
+        let opts = DiagnoseOptions::default();
+        let at = |refinement| WhereFitted {
+            spans: Vec::new(),
+            refinement,
+            what: String::new(),
+        };
+        assert_eq!(
+            where_fitted_null_spread(&opts, &at(3), Steps::All),
+            Some(opts.fitted_steps_null_spread)
+        );
+        // The tilt's contact steps at the twin's own step keep the band's.
+        assert_eq!(where_fitted_null_spread(&opts, &at(1), Steps::All), None);
+        assert_eq!(
+            where_fitted_null_spread(&opts, &at(3), Steps::ImpactFree),
+            None
+        );
+        assert!(opts.fitted_steps_null_spread < opts.contact_null_spread);
+    }
 
     #[test]
     fn tests_split_alternately() {

@@ -36,8 +36,8 @@ pub struct DiagnoseOptions {
     /// The null spread for a band candidate judged where it was fitted at a finer twin step
     /// ([`Candidate::judged_where_fitted`]), -. Default 0.5. There the twin's own contact
     /// excess, which `contact_null_spread` allows for, is gone: on `identify.toml` with
-    /// nothing hidden (two noise seeds), smaller clearances forced there by 25 and 45 um
-    /// raised the error by 0.24-5.9, and a right model's error there was 0.86-1.18; hidden
+    /// nothing hidden (two noise seeds), offsets of -25, -45 and +30 um forced there raised
+    /// the error by 0.24-5.9, and a right model's error there was 0.86-1.18; hidden
     /// clearances of -6e-5 and -8e-5 m fell by 0.89 and 1.04, under the band's 1.1 with the
     /// penalty (BENCHMARKS.md, "The null spread where a clearance was fitted").
     pub fitted_steps_null_spread: f64,

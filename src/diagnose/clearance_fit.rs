@@ -525,7 +525,18 @@ pub(super) fn unexplained_offset(e: &EffectResult) -> Option<String> {
         return None;
     }
     let offset = e.evidence.get("offset_m")?.as_f64()?;
-    let se = e.evidence.get("offset_standard_error_m")?.as_f64()?;
+    // The offset fitted on the tests together is known no better than its own valley: on a
+    // flat floor its best point is a draw (on the six-probe wear plan with nothing hidden,
+    // -49.8 um on a valley +-37.6 um wide, where the tests' own offsets averaged -7.7 +- 15.7).
+    let joint = (e.evidence.get("offset_by_tests_together"))
+        .and_then(|j| j.get("spread_m")?.as_f64())
+        .filter(|s| s.is_finite())
+        .unwrap_or(0.0);
+    let se = e
+        .evidence
+        .get("offset_standard_error_m")?
+        .as_f64()?
+        .max(joint);
     (se > 0.0 && offset.abs() > LOCATED_STANDARD_ERRORS * se).then(|| {
         format!(
             "a contact mismatch in {}: their first contact lies {:+.1} +- {:.1} um from the model's ({:.1} standard errors), but no effect fitted there lowered the error on {} beyond the null spread",
@@ -540,7 +551,10 @@ pub(super) fn unexplained_offset(e: &EffectResult) -> Option<String> {
 
 #[cfg(test)]
 mod tests {
-    use super::{offset_standard_error, sharpness_weights, valley_spread, weighted_tests_error};
+    use super::{
+        offset_standard_error, sharpness_weights, unexplained_offset, valley_spread,
+        weighted_tests_error,
+    };
     use crate::diagnose::outcome::{Regime, StepScores};
 
     /// A step of test `test` whose one feature scores `score`.
@@ -713,5 +727,23 @@ mod tests {
         assert_eq!(valley_spread(&sharp, (720.0, 0.5), 1.0), 10.0);
         // A single run: no spread.
         assert!(valley_spread(&[(720.0, 0.5)], (720.0, 0.5), 1.0).is_nan());
+    }
+
+    /// A rejected offset is a located contact mismatch only beyond 3 of its uncertainties:
+    /// the tests' standard error, or the joint fit's own valley where that is wider.
+    #[test]
+    fn an_offset_on_a_flat_joint_valley_is_no_located_mismatch() {
+        let effect = |together: serde_json::Value| crate::diagnose::outcome::EffectResult {
+            train_tests: vec!["probe-1".into()],
+            validation_tests: vec!["probe-2".into()],
+            ..crate::diagnose::outcome::EffectResult::unfitted(
+                "clearance",
+                serde_json::json!({"offset_m": -49.8e-6, "offset_standard_error_m": 15.7e-6, "offset_by_tests_together": together}),
+                "rejected".to_string(),
+            )
+        };
+        assert!(unexplained_offset(&effect(serde_json::Value::Null)).is_some());
+        assert!(unexplained_offset(&effect(serde_json::json!({"spread_m": 10e-6}))).is_some());
+        assert!(unexplained_offset(&effect(serde_json::json!({"spread_m": 37.6e-6}))).is_none());
     }
 }

@@ -7,7 +7,7 @@
 use serde_json::json;
 
 use crate::config::{ClearanceSpec, PhysicsSpec};
-use crate::signal::features::{inverse_variance_weights, standard_error};
+use crate::signal::features::{inverse_variance_weights, spreads_known, standard_error};
 
 use super::clearance::{ClearanceEvidence, TestClearance};
 use super::judge::{alternate, grid_then_refine, members_error, Candidate, Steps, Work};
@@ -354,7 +354,7 @@ fn unbracketed_contact(ce: &ClearanceEvidence) -> Vec<usize> {
 pub(super) fn clearance_stage(
     work: &mut Work<'_>,
     ce: &ClearanceEvidence,
-) -> Result<(), DiagnoseError> {
+) -> Result<Option<FittedOffset>, DiagnoseError> {
     let bracketed: Vec<&TestClearance> = ce
         .tests
         .iter()
@@ -380,7 +380,7 @@ pub(super) fn clearance_stage(
                     "two are needed, one to fit and one to validate (or one and another test with contact)",
                 ),
             );
-            return Ok(());
+            return Ok(None);
         }
     };
     // Per train test: the clearance within its bracket whose model run matches the test best
@@ -394,7 +394,7 @@ pub(super) fn clearance_stage(
         }
     }
     if fitted.is_empty() {
-        return Ok(());
+        return Ok(None);
     }
     // Each train test's clearance in the model as accepted so far.
     let current: Vec<f64> = (fitted.iter())
@@ -431,7 +431,7 @@ pub(super) fn clearance_stage(
                 format!("not indicated: the train tests' clearances by model runs are within 2 % of the model's (offset {offset:+.2e} m)"),
             )
         });
-        return Ok(());
+        return Ok(None);
     }
     let spread = if offs.len() > 1 {
         (offs.iter().map(|o| (o - mean_offset).powi(2)).sum::<f64>() / (offs.len() - 1) as f64)
@@ -473,8 +473,15 @@ pub(super) fn clearance_stage(
         Steps::All,
     )
     .judged_where_fitted(spans, FIT_REFINEMENT, what);
+    let fitted = FittedOffset {
+        offset_m: offset,
+        standard_error_m: standard_error,
+        joint_spread_m: joint.as_ref().map_or(f64::NAN, |j| j.spread_m),
+        train_tests: work.names(&cand.train),
+        validation_tests: work.names(&cand.validation),
+    };
     work.judge(cand)?;
-    Ok(())
+    Ok(Some(fitted))
 }
 
 /// The standard error of the mean of the train tests' offsets `offs` (m), each fitted with
@@ -486,7 +493,7 @@ pub(super) fn clearance_stage(
 /// their scatter alone is no error of the mean (as for the wear line, `wear::weighted_line`).
 fn offset_standard_error(offs: &[f64], spreads: &[f64]) -> f64 {
     let n = offs.len() as f64;
-    let from_spreads = if !offs.is_empty() && spreads.iter().all(|s| s.is_finite() && *s > 0.0) {
+    let from_spreads = if !offs.is_empty() && spreads_known(spreads) {
         spreads.iter().map(|s| s * s).sum::<f64>().sqrt() / n
     } else {
         f64::NAN
@@ -508,11 +515,33 @@ fn offset_standard_error(offs: &[f64], spreads: &[f64]) -> f64 {
 /// contact mismatch ([`unexplained_offset`]).
 const LOCATED_STANDARD_ERRORS: f64 = 3.0;
 
-/// Where the clearance stage's offset `e` was rejected on its validation but its train tests'
-/// first contact lies beyond [`LOCATED_STANDARD_ERRORS`] of its standard error from the
-/// model's: a contact mismatch in those tests that no stage explained (why, in words). The
-/// verdict is then a mismatch: the model and the recording differ where the probes first
-/// meet, whatever the cause.
+/// The clearance offset [`clearance_stage`] fitted on its train tests, and how well they know
+/// it: what the offset still locates where it is not accepted ([`unexplained_offset`]).
+#[derive(Debug, Clone)]
+pub(super) struct FittedOffset {
+    /// The offset to the model's clearance, m.
+    pub(super) offset_m: f64,
+    /// The standard error of the train tests' offsets ([`offset_standard_error`]), m; NaN
+    /// where unknown.
+    pub(super) standard_error_m: f64,
+    /// The joint fit's own valley spread ([`valley_spread`]), m; NaN without a joint fit.
+    pub(super) joint_spread_m: f64,
+    /// The tests it was fitted on.
+    pub(super) train_tests: Vec<String>,
+    /// The tests it was judged on.
+    pub(super) validation_tests: Vec<String>,
+}
+
+/// Where the clearance stage's offset `fitted` was not accepted (no `clearance` among
+/// `effects` is) but its train tests' first contact lies beyond [`LOCATED_STANDARD_ERRORS`]
+/// of its error from the model's: a contact mismatch in those tests that no stage explained
+/// (why, in words). The verdict is then a mismatch: the model and the recording differ where
+/// the probes first meet, whatever the cause.
+///
+/// The error is the larger of the tests' standard error and the joint fit's own valley: on
+/// a flat floor the joint fit's best point is a draw (on the six-probe wear plan with nothing
+/// hidden, -49.8 um on a valley +-37.6 um wide, where the tests' own offsets averaged -7.7 +-
+/// 15.7 um).
 ///
 /// NOTE: a hidden tilt of 0.02 rad on `identify.toml` was `no_significant_mismatch`: the
 /// offset came out -53.5 um (standard error 11 um) on low-down and high-down, but low-up,
@@ -520,31 +549,28 @@ const LOCATED_STANDARD_ERRORS: f64 = 3.0;
 /// the spread (2.28) stayed under the threshold (BENCHMARKS.md, "A contact mismatch located
 /// where nothing validated"). The nulls of `identify.toml` and the four-probe plan gave
 /// -5.5 +- 17 and -11 +- 19 um (within 2 % of the plan: not even fitted).
-pub(super) fn unexplained_offset(e: &EffectResult) -> Option<String> {
-    if e.effect != "clearance" || e.accepted {
+pub(super) fn unexplained_offset(
+    fitted: &FittedOffset,
+    effects: &[EffectResult],
+) -> Option<String> {
+    if effects
+        .iter()
+        .any(|e| e.effect == "clearance" && e.accepted)
+    {
         return None;
     }
-    let offset = e.evidence.get("offset_m")?.as_f64()?;
-    // The offset fitted on the tests together is known no better than its own valley: on a
-    // flat floor its best point is a draw (on the six-probe wear plan with nothing hidden,
-    // -49.8 um on a valley +-37.6 um wide, where the tests' own offsets averaged -7.7 +- 15.7).
-    let joint = (e.evidence.get("offset_by_tests_together"))
-        .and_then(|j| j.get("spread_m")?.as_f64())
-        .filter(|s| s.is_finite())
-        .unwrap_or(0.0);
-    let se = e
-        .evidence
-        .get("offset_standard_error_m")?
-        .as_f64()?
-        .max(joint);
-    (se > 0.0 && offset.abs() > LOCATED_STANDARD_ERRORS * se).then(|| {
+    let joint = Some(fitted.joint_spread_m).filter(|s| s.is_finite());
+    let se = Some(fitted.standard_error_m).filter(|s| s.is_finite() && *s > 0.0)?;
+    let se = se.max(joint.unwrap_or(0.0));
+    let offset = fitted.offset_m;
+    (offset.abs() > LOCATED_STANDARD_ERRORS * se).then(|| {
         format!(
             "a contact mismatch in {}: their first contact lies {:+.1} +- {:.1} um from the model's ({:.1} standard errors), but no effect fitted there lowered the error on {} beyond the null spread",
-            e.train_tests.join(", "),
+            fitted.train_tests.join(", "),
             offset * 1e6,
             se * 1e6,
             offset.abs() / se,
-            e.validation_tests.join(", ")
+            fitted.validation_tests.join(", ")
         )
     })
 }
@@ -553,9 +579,9 @@ pub(super) fn unexplained_offset(e: &EffectResult) -> Option<String> {
 mod tests {
     use super::{
         offset_standard_error, sharpness_weights, unexplained_offset, valley_spread,
-        weighted_tests_error,
+        weighted_tests_error, FittedOffset,
     };
-    use crate::diagnose::outcome::{Regime, StepScores};
+    use crate::diagnose::outcome::{EffectResult, Regime, StepScores};
 
     /// A step of test `test` whose one feature scores `score`.
     fn step(test: usize, step: usize, score: f64) -> StepScores {
@@ -631,39 +657,40 @@ mod tests {
         assert!(offset_standard_error(&[1e-5], &[f64::NAN]).is_nan());
     }
 
-    #[test]
-    fn a_rejected_offset_far_beyond_its_error_locates_a_contact_mismatch() {
-        use super::super::outcome::EffectResult;
-        let rejected = |offset: f64, se: f64| EffectResult {
+    /// The stage's offset `offset_m` with its standard error `se` (m), fitted on low-down and
+    /// high-down, judged on low-up; no joint fit.
+    fn fitted(offset_m: f64, se: f64) -> FittedOffset {
+        FittedOffset {
+            offset_m,
+            standard_error_m: se,
+            joint_spread_m: f64::NAN,
             train_tests: vec!["low-down".into(), "high-down".into()],
             validation_tests: vec!["low-up".into()],
-            ..EffectResult::unfitted(
-                "clearance",
-                serde_json::json!({"offset_m": offset, "offset_standard_error_m": se}),
-                "rejected".into(),
-            )
+        }
+    }
+
+    #[test]
+    fn a_rejected_offset_far_beyond_its_error_locates_a_contact_mismatch() {
+        let rejected = |effect: &str, accepted: bool| EffectResult {
+            accepted,
+            ..EffectResult::unfitted(effect, serde_json::json!({}), "judged".into())
         };
+        let clearance_rejected = [rejected("clearance", false), rejected("tilt", true)];
         // The tilt of 0.02 rad on identify.toml: -53.5 +- 11 um.
-        let why = super::unexplained_offset(&rejected(-53.5e-6, 11e-6)).unwrap();
+        let why = unexplained_offset(&fitted(-53.5e-6, 11e-6), &clearance_rejected).unwrap();
         assert!(
             why.contains("low-down, high-down") && why.contains("low-up"),
             "{why}"
         );
-        // A null: -5.5 +- 17 um; an accepted offset; another effect.
-        assert!(super::unexplained_offset(&rejected(-5.5e-6, 17e-6)).is_none());
-        let mut accepted = rejected(-53.5e-6, 11e-6);
-        accepted.accepted = true;
-        assert!(super::unexplained_offset(&accepted).is_none());
-        let mut tilt = rejected(-53.5e-6, 11e-6);
-        tilt.effect = "tilt".into();
-        assert!(super::unexplained_offset(&tilt).is_none());
+        assert!(why.contains("-53.5 +- 11.0 um"), "{why}");
+        // A null: -5.5 +- 17 um.
+        assert!(unexplained_offset(&fitted(-5.5e-6, 17e-6), &clearance_rejected).is_none());
+        // The clearance accepted: nothing left unexplained.
+        let accepted = [rejected("clearance", true)];
+        assert!(unexplained_offset(&fitted(-53.5e-6, 11e-6), &accepted).is_none());
         // No standard error (a single test without a spread): nothing located.
-        let none = EffectResult::unfitted(
-            "clearance",
-            serde_json::json!({"offset_m": -53.5e-6, "offset_standard_error_m": null}),
-            "rejected".into(),
-        );
-        assert!(super::unexplained_offset(&none).is_none());
+        let none = fitted(-53.5e-6, f64::NAN);
+        assert!(unexplained_offset(&none, &clearance_rejected).is_none());
     }
 
     #[test]
@@ -733,17 +760,12 @@ mod tests {
     /// the tests' standard error, or the joint fit's own valley where that is wider.
     #[test]
     fn an_offset_on_a_flat_joint_valley_is_no_located_mismatch() {
-        let effect = |together: serde_json::Value| crate::diagnose::outcome::EffectResult {
-            train_tests: vec!["probe-1".into()],
-            validation_tests: vec!["probe-2".into()],
-            ..crate::diagnose::outcome::EffectResult::unfitted(
-                "clearance",
-                serde_json::json!({"offset_m": -49.8e-6, "offset_standard_error_m": 15.7e-6, "offset_by_tests_together": together}),
-                "rejected".to_string(),
-            )
+        let with_joint = |joint_spread_m: f64| FittedOffset {
+            joint_spread_m,
+            ..fitted(-49.8e-6, 15.7e-6)
         };
-        assert!(unexplained_offset(&effect(serde_json::Value::Null)).is_some());
-        assert!(unexplained_offset(&effect(serde_json::json!({"spread_m": 10e-6}))).is_some());
-        assert!(unexplained_offset(&effect(serde_json::json!({"spread_m": 37.6e-6}))).is_none());
+        assert!(unexplained_offset(&with_joint(f64::NAN), &[]).is_some());
+        assert!(unexplained_offset(&with_joint(10e-6), &[]).is_some());
+        assert!(unexplained_offset(&with_joint(37.6e-6), &[]).is_none());
     }
 }

@@ -57,7 +57,7 @@ use crate::twin::{
 };
 
 use super::clearance::{clearance_per_test_of, ClearanceOptions};
-use super::clearance_fit::clearance_stage;
+use super::clearance_fit::{clearance_stage, unexplained_offset};
 use super::evidence::session_evidence;
 use super::gains::{sensor_stage, unpartnered_gains, GainSplit};
 use super::judge::{members_error, set_error, DiagnoseOptions, DiagnoseProgress, Steps, Work};
@@ -631,6 +631,8 @@ pub fn diagnose(
         "identify: the clearance per test against the normal contact impulse before it (wear)",
     );
     let worn = super::wear::wear_stage(&mut work, &mut ce)?;
+    // The clearance stage's offset: what it locates if no clearance is accepted.
+    let mut fitted_offset = None;
     if worn {
         work.undecided(
             "tilt",
@@ -641,7 +643,7 @@ pub fn diagnose(
             "clearance",
             "identify: the clearance as an offset to the plan's (model runs within the brackets)",
         );
-        clearance_stage(&mut work, &ce)?;
+        fitted_offset = clearance_stage(&mut work, &ce)?;
         work.stage(
             "tilt",
             "identify: tilt against the clearance (contact-regime statistics)",
@@ -753,14 +755,11 @@ pub fn diagnose(
         .filter(|r| r.regime != Regime::Impacts)
         .any(|r| r.median_max_score > opts.threshold);
     let band_mismatch = band.is_some_and(|b| b.beyond);
-    // A clearance offset rejected on its validation test but far beyond its error on the
-    // tests it was fitted on: the first contact there is not the model's, whatever the cause.
-    let unexplained: Vec<String> = (work.effects.iter())
-        .filter_map(super::clearance_fit::unexplained_offset)
-        .collect();
-    // So is a trend of the clearance over the session that no effect explained (the wear
-    // stage's, already in `work.unexplained`).
-    for why in unexplained {
+    // A clearance offset not accepted but far beyond its error on the tests it was fitted
+    // on: the first contact there is not the model's, whatever the cause (as a trend of the
+    // clearance over the session that no effect explained is: the wear stage's, already in
+    // `work.unexplained`).
+    if let Some(why) = (fitted_offset.as_ref()).and_then(|f| unexplained_offset(f, &work.effects)) {
         work.undecided("clearance", why.clone());
         work.unexplained.push(why);
     }

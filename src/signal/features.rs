@@ -228,13 +228,15 @@ pub(crate) fn standard_error(x: &[f64]) -> f64 {
     sample_std(x) / (x.len() as f64).sqrt()
 }
 
+/// Whether every spread is known: a finite, positive number.
+pub(crate) fn spreads_known(spreads: &[f64]) -> bool {
+    spreads.iter().all(|s| s.is_finite() && *s > 0.0)
+}
+
 /// Inverse-variance weights `1 / spread^2` of estimates with the given spreads, or `None`
-/// where a spread is missing (not finite, or not positive): the caller then weighs them equally.
+/// where a spread is missing ([`spreads_known`]): the caller then weighs them equally.
 pub(crate) fn inverse_variance_weights(spreads: &[f64]) -> Option<Vec<f64>> {
-    spreads
-        .iter()
-        .all(|s| s.is_finite() && *s > 0.0)
-        .then(|| spreads.iter().map(|s| 1.0 / (s * s)).collect())
+    spreads_known(spreads).then(|| spreads.iter().map(|s| 1.0 / (s * s)).collect())
 }
 
 #[cfg(test)]
@@ -395,5 +397,8 @@ mod tests {
         assert_eq!(inverse_variance_weights(&[1.0, 0.0]), None);
         assert_eq!(inverse_variance_weights(&[f64::NAN, 1.0]), None);
         assert_eq!(inverse_variance_weights(&[]), Some(vec![]));
+        assert!(spreads_known(&[2e-5, 1e-6]));
+        assert!(!spreads_known(&[2e-5, f64::INFINITY]));
+        assert!(!spreads_known(&[-1e-6]));
     }
 }

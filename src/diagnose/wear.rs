@@ -250,9 +250,9 @@ fn measured_clearance(by_runs: (f64, f64), at_onsets: Option<(f64, Option<f64>)>
 /// points (slope `k_all`, m/(N s)) predicts a growth of more than 2 % of the plan's clearance
 /// `plan` (the trend's own threshold) by the test's start. A bracketed test below that is
 /// fitted instead. Without a bracketed test left to validate on, the tests with contact that
-/// are not bracketed (`contact`: test index and the model's impulse at its start, N s) and
-/// above that growth validate: their clearances were not fitted, and the wear the model
-/// exchanges in them is what it predicts. Where the alternate train tests span less than
+/// are not bracketed (`contact`: test index and the model's impulse by its end, N s,
+/// [`impulse_by_end`]) and above that growth validate: their clearances were not fitted,
+/// and the wear the model exchanges in them is what it predicts. Where the alternate train tests span less than
 /// [`LEVER_SHARE`] of the bracketed tests' impulse, the line would be extrapolated from a
 /// growth within the clearances' errors: the lever trains instead ([`lever_split`]).
 ///
@@ -336,6 +336,17 @@ fn lever_split(
         validates ^= grown;
     }
     (train, validation)
+}
+
+/// The model's impulse (N s) by the end of test `ti`: at the start of the next test, else
+/// (the next one not run) at its own start; from `impulse`, per test in session order.
+///
+/// NOTE: on `identify.toml` with a wear of 3e-5 m/(N s) capped at 1.2e-4 m beside a platform
+/// gain, high-up (the one test with contact that brackets nothing) starts after 0.56 N s,
+/// where the line (4.3e-6 m/(N s)) predicts 2 um of growth, and exchanges 25 N s within
+/// itself: judged by its start it could not validate, and the trend was left undecided.
+fn impulse_by_end(impulse: &[Option<f64>], ti: usize) -> Option<f64> {
+    (impulse.get(ti + 1).copied().flatten()).or_else(|| impulse.get(ti).copied().flatten())
 }
 
 /// The largest of `ps` less the smallest (an impulse span, N s); -inf without any.
@@ -523,11 +534,13 @@ pub(super) fn wear_stage(
         });
         return Ok(false);
     }
+    // A test with contact that brackets nothing validates by the growth its own contact
+    // makes: by its end, not its start.
     let contact_tests: Vec<(usize, f64)> = ce
         .tests
         .iter()
         .filter(|t| t.onsets > 0 && !is_bracketed(t))
-        .filter_map(|t| Some((t.test_index, p_of(t)?)))
+        .filter_map(|t| Some((t.test_index, impulse_by_end(&impulse, t.test_index)?)))
         .collect();
     let at: Vec<(usize, f64)> = points
         .iter()
@@ -552,7 +565,7 @@ pub(super) fn wear_stage(
             .collect();
         work.undecided(
             "wear",
-            format!("a trend (slope {k_all:.2e} m/(N s), standard error {se_all:.1e}, growth {growth:.2e} m over the session; clearances {}) but no test left to validate on: the line predicts a growth above 2 % of the plan's clearance at no test that is not fitted", seen.join(", ")),
+            format!("a trend (slope {k_all:.2e} m/(N s), standard error {se_all:.1e}, growth {growth:.2e} m over the session; clearances {}) but no test left to validate on: the line predicts a growth above 2 % of the plan's clearance at no test that is not fitted (by a bracketed test's start, or by the end of a test with contact)", seen.join(", ")),
         );
         work.unexplained
             .push(unexplained_trend(k_all, se_all, growth));
@@ -882,6 +895,25 @@ mod tests {
         );
         // Nothing predicts a growth: nothing validates.
         assert_eq!(split(&band, &[(7, 1.4)], 1e-7, plan).1, Vec::<usize>::new());
+    }
+
+    #[test]
+    fn a_test_with_contact_grows_by_its_end() {
+        // identify.toml: low-down, low-up, high-up (contact throughout), high-down (the last
+        // run); the bursts of impulse are within high-up.
+        let impulse = [None, Some(0.0), Some(0.56), Some(0.56), Some(25.7)];
+        assert_eq!(impulse_by_end(&impulse, 3), Some(25.7));
+        assert_eq!(impulse_by_end(&impulse, 4), Some(25.7));
+        assert_eq!(impulse_by_end(&impulse, 0), Some(0.0));
+        assert_eq!(impulse_by_end(&impulse, 9), None);
+        // So a capped wear's line (4.3e-6 m/(N s)) validates on high-up by its end.
+        let band = [(1, 0.0), (2, 0.56), (4, 25.7)];
+        let by_end = [(3, impulse_by_end(&impulse, 3).unwrap())];
+        assert_eq!(split(&band, &by_end, 4.3e-6, 7e-4).1, vec![3]);
+        assert_eq!(
+            split(&band, &[(3, 0.56)], 4.3e-6, 7e-4).1,
+            Vec::<usize>::new()
+        );
     }
 
     #[test]

@@ -90,6 +90,34 @@ fn impulse_error_gain(runs: &[(f64, f64)]) -> Option<f64> {
 /// conditioned.
 const CONDITIONED_GAIN: f64 = 2.0;
 
+/// The coefficient's standard error (m/(N s)): the train tests' slope's, `slope_se` (from
+/// their clearances' spreads), as the fixed point amplifies it (`gain`,
+/// [`impulse_error_gain`]: an error common to every run's slope moves the fixed point by
+/// `gain` times as much); never below the slope's own.
+fn coefficient_standard_error(slope_se: f64, gain: Option<f64>) -> f64 {
+    slope_se * gain.filter(|g| g.is_finite()).unwrap_or(1.0).max(1.0)
+}
+
+/// Where the coefficient `k` (m/(N s)) is poorly conditioned (`gain` above
+/// [`CONDITIONED_GAIN`]): the range of coefficients within two of its standard errors `se`
+/// (clipped at zero) that the session cannot tell from it, in words (an alternative of the
+/// wear); `None` where it is conditioned or its error unknown.
+///
+/// NOTE: on `identify.toml` with a hidden 3.5e-5 m/(N s) the growth limits itself (640 um by
+/// high-down, the same with 4e-5): the fixed point came out 6.86e-5 at a gain of 3.8, its
+/// standard error 4.2e-5 (BENCHMARKS.md, "Concealed values, a fourth sweep").
+fn poorly_conditioned_range(k: f64, se: f64, gain: Option<f64>) -> Option<String> {
+    let g = gain.filter(|&g| g > CONDITIONED_GAIN)?;
+    se.is_finite().then(|| {
+        format!(
+            "wear with a coefficient from {:.2e} to {:.2e} m/(N s) (2 standard errors of {k:.2e}): the growth limits itself in this session (a grown clearance closes less), so the clearances place the coefficient no closer (a 10 % error in the model's contact impulse moves it {:.0} %)",
+            (k - 2.0 * se).max(0.0),
+            k + 2.0 * se,
+            10.0 * g
+        )
+    })
+}
+
 /// A least-squares line `y = a + k x` ([`line`]).
 #[derive(Clone, Copy, Debug)]
 struct Line {
@@ -731,6 +759,12 @@ pub(super) fn wear_stage(
         }
         record_impulses(ce, impulse);
     }
+    // The coefficient's standard error, from the train tests' clearances against the impulse
+    // of the run nearest it.
+    let tr_now: Vec<(f64, f64)> = points.iter().filter(|p| p.train).map(xy).collect();
+    let k_se = weighted_line(&tr_now, &w_tr)
+        .map_or(f64::NAN, |l| coefficient_standard_error(l.slope_se, gain));
+    let range = poorly_conditioned_range(k, k_se, gain);
     // max_growth: where the largest growth seen stays clearly under the line's, the clearance
     // levelled off; else it is not identified (none, unbounded).
     let latest = points
@@ -742,11 +776,12 @@ pub(super) fn wear_stage(
         (seen > 0.0 && seen < 0.5 * line_growth).then_some(seen)
     });
     (work.progress)(DiagnoseProgress::Note(format!(
-        "wear: coefficient {k:.3e} m/(N s) by {} whole-session runs of the model's impulse (start {k0:.3e} from the train tests' clearances against the impulse without wear){}",
+        "wear: coefficient {k:.3e} m/(N s) (standard error {k_se:.1e}) by {} whole-session runs of the model's impulse (start {k0:.3e} from the train tests' clearances against the impulse without wear){}",
         runs.len(),
         max_growth.map_or(String::new(), |g| format!(", levelling off at {g:.2e} m"))
     )));
     let mut evidence = evidence;
+    evidence["coefficient_standard_error_m_per_ns"] = json!(k_se.is_finite().then_some(k_se));
     evidence["points"] = json!(points);
     evidence["points_against"] = json!(
         "the model's accumulated normal contact impulse before each test (N s), with the fitted wear"
@@ -778,7 +813,8 @@ pub(super) fn wear_stage(
         evidence,
         (train, validation),
         Steps::All,
-    );
+    )
+    .with_alternatives(range.into_iter().collect());
     let whole = cand.whole_tests();
     let accepted =
         work.judge(cand.judged_where_fitted(whole, FIT_REFINEMENT, "the whole tests"))?;
@@ -895,6 +931,28 @@ mod tests {
         );
         // Nothing predicts a growth: nothing validates.
         assert_eq!(split(&band, &[(7, 1.4)], 1e-7, plan).1, Vec::<usize>::new());
+    }
+
+    #[test]
+    fn a_self_limiting_coefficient_names_the_range_it_cannot_tell_apart() {
+        // The fixed point amplifies the train slope's error by its gain, never shrinks it.
+        assert_eq!(
+            coefficient_standard_error(1.08e-5, Some(3.83)),
+            1.08e-5 * 3.83
+        );
+        assert_eq!(coefficient_standard_error(1.6e-6, Some(0.8)), 1.6e-6);
+        assert_eq!(coefficient_standard_error(1.6e-6, None), 1.6e-6);
+        // identify.toml, 3.5e-5 hidden: 6.86e-5 at a gain of 3.83 covers the hidden value.
+        let why = poorly_conditioned_range(6.86e-5, 4.15e-5, Some(3.83)).unwrap();
+        assert!(why.contains("from 0.00e0 to 1.52e-4"), "{why}");
+        assert!(why.contains("moves it 38 %"), "{why}");
+        // 4e-5 hidden: 5.09e-5 +- 8.6e-6 at a gain of 2.09.
+        let why = poorly_conditioned_range(5.09e-5, 8.6e-6, Some(2.09)).unwrap();
+        assert!(why.contains("from 3.37e-5 to 6.81e-5"), "{why}");
+        // Conditioned (2e-5 hidden beside a gain and 1FL: 1.47), or no error: nothing named.
+        assert!(poorly_conditioned_range(2.44e-5, 2.4e-6, Some(1.47)).is_none());
+        assert!(poorly_conditioned_range(6.86e-5, f64::NAN, Some(3.83)).is_none());
+        assert!(poorly_conditioned_range(6.86e-5, 4.15e-5, None).is_none());
     }
 
     #[test]

@@ -105,7 +105,7 @@ fn coefficient_standard_error(slope_se: f64, gain: Option<f64>) -> f64 {
 ///
 /// NOTE: on `identify.toml` with a hidden 3.5e-5 m/(N s) the growth limits itself (640 um by
 /// high-down, the same with 4e-5): the fixed point came out 6.86e-5 at a gain of 3.8, its
-/// standard error 4.2e-5 (BENCHMARKS.md, "Concealed values, a fourth sweep").
+/// standard error 4.1e-5 (BENCHMARKS.md, "Concealed values, a fourth sweep").
 fn poorly_conditioned_range(k: f64, se: f64, gain: Option<f64>) -> Option<String> {
     let g = gain.filter(|&g| g > CONDITIONED_GAIN)?;
     se.is_finite().then(|| {
@@ -281,9 +281,10 @@ fn measured_clearance(by_runs: (f64, f64), at_onsets: Option<(f64, Option<f64>)>
 /// fitted instead. Without a bracketed test left to validate on, the tests with contact that
 /// are not bracketed (`contact`: test index and the model's impulse by its end, N s,
 /// [`impulse_by_end`]) and above that growth validate: their clearances were not fitted,
-/// and the wear the model exchanges in them is what it predicts. Where the alternate train tests span less than
-/// [`LEVER_SHARE`] of the bracketed tests' impulse, the line would be extrapolated from a
-/// growth within the clearances' errors: the lever trains instead ([`lever_split`]).
+/// and the wear the model exchanges in them is what it predicts. Where the alternate train
+/// tests span less than [`LEVER_SHARE`] of the bracketed tests' impulse, the line would be
+/// extrapolated from a growth within the clearances' errors: the lever trains instead
+/// ([`lever_split`]).
 ///
 /// NOTE: on `identify.toml` the bracketed tests are the two low-level tests (0 and 0.6 N s
 /// before them) and the last high-level one (16 N s): alternately, the low-level up test

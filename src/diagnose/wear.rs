@@ -21,10 +21,13 @@
 //!    judges the offset. A trend is wear: its coefficient `k` (m/(N s)) from the train tests'
 //!    points, then made consistent with the model's own impulse under that wear (the line's
 //!    fixed point: the session re-run with the coefficient, the train tests' clearances
-//!    against its impulse, until the slope settles), validated by the pipeline's rule on the
-//!    other bracketed tests where the line predicts a growth, else on the tests with contact
-//!    that are not bracketed; the tests with the least and the most impulse train where the
-//!    alternate ones would extrapolate ([`split`]). A candidate the twin's own step rejects is
+//!    against its impulse, until the slope settles; its standard error the train slope's
+//!    times the fixed point's gain, and where that gain says the growth limits itself, the
+//!    range within two of them named as the wear's alternative), validated by the pipeline's
+//!    rule on the other bracketed tests where the line predicts a growth by their start, else
+//!    on the tests with contact that are not bracketed, by their end; the tests with the
+//!    least and the most impulse train where the alternate ones would extrapolate
+//!    ([`split`]). A candidate the twin's own step rejects is
 //!    judged on the same whole tests at the finer step its clearances were fitted at.
 //!    `max_growth` is fitted only where the clearance levels off within the session: the
 //!    largest growth seen is compared with the line's.

@@ -173,7 +173,7 @@ pub struct TestResult {
 }
 
 /// The record window of one step, sample by sample (contact time level of each step; the
-/// velocities are at the half step before, see [`StepOutput`]).
+/// velocities are at the half step before, see [`super::output::StepOutput`]).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct StepTrace {
     /// Omega / omega_2 of the step.

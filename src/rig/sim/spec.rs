@@ -1,6 +1,6 @@
 //! The simulated rig's parameters, gathered from the rig description's `[shaker]`, `[daq]` and
 //! `[truth]` tables (described, with their defaults and checks, in [`crate::config::shaker`],
-//! [`crate::config::daq`], [`crate::config::truth`] and [`crate::config::variants`], and
+//! [`crate::config::daq`], [`crate::config::truth`] and [`crate::config::physics`], and
 //! re-exported here). [`SimRigSpec::validate`] names the key of a bad value.
 
 use serde::{Deserialize, Serialize};

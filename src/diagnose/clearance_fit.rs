@@ -671,11 +671,11 @@ mod tests {
 
     #[test]
     fn a_rejected_offset_far_beyond_its_error_locates_a_contact_mismatch() {
-        let rejected = |effect: &str, accepted: bool| EffectResult {
+        let judged = |effect: &str, accepted: bool| EffectResult {
             accepted,
             ..EffectResult::unfitted(effect, serde_json::json!({}), "judged".into())
         };
-        let clearance_rejected = [rejected("clearance", false), rejected("tilt", true)];
+        let clearance_rejected = [judged("clearance", false), judged("tilt", true)];
         // The tilt of 0.02 rad on identify.toml: -53.5 +- 11 um.
         let why = unexplained_offset(&fitted(-53.5e-6, 11e-6), &clearance_rejected).unwrap();
         assert!(
@@ -686,7 +686,7 @@ mod tests {
         // A null: -5.5 +- 17 um.
         assert!(unexplained_offset(&fitted(-5.5e-6, 17e-6), &clearance_rejected).is_none());
         // The clearance accepted: nothing left unexplained.
-        let accepted = [rejected("clearance", true)];
+        let accepted = [judged("clearance", true)];
         assert!(unexplained_offset(&fitted(-53.5e-6, 11e-6), &accepted).is_none());
         // No standard error (a single test without a spread): nothing located.
         let none = fitted(-53.5e-6, f64::NAN);

@@ -34,7 +34,7 @@ pub struct DiagnoseOptions {
     /// where the rig matches the model (BENCHMARKS.md, "The comparison's spread").
     pub contact_null_spread: f64,
     /// The null spread for a band candidate judged where it was fitted at a finer twin step
-    /// ([`Candidate::judged_where_fitted`]), -. Default 0.5. There the twin's own contact
+    /// (`Candidate::judged_where_fitted`), -. Default 0.5. There the twin's own contact
     /// excess, which `contact_null_spread` allows for, is gone: on `identify.toml` with
     /// nothing hidden (two noise seeds), offsets of -25, -45 and +30 um forced there raised
     /// the error by 0.24-5.9, and a right model's error there was 0.86-1.18; hidden
@@ -49,7 +49,7 @@ pub struct DiagnoseOptions {
     /// Runs of each model whose errors judge a candidate on the impact band: the model as
     /// given and `band_members - 1` draws from perturbed states at the band's steps
     /// ([`ModelRunner::run_members`]); the error takes each step's median over them
-    /// ([`members_error`]). Default 3: one run of a non-periodic response is one draw, and a
+    /// (`members_error`). Default 3: one run of a non-periodic response is one draw, and a
     /// right model's draw can land on another attractor than the rig's in a step or two
     /// (BENCHMARKS.md, "The judge's errors in the band over three draws", "The judge's draws
     /// compared per step").

@@ -5,7 +5,7 @@
 //! A run covers whole tests, or a test's steps up to one that ends the evidence (e.g. two
 //! steps past its first contact, [`ModelRunner::run_spans`]), each group of consecutive tests
 //! in one stretch, from rest at the
-//! start of the lead-in, [`LEAD_IN_STEPS`] steps before the group's first step (the
+//! start of the lead-in, `LEAD_IN_STEPS` steps before the group's first step (the
 //! previous test's last steps, or the session's start; for the steps near a resonance,
 //! before the first of them, [`LeadIn::Span`]): the twin's own state cannot be carried in
 //! from another model (a state belongs to the model that made it), and a free transient
@@ -202,7 +202,7 @@ impl SessionSteps {
     /// little and a joint in the clamp hardly slips: those steps carry little of the evidence
     /// a resonance fit looks for, and a run from rest at steps below the cut starts with a
     /// free transient that small, decayed over the lead-in's steps and the first one's
-    /// settling ([`LEAD_IN_STEPS`]) before the first compared record window.
+    /// settling (`LEAD_IN_STEPS`) before the first compared record window.
     pub fn near_resonance(&self, ti: usize, fraction: f64) -> Option<Span> {
         let span = self.before_contact(ti)?;
         let size = |s: &SessionStep| s.measured.metrics.rms_upper + s.measured.metrics.rms_lower;
@@ -300,7 +300,7 @@ impl SessionSteps {
 /// fit took 0.1999 and 1.498e-4 m (BENCHMARKS.md, "A run's lead-in from rest").
 const LEAD_IN_STEPS: usize = 3;
 
-/// Where a run of a [`Span`] from rest starts: [`LEAD_IN_STEPS`] steps before the first it
+/// Where a run of a [`Span`] from rest starts: `LEAD_IN_STEPS` steps before the first it
 /// needs.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub enum LeadIn {

@@ -8,14 +8,14 @@
 //!    [`super::clearance`], reference section 4, Table 2) is refined by model runs of that
 //!    test alone over its bracket (`clearance_fit::test_clearance_by_runs`, shared with the
 //!    clearance and tilt stages), and combined with the one read at the test's contact
-//!    onsets, each weighted by its own spread ([`measured_clearance`]).
+//!    onsets, each weighted by its own spread (`measured_clearance`).
 //! 2. The accumulated impulse `P` at the start of each test comes from one run of the model as
 //!    accepted so far from the session's start to the last bracketed test's first step, with
 //!    the wear counter on and a zero coefficient
 //!    ([`super::rerun::ModelRunner::contact_impulse`]): what the contact exchanged before the
 //!    test's first impact.
 //! 3. The clearances against `P`: a straight line `c - c_plan = a + k P`, each point weighted
-//!    by the inverse of its own variance ([`weights_of`]). A constant offset has no trend
+//!    by the inverse of its own variance (`weights_of`). A constant offset has no trend
 //!    with `P` (`k` within 3 standard errors of zero, or a growth over the session below 2 %
 //!    of the plan's clearance): no wear, the pipeline's clearance stage
 //!    judges the offset. A trend is wear: its coefficient `k` (m/(N s)) from the train tests'
@@ -27,7 +27,7 @@
 //!    rule on the other bracketed tests where the line predicts a growth by their start, else
 //!    on the tests with contact that are not bracketed, by their end; the tests with the
 //!    least and the most impulse train where the alternate ones would extrapolate
-//!    ([`split`]). A candidate the twin's own step rejects is
+//!    (`split`). A candidate the twin's own step rejects is
 //!    judged on the same whole tests at the finer step its clearances were fitted at.
 //!    `max_growth` is fitted only where the clearance levels off within the session: the
 //!    largest growth seen is compared with the line's.
@@ -401,9 +401,9 @@ pub struct WearPoint {
     /// wear in the trend's points; with the fitted coefficient in an accepted candidate's).
     pub contact_impulse_ns: f64,
     /// The measured clearance, m: the two estimates, [`Self::run_clearance_m`] and
-    /// [`Self::onset_clearance_m`], as [`measured_clearance`] combines them.
+    /// [`Self::onset_clearance_m`], as `measured_clearance` combines them.
     pub clearance_m: f64,
-    /// The measured clearance's spread, m ([`measured_clearance`]): its weight in the line.
+    /// The measured clearance's spread, m (`measured_clearance`): its weight in the line.
     #[serde(default)]
     pub spread_m: f64,
     /// The clearance refined by model runs within the bracket, m.

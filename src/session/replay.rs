@@ -84,7 +84,7 @@ pub struct BlockHead {
 /// The session's DAQ stream, kept as its consumers need it and no more: every block's base
 /// motion (the platform accelerometers' counts: what the twin runs on), every channel's counts
 /// only inside the steps' record windows (what a step's summary and evidence are computed
-/// from), both packed losslessly ([`super::packed`]); and the layout, events and logged twin
+/// from), both packed losslessly (`super::packed`); and the layout, events and logged twin
 /// states. A one-hour session at the default rates holds a few hundred megabytes here, where
 /// all its counts would take 1.9 GB.
 #[derive(Debug, Clone, PartialEq)]

@@ -71,7 +71,7 @@ impl SolverCounters {
 /// `t^j`, and the cumulative energy accounts and solver counters.
 ///
 /// It serialises (serde) for warm starts: the contact vectors, zero for every open pair, as
-/// their non-zero entries only ([`sparse`]); every number round-trips exactly through JSON.
+/// their non-zero entries only (`sparse`); every number round-trips exactly through JSON.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
 pub struct State {
     pub(super) eta: Vec<f64>,

@@ -528,6 +528,23 @@ impl<'a> Work<'a> {
             .map(|(train, validation)| SetError { train, validation }))
     }
 
+    /// [`Work::errors`] of each model of `exts` on the candidate's tests (every step), their
+    /// runs made side by side on the runner's threads first.
+    pub(super) fn errors_of_models(
+        &mut self,
+        exts: &[PhysicsSpec],
+        c: &Candidate,
+    ) -> Result<Vec<Option<SetError>>, DiagnoseError> {
+        let spans = Self::judged_spans(c, false);
+        let members = self.members(c.steps);
+        let runs = (0..members)
+            .flat_map(|m| exts.iter().map(move |e| (e.clone(), m)))
+            .map(|(e, m)| (e, spans.clone(), m))
+            .collect();
+        self.prefetch_members(runs)?;
+        exts.iter().map(|e| self.errors(e, c, false)).collect()
+    }
+
     /// The runs of each model a candidate judged on `steps` is judged over: the band's
     /// members for the impact band, one run otherwise.
     fn members(&self, steps: Steps) -> usize {

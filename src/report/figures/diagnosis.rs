@@ -914,8 +914,13 @@ fn evidence_clearance(d: &Diagnosis) -> Option<Panels> {
             p.series.push(line(model, BLACK, LineKind::Dashed, width()));
             legend.push(entry(
                 format!(
-                    "model: wear {} m/(N s) ({})",
+                    "model: wear {} m/(N s){} ({})",
                     sig(k),
+                    if cap.is_finite() {
+                        format!(" capped at {} mm", sig(1e3 * cap))
+                    } else {
+                        String::new()
+                    },
                     if w.accepted { "accepted" } else { "rejected" }
                 ),
                 BLACK,

@@ -34,7 +34,8 @@
 //!    with contact that no point brackets: there a wear capped at the growth seen, at a few
 //!    multiples of the coefficient, gives the same clearances at the points, and it is taken
 //!    where every step of the wear's tests prefers it beyond the null spread (`capped_choice`;
-//!    the cap bounds the coefficient from below only).
+//!    the session places the cap, not the coefficient), the uncapped wear judged in its place
+//!    where the judge rejects it.
 
 use serde_json::json;
 
@@ -818,42 +819,42 @@ pub(super) fn wear_stage(
         _ => None,
     };
     let within = work.names(&validation).join(", ");
-    let (k, max_growth, alternatives) = match capped {
+    let uncapped_alternatives: Vec<String> = range.into_iter().collect();
+    // The wears to judge, in order, until one is accepted: (coefficient, cap, alternatives).
+    let mut wears: Vec<(f64, Option<f64>, Vec<String>)> = Vec::new();
+    match capped {
         Some((c, g)) => match c.cap {
             Cap::Taken(i) => {
                 let kc = c.coefficients[i];
                 (work.progress)(DiagnoseProgress::Note(format!(
-                    "wear: capped at {g:.2e} m from {kc:.2e} m/(N s) up: every step of the wear's tests prefers it to the uncapped {k:.2e} ({:.3} against {:.3}; the growth stops within {within})",
+                    "wear: capped at {g:.2e} m, at {kc:.2e} m/(N s): every step of the wear's tests prefers it to the uncapped {k:.2e} ({:.3} against {:.3}; the growth stops within {within}); the uncapped wear is judged if it is rejected",
                     c.errors[i + 1],
                     c.errors[0]
                 )));
-                (
+                wears.push((
                     kc,
                     Some(g),
                     vec![
-                        format!("wear capped at {g:.2e} m with any coefficient from {kc:.2e} m/(N s) up: the cap is reached within {within}, which no clearance brackets, so the session bounds the coefficient from below only"),
+                        format!("wear capped at {g:.2e} m with another coefficient: the session does not place it, the cap being reached within {within}, which no clearance brackets ({} tried with the cap: {}; the uncapped {k:.2e}: {:.3})", c.coefficients.len(), tried_with_cap(&c), c.errors[0]),
                         "wear without a cap whose growth limits itself (a grown clearance closes less) stops as a cap does: the clearances and the responses do not tell them apart".to_string(),
                     ],
-                )
+                ));
+                wears.push((k, max_growth, uncapped_alternatives));
             }
             Cap::Equal(i) => {
-                let mut alternatives: Vec<String> = range.into_iter().collect();
+                let mut alternatives = uncapped_alternatives;
                 alternatives.push(format!(
-                    "wear capped at {g:.2e} m (the growth seen) with a coefficient from {:.2e} m/(N s) up: every step of the wear's tests within the null spread of the uncapped wear ({:.3} against {:.3}); the clearances cannot tell a cap reached within {within}, which no clearance brackets, from a growth that goes on",
+                    "wear capped at {g:.2e} m (the growth seen) at {:.2e} m/(N s), or another coefficient: every step of the wear's tests within the null spread of the uncapped wear ({:.3} against {:.3}; {}); the clearances cannot tell a cap reached within {within}, which no clearance brackets, from a growth that goes on",
                     c.coefficients[i],
                     c.errors[i + 1],
-                    c.errors[0]
+                    c.errors[0],
+                    tried_with_cap(&c)
                 ));
-                (k, max_growth, alternatives)
+                wears.push((k, max_growth, alternatives));
             }
-            Cap::Worse => (k, max_growth, range.into_iter().collect()),
+            Cap::Worse => wears.push((k, max_growth, uncapped_alternatives)),
         },
-        None => (k, max_growth, range.into_iter().collect()),
-    };
-    let ext = with(k, max_growth);
-    let mut parameters = json!({"coefficient": k, "max_growth": max_growth});
-    if offset != 0.0 {
-        parameters["clearance_offset"] = json!(base_offset + offset);
+        None => wears.push((k, max_growth, uncapped_alternatives)),
     }
     // NOTE: where the twin's own step rejects it, the candidate is judged on the same whole
     // tests at the finer step its clearances were fitted at: the twin's step ends a band's
@@ -864,19 +865,29 @@ pub(super) fn wear_stage(
     // with it at the finer step (3.72 -> 2.06). A 2.5e-5 m/(N s) wear on six probes, which
     // the twin's step rejected (10.53 -> 6.13, 50 % asked), is accepted there (9.72 -> 1.52;
     // BENCHMARKS.md, "The lever in training, judged at the finer step").
-    let cand = Candidate::new(
-        "wear",
-        ext,
-        parameters,
-        1 + usize::from(offset != 0.0) + usize::from(max_growth.is_some()),
-        evidence,
-        (train, validation),
-        Steps::All,
-    )
-    .with_alternatives(alternatives);
-    let whole = cand.whole_tests();
-    let accepted =
-        work.judge(cand.judged_where_fitted(whole, FIT_REFINEMENT, "the whole tests"))?;
+    let mut accepted = false;
+    for (k, max_growth, alternatives) in wears {
+        let mut parameters = json!({"coefficient": k, "max_growth": max_growth});
+        if offset != 0.0 {
+            parameters["clearance_offset"] = json!(base_offset + offset);
+        }
+        let cand = Candidate::new(
+            "wear",
+            with(k, max_growth),
+            parameters,
+            1 + usize::from(offset != 0.0) + usize::from(max_growth.is_some()),
+            evidence.clone(),
+            (train.clone(), validation.clone()),
+            Steps::All,
+        )
+        .with_alternatives(alternatives);
+        let whole = cand.whole_tests();
+        accepted =
+            work.judge(cand.judged_where_fitted(whole, FIT_REFINEMENT, "the whole tests"))?;
+        if accepted {
+            break;
+        }
+    }
     if !accepted {
         let why = unexplained_trend(k_all, se_all, growth);
         work.undecided("wear", why.clone());
@@ -1012,8 +1023,8 @@ fn capped_choice(
 /// `uncapped`, and `capped` in increasing coefficient. Where the best capped one's error is
 /// below the uncapped one's by more than `needed` (the null spread and the penalty for the
 /// cap), the cap is taken at the smallest coefficient within the null spread `null` of the
-/// best: the cap bounds the coefficient from below only, and the smallest that stops the
-/// growth in time is the one the session holds. Else, where a capped one is within the null
+/// best (the session places the cap, not the coefficient: the multiples tried are a factor
+/// two apart and the band's draws are not monotone in them). Else, where a capped one is within the null
 /// spread of the uncapped one, the smallest such is an equal alternative. A missing
 /// (non-finite) capped error is passed over.
 fn cap_choice(uncapped: f64, capped: &[f64], needed: f64, null: f64) -> Cap {
@@ -1031,6 +1042,16 @@ fn cap_choice(uncapped: f64, capped: &[f64], needed: f64, null: f64) -> Cap {
     } else {
         first_within(uncapped).map_or(Cap::Worse, Cap::Equal)
     }
+}
+
+/// The capped coefficients [`capped_choice`] tried and their errors, in words.
+fn tried_with_cap(c: &CapChoice) -> String {
+    c.coefficients
+        .iter()
+        .zip(&c.errors[1..])
+        .map(|(k, e)| format!("{k:.2e} m/(N s) {e:.3}"))
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
 /// A trend of the clearance with the contact impulse (slope `k` m/(N s), standard error `se`,

@@ -887,6 +887,10 @@ pub(super) fn wear_stage(
         if accepted {
             break;
         }
+        if max_growth.is_some() && evidence.get("cap").is_some() {
+            evidence["cap"]["verdict"] =
+                json!("taken, then rejected by the judge: the uncapped wear judged in its place");
+        }
     }
     if !accepted {
         let why = unexplained_trend(k_all, se_all, growth);

@@ -835,7 +835,7 @@ pub(super) fn wear_stage(
                     kc,
                     Some(g),
                     vec![
-                        format!("wear capped at {g:.2e} m with another coefficient: the session does not place it, the cap being reached within {within}, which no clearance brackets ({} tried with the cap: {}; the uncapped {k:.2e}: {:.3})", c.coefficients.len(), tried_with_cap(&c), c.errors[0]),
+                        format!("wear capped at {g:.2e} m with another coefficient: the session does not place it, the cap being reached within {within}, which no clearance brackets ({} tried with the cap: {}; the uncapped {k:.2e}: {:.3})", c.coefficients.len(), tried_with_cap(&c.coefficients, &c.errors[1..]), c.errors[0]),
                         "wear without a cap whose growth limits itself (a grown clearance closes less) stops as a cap does: the clearances and the responses do not tell them apart".to_string(),
                     ],
                 ));
@@ -848,7 +848,7 @@ pub(super) fn wear_stage(
                     c.coefficients[i],
                     c.errors[i + 1],
                     c.errors[0],
-                    tried_with_cap(&c)
+                    tried_with_cap(&c.coefficients, &c.errors[1..])
                 ));
                 wears.push((k, max_growth, alternatives));
             }
@@ -987,12 +987,7 @@ fn capped_choice(
     (work.progress)(DiagnoseProgress::Note(format!(
         "wear: on every step of the wear's tests, uncapped {:.3}, capped {}: {}",
         errors[0],
-        coefficients
-            .iter()
-            .zip(&errors[1..])
-            .map(|(c, e)| format!("{e:.3} at {c:.2e}"))
-            .collect::<Vec<_>>()
-            .join(", "),
+        tried_with_cap(&coefficients, &errors[1..]),
         match cap {
             Cap::Taken(i) => format!("the cap, from {:.2e} m/(N s) up", coefficients[i]),
             Cap::Equal(i) => format!(
@@ -1048,11 +1043,11 @@ fn cap_choice(uncapped: f64, capped: &[f64], needed: f64, null: f64) -> Cap {
     }
 }
 
-/// The capped coefficients [`capped_choice`] tried and their errors, in words.
-fn tried_with_cap(c: &CapChoice) -> String {
-    c.coefficients
+/// The capped coefficients [`capped_choice`] tried and their `errors`, in words.
+fn tried_with_cap(coefficients: &[f64], errors: &[f64]) -> String {
+    coefficients
         .iter()
-        .zip(&c.errors[1..])
+        .zip(errors)
         .map(|(k, e)| format!("{k:.2e} m/(N s) {e:.3}"))
         .collect::<Vec<_>>()
         .join(", ")

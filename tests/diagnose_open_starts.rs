@@ -202,15 +202,37 @@ fn a_run_with_wear_starts_a_test_worn_as_the_twins_step_left_it() {
         }),
         ..PhysicsSpec::default()
     };
-    let from_start = runner.contact_impulse(&wear, 2).unwrap();
+    let from_start = runner.contact_impulse(&wear, (2, 0)).unwrap();
     let whole = runner.cost.rig_seconds;
-    let p = from_start[2].expect("the impulse at the start of `again`");
+    let p = from_start.at_test_start[2].expect("the impulse at the start of `again`");
     assert!(p > 0.0, "no contact in `down`");
-    assert_eq!(from_start[1], from_start[2], "contact in `quiet`");
+    assert_eq!(
+        from_start.at_test_start[1], from_start.at_test_start[2],
+        "contact in `quiet`"
+    );
+    // At the record windows: growing through `down`'s contact, within what it exchanges;
+    // `quiet`'s all `again`'s start; `again` read through its first step only.
+    let at = |t: usize| -> Vec<f64> {
+        (from_start.at_record.range((t, 0)..(t + 1, 0)))
+            .map(|(_, p)| *p)
+            .collect()
+    };
+    let down = at(0);
+    assert!(!down.is_empty());
+    assert!(down.windows(2).all(|w| w[0] <= w[1]), "{down:?}");
+    assert!(down[0] >= 0.0 && down[down.len() - 1] <= p, "{down:?}, {p}");
+    assert!(
+        down[0] < down[down.len() - 1],
+        "no contact within `down`: {down:?}"
+    );
+    assert!(at(1).iter().all(|&q| q == p), "{:?}", at(1));
+    assert_eq!(at(2), vec![p]);
+    let mean = from_start.over_records(0, 0, 99).unwrap();
+    assert!(mean > down[0] && mean < down[down.len() - 1], "{mean}");
 
     runner.set_wear_from(Some(1));
-    let worn = runner.contact_impulse(&wear, 2).unwrap();
-    assert_eq!(worn[2], Some(p));
+    let worn = runner.contact_impulse(&wear, (2, 0)).unwrap();
+    assert_eq!(worn.at_test_start[2], Some(p));
     let short = runner.cost.rig_seconds - whole;
     assert!(
         short < 0.5 * whole,
@@ -218,14 +240,14 @@ fn a_run_with_wear_starts_a_test_worn_as_the_twins_step_left_it() {
     );
 
     runner.set_refinement(3);
-    let fine_worn = runner.contact_impulse(&wear, 2).unwrap();
-    assert_eq!(fine_worn[2], Some(p));
+    let fine_worn = runner.contact_impulse(&wear, (2, 0)).unwrap();
+    assert_eq!(fine_worn.at_test_start[2], Some(p));
     let fine_scores = runner.run_spans(&wear, &[Span::whole(2)]).unwrap();
     assert_eq!(fine_scores.len(), 3);
     assert!(fine_scores.iter().all(|s| !s.features.is_empty()));
     runner.set_wear_from(None);
-    let fine_from_start = runner.contact_impulse(&wear, 2).unwrap();
-    let q = fine_from_start[2].expect("the impulse at the start of `again`");
+    let fine_from_start = runner.contact_impulse(&wear, (2, 0)).unwrap();
+    let q = fine_from_start.at_test_start[2].expect("the impulse at the start of `again`");
     assert!(
         q > 0.0 && q != p,
         "{q} N s at the finer step, {p} N s at the twin's"

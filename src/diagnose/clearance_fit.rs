@@ -116,6 +116,19 @@ pub(super) fn test_clearance_by_runs(
     }))
 }
 
+/// The steps of test `ti` with contact that a clearance by runs ([`test_clearance_by_runs`])
+/// is read from, (first, last): its first measured contact step through
+/// [`STEPS_PAST_FIRST_CONTACT`] past it, or its last step where that is earlier; `None` without
+/// measured contact. Where wear grows the clearance, it grows over these steps.
+pub(super) fn contact_steps_fitted(work: &Work<'_>, ti: usize) -> Option<(usize, usize)> {
+    let first = work.steps.first_contact(ti)?;
+    let last_of_test = (work.steps.steps.iter())
+        .filter(|s| s.test_index == ti)
+        .map(|s| s.info.step)
+        .max()?;
+    Some((first, (first + STEPS_PAST_FIRST_CONTACT).min(last_of_test)))
+}
+
 /// The steps of test `ti` that carry its clearance, (first, last): from two before its first
 /// measured contact (the steps before are the same for every clearance a fit tries, run once:
 /// the smallest tried closes nothing there) to [`STEPS_PAST_FIRST_CONTACT`] after it (`None`:

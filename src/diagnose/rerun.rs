@@ -427,10 +427,10 @@ pub struct ModelRunner<'a> {
     jobs: usize,
     /// What the runs cost so far.
     pub cost: RunCost,
-    /// Per run of the last [`ModelRunner::run_many`], per test of the session: the normal
-    /// contact impulse accumulated at its start, N s (`None`: not run, or no wear in the
+    /// Per run of the last [`ModelRunner::run_many`]: the normal contact impulse accumulated
+    /// at each test's start and each step's record window (empty: not run, or no wear in the
     /// model).
-    last_impulses: Vec<Vec<Option<f64>>>,
+    last_impulses: Vec<Impulses>,
     /// States of open contact that can start runs ([`ModelRunner::capture_open`]).
     open_starts: Vec<OpenStart>,
     /// Every capture tried: (test, step, extensions and refinement) and whether it was kept.
@@ -441,6 +441,27 @@ pub struct ModelRunner<'a> {
     /// Whether runs of models with wear start each test from the state recorded at its lead-in
     /// by a run at this refinement ([`ModelRunner::set_wear_from`]).
     wear_from: Option<u32>,
+}
+
+/// The normal contact impulse a model with wear accumulated over a run from the session's
+/// start (`physics::wear`), N s.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Impulses {
+    /// Per test of the session, at its start (`None`: not run).
+    pub at_test_start: Vec<Option<f64>>,
+    /// Per (test index, step) run, at the middle of the step's record window.
+    pub at_record: BTreeMap<(usize, usize), f64>,
+}
+
+impl Impulses {
+    /// The mean over steps `first..=last` of test `ti` of the impulse at their record
+    /// windows' middles (those run; `None`: none was).
+    pub fn over_records(&self, ti: usize, first: usize, last: usize) -> Option<f64> {
+        let ps: Vec<f64> = (self.at_record.range((ti, first)..=(ti, last)))
+            .map(|(_, p)| *p)
+            .collect();
+        (!ps.is_empty()).then(|| ps.iter().sum::<f64>() / ps.len() as f64)
+    }
 }
 
 /// A run of [`ModelRunner::run_members`]: its extensions, the steps it scores and its
@@ -454,6 +475,9 @@ struct GroupRun {
     /// (test index, accumulated normal contact impulse at its start, N s), with wear in the
     /// model.
     impulse: Vec<(usize, f64)>,
+    /// ((test index, step), the impulse at the middle of its record window, N s), with wear
+    /// in the model.
+    at_record: Vec<((usize, usize), f64)>,
     /// (test index, the twin's state at its lead-in), with wear in the model.
     lead_ins: Vec<(usize, crate::twin::TwinState)>,
 }
@@ -711,7 +735,13 @@ impl<'a> ModelRunner<'a> {
         done.sort_unstable_by_key(|d| d.0);
         let results = done.into_iter().map(|(_, r)| r);
         let mut out: Vec<Vec<StepScores>> = vec![Vec::new(); runs.len()];
-        let mut impulse = vec![vec![None; self.steps.tests.len()]; runs.len()];
+        let mut impulse = vec![
+            Impulses {
+                at_test_start: vec![None; self.steps.tests.len()],
+                at_record: BTreeMap::new(),
+            };
+            runs.len()
+        ];
         for ((r, _, start), g) in groups.iter().zip(results) {
             let g = g?;
             self.cost.runs += 1;
@@ -727,10 +757,11 @@ impl<'a> ModelRunner<'a> {
                     .extend(g.lead_ins);
             }
             for (t, p) in g.impulse {
-                if let Some(slot) = impulse[*r].get_mut(t) {
+                if let Some(slot) = impulse[*r].at_test_start.get_mut(t) {
                     *slot = Some(p);
                 }
             }
+            impulse[*r].at_record.extend(g.at_record);
         }
         for (o, wanted) in out.iter_mut().zip(&wanted_of) {
             o.sort_by_key(|s| (s.test_index, s.step));
@@ -897,16 +928,16 @@ impl<'a> ModelRunner<'a> {
     }
 
     /// The model's accumulated normal contact impulse `P` (N s, `physics::wear`) at the start
-    /// of every test up to test `through` (index), over the session run from its start with
-    /// extensions `ext` (wear on, with a zero coefficient when `ext` has none: `P` is counted
-    /// whatever the coefficient; the clearances stay `ext`'s) to the end of test `through`'s
-    /// first step. The impulse of a test before its first impact is its start's: the
-    /// clearance measured there has seen exactly this `P`.
+    /// of every test and at every step's record window up to step `through.1` of test
+    /// `through.0` (indices), over the session run from its start with extensions `ext` (wear
+    /// on, with a zero coefficient when `ext` has none: `P` is counted whatever the
+    /// coefficient; the clearances stay `ext`'s). The impulse of a test before its first
+    /// impact is its start's; within its contact the wear grows from step to step.
     pub fn contact_impulse(
         &mut self,
         ext: &PhysicsSpec,
-        through: usize,
-    ) -> Result<Vec<Option<f64>>, DiagnoseError> {
+        through: (usize, usize),
+    ) -> Result<Impulses, DiagnoseError> {
         let mut all = self.contact_impulses(std::slice::from_ref(ext), through)?;
         Ok(all.pop().unwrap_or_default())
     }
@@ -916,9 +947,9 @@ impl<'a> ModelRunner<'a> {
     pub fn contact_impulses(
         &mut self,
         exts: &[PhysicsSpec],
-        through: usize,
-    ) -> Result<Vec<Vec<Option<f64>>>, DiagnoseError> {
-        let spans = vec![Span::of_test(through, 0, Some(0))];
+        through: (usize, usize),
+    ) -> Result<Vec<Impulses>, DiagnoseError> {
+        let spans = vec![Span::of_test(through.0, 0, Some(through.1))];
         let runs: Vec<(PhysicsSpec, Vec<Span>)> = exts
             .iter()
             .map(|ext| {
@@ -989,6 +1020,7 @@ impl<'a> ModelRunner<'a> {
             scores: Vec::new(),
             rig_seconds: 0.0,
             impulse: Vec::new(),
+            at_record: Vec::new(),
             lead_ins: Vec::new(),
         };
         if group.is_empty() {
@@ -1017,6 +1049,21 @@ impl<'a> ModelRunner<'a> {
                 .collect();
         }
         let mut lead_ins = Vec::new();
+        // With wear, the middle of each record window (an index into `windows`): where the
+        // impulse the clearance of that window has seen is read.
+        let mut record_mids: VecDeque<(usize, u64)> = VecDeque::new();
+        if model.extensions.wear.is_some() {
+            record_mids = (windows.iter().enumerate())
+                .map(|(k, w)| {
+                    (
+                        k,
+                        w.info.record_first_sample + w.info.record_samples as u64 / 2,
+                    )
+                })
+                .collect();
+            record_mids.make_contiguous().sort_by_key(|x| x.1);
+        }
+        let mut at_record = Vec::new();
         // A member's perturbations: at the start of each step with contact on the rig.
         let mut perturb_at: VecDeque<(usize, u64)> = VecDeque::new();
         if member > 0 {
@@ -1078,6 +1125,12 @@ impl<'a> ModelRunner<'a> {
                     impulse.push((t, 0.0));
                 }
             }
+            for k in due_before(&mut record_mids, block_end) {
+                if let Some(w) = twin.state().and_then(|s| s.effects.wear) {
+                    let info = &windows[k];
+                    at_record.push(((info.test_index, info.info.step), w.impulse));
+                }
+            }
             // NOTE: at the first block that starts at or after the step's start (blocks are a
             // few ms), so that the step before's record window, which ends there, is not
             // perturbed.
@@ -1125,6 +1178,7 @@ impl<'a> ModelRunner<'a> {
             scores,
             rig_seconds,
             impulse,
+            at_record,
             lead_ins,
         })
     }

@@ -9,11 +9,12 @@
 //!    test alone over its bracket (`clearance_fit::test_clearance_by_runs`, shared with the
 //!    clearance and tilt stages), and combined with the one read at the test's contact
 //!    onsets, each weighted by its own spread (`measured_clearance`).
-//! 2. The accumulated impulse `P` at the start of each test comes from one run of the model as
-//!    accepted so far from the session's start to the last bracketed test's first step, with
-//!    the wear counter on and a zero coefficient
-//!    ([`super::rerun::ModelRunner::contact_impulse`]): what the contact exchanged before the
-//!    test's first impact.
+//! 2. The accumulated impulse `P` of each test comes from one run of the model as accepted so
+//!    far from the session's start to the end of the last bracketed test's steps its clearance
+//!    is read from, with the wear counter on and a zero coefficient
+//!    ([`super::rerun::ModelRunner::contact_impulse`]): the mean over the record windows of
+//!    the steps its clearance is read from (its first contact step and the two after it,
+//!    `clearance_fit::contact_steps_fitted`), over which a wear grows it (`at_fitted_steps`).
 //! 3. The clearances against `P`: a straight line `c - c_plan = a + k P`, each point weighted
 //!    by the inverse of its own variance (`weights_of`). A constant offset has no trend
 //!    with `P` (`k` within 3 standard errors of zero, or a growth over the session below 2 %
@@ -24,11 +25,11 @@
 //!    against its impulse, until the slope settles; its standard error the train slope's
 //!    times the fixed point's gain, and where that gain says the growth limits itself, the
 //!    range within two of them named as the wear's alternative), validated by the pipeline's
-//!    rule on the other bracketed tests where the line predicts a growth by their start, else
-//!    on the tests with contact that are not bracketed, by their end; the tests with the
-//!    least and the most impulse train where the alternate ones would extrapolate
-//!    (`split`). A candidate the twin's own step rejects is
-//!    judged on the same whole tests at the finer step its clearances were fitted at.
+//!    rule on the other bracketed tests where the line predicts a growth by their first
+//!    contact steps, else on the tests with contact that are not bracketed, by their end; the
+//!    tests with the least and the most impulse train where the alternate ones would
+//!    extrapolate (`split`). A candidate the twin's own step rejects is judged on the same
+//!    whole tests at the finer step its clearances were fitted at.
 //!    `max_growth` is fitted where the clearance levels off within the session (the largest
 //!    growth seen is compared with the line's), or where the growth happened within a test
 //!    with contact that no point brackets: there a wear capped at the growth seen, at a few
@@ -43,9 +44,10 @@ use crate::config::{ClearanceSpec, PhysicsSpec, WearSpec};
 use crate::signal::features::inverse_variance_weights;
 
 use super::clearance::{ClearanceEvidence, TestClearance};
-use super::clearance_fit::{test_clearance_by_runs, FIT_REFINEMENT};
+use super::clearance_fit::{contact_steps_fitted, test_clearance_by_runs, FIT_REFINEMENT};
 use super::judge::{alternate, Candidate, Steps, Work};
 use super::outcome::EffectResult;
+use super::rerun::Impulses;
 use super::{DiagnoseError, DiagnoseProgress};
 
 /// The share of the bracketed tests' impulse span below which the alternate train tests'
@@ -281,12 +283,12 @@ fn measured_clearance(by_runs: (f64, f64), at_onsets: Option<(f64, Option<f64>)>
 
 /// The train and validation tests of the wear candidate (test indices, session order).
 ///
-/// The bracketed tests (`bracketed`: test index and the model's impulse at its start, N s,
-/// in session order) alternately, as every stage splits them, but a test can only validate
-/// wear where the model with it differs from the model without: where the line over all
-/// points (slope `k_all`, m/(N s)) predicts a growth of more than 2 % of the plan's clearance
-/// `plan` (the trend's own threshold) by the test's start. A bracketed test below that is
-/// fitted instead. Without a bracketed test left to validate on, the tests with contact that
+/// The bracketed tests (`bracketed`: test index and the model's impulse at its first contact
+/// steps, N s, in session order) alternately, as every stage splits them, but a test can only
+/// validate wear where the model with it differs from the model without: where the line over
+/// all points (slope `k_all`, m/(N s)) predicts a growth of more than 2 % of the plan's
+/// clearance `plan` (the trend's own threshold) by the test's first contact steps. A bracketed
+/// test below that is fitted instead. Without a bracketed test left to validate on, the tests with contact that
 /// are not bracketed (`contact`: test index and the model's impulse by its end, N s,
 /// [`impulse_by_end`]) and above that growth validate: their clearances were not fitted,
 /// and the wear the model exchanges in them is what it predicts. Where the alternate train
@@ -376,6 +378,26 @@ fn lever_split(
     (train, validation)
 }
 
+/// The model's impulse (N s) where test `ti`'s clearance was read: the mean over the steps
+/// its clearance is read from (`windows`: test index, (first, last) step; from
+/// `clearance_fit::contact_steps_fitted`) of the impulse at their record windows, else at the
+/// test's start.
+///
+/// NOTE: a wear grows the clearance within those steps. With friction in the lower clamp
+/// beside a 2e-5 m/(N s) wear on `identify.toml`, high-up's clearance, read from its first
+/// contact step and the two after it, came out 23 um over what the wear had grown by the
+/// test's start, where it was placed (BENCHMARKS.md, "The lever in training, judged at the
+/// finer step").
+fn at_fitted_steps(
+    impulse: &Impulses,
+    windows: &[(usize, (usize, usize))],
+    ti: usize,
+) -> Option<f64> {
+    (windows.iter().find(|w| w.0 == ti))
+        .and_then(|&(_, (first, last))| impulse.over_records(ti, first, last))
+        .or_else(|| impulse.at_test_start.get(ti).copied().flatten())
+}
+
 /// The model's impulse (N s) by the end of test `ti`: at the start of the next test, else
 /// (the next one not run) at its own start; from `impulse`, per test in session order.
 ///
@@ -402,7 +424,8 @@ pub struct WearPoint {
     pub test: String,
     /// Index of the test in the session, from 0.
     pub test_index: usize,
-    /// The model's accumulated normal contact impulse before the test, N s (the model without
+    /// The model's accumulated normal contact impulse at the test's first contact steps (the
+    /// mean over the record windows its clearance is read from), N s (the model without
     /// wear in the trend's points; with the fitted coefficient in an accepted candidate's).
     pub contact_impulse_ns: f64,
     /// The measured clearance, m: the two estimates, [`Self::run_clearance_m`] and
@@ -453,22 +476,24 @@ pub(super) fn wear_stage(
         return Ok(false);
     }
     let accepted = work.accepted.clone();
-    let last = ce
-        .tests
-        .iter()
-        .filter(|t| is_bracketed(t))
-        .map(|t| t.test_index)
-        .max()
-        .unwrap_or(0);
-    let impulse = work.runner.contact_impulse(&accepted, last)?;
-    record_impulses(ce, &impulse);
     let bracketed: Vec<TestClearance> = ce
         .tests
         .iter()
         .filter(|t| is_bracketed(t))
         .cloned()
         .collect();
-    let p_of = |t: &TestClearance| impulse.get(t.test_index).copied().flatten();
+    // Each bracketed test's steps its clearance is read from: the runs go through the last's.
+    let windows: Vec<(usize, (usize, usize))> = (bracketed.iter())
+        .filter_map(|t| Some((t.test_index, contact_steps_fitted(work, t.test_index)?)))
+        .collect();
+    let last = (windows.iter())
+        .map(|&(ti, (_, through))| (ti, through))
+        .max()
+        .unwrap_or((0, 0));
+    let impulse = work.runner.contact_impulse(&accepted, last)?;
+    record_impulses(ce, &impulse.at_test_start);
+    let at_points = |impulse: &Impulses, ti: usize| at_fitted_steps(impulse, &windows, ti);
+    let p_of = |t: &TestClearance| at_points(&impulse, t.test_index);
     let ps: Vec<f64> = bracketed.iter().filter_map(p_of).collect();
     let p_span = span(ps.iter().copied());
     // NOTE: no threshold in N s: any impulse between the tests can carry a growth; whether it
@@ -481,7 +506,7 @@ pub(super) fn wear_stage(
         return Ok(false);
     }
     (work.progress)(DiagnoseProgress::Note(format!(
-        "wear: the model's normal contact impulse before the bracketed tests: {}",
+        "wear: the model's normal contact impulse at the bracketed tests' first contact steps (the mean over the steps their clearance is read from): {}",
         bracketed
             .iter()
             .map(|t| format!("{} {:.3e} N s", t.test, p_of(t).unwrap_or(f64::NAN)))
@@ -554,7 +579,7 @@ pub(super) fn wear_stage(
         "line": {"intercept_m": a_all, "slope_m_per_ns": k_all, "slope_standard_error_m_per_ns": se_all},
         "growth_over_session_m": growth,
         "plan_clearance_m": plan,
-        "against": "the model's accumulated normal contact impulse before each test (N s), without wear",
+        "against": "the model's accumulated normal contact impulse at each test's first contact steps (the mean over the record windows its clearance is read from, N s), without wear",
     });
     let trend = k_all > 0.0 && k_all > 3.0 * se_all && growth > 0.02 * plan;
     (work.progress)(DiagnoseProgress::Note(format!(
@@ -578,7 +603,12 @@ pub(super) fn wear_stage(
         .tests
         .iter()
         .filter(|t| t.onsets > 0 && !is_bracketed(t))
-        .filter_map(|t| Some((t.test_index, impulse_by_end(&impulse, t.test_index)?)))
+        .filter_map(|t| {
+            Some((
+                t.test_index,
+                impulse_by_end(&impulse.at_test_start, t.test_index)?,
+            ))
+        })
         .collect();
     let at: Vec<(usize, f64)> = points
         .iter()
@@ -683,35 +713,31 @@ pub(super) fn wear_stage(
     // 3e-5 m/(N s)), so runs spread out and a line through all of them settle it where
     // re-running the last slope wandered: four rounds one after the other, still 3 % apart,
     // 144 s of one thread in a 798 s diagnosis (BENCHMARKS.md, "The diagnosis' time").
-    let slope_with = |impulse: &[Option<f64>]| -> Option<f64> {
+    let slope_with = |impulse: &Impulses| -> Option<f64> {
         let tr: Vec<(f64, f64)> = points
             .iter()
             .filter(|p| p.train)
             .map(|p| {
-                let x = impulse
-                    .get(p.test_index)
-                    .copied()
-                    .flatten()
-                    .unwrap_or(p.contact_impulse_ns);
+                let x = at_points(impulse, p.test_index).unwrap_or(p.contact_impulse_ns);
                 (x, p.clearance_m - p.plan_clearance_m)
             })
             .collect();
         slope(&tr).filter(|k| *k > 0.0 && k.is_finite())
     };
     let side_by_side = work.runner.jobs() > 1;
-    // (coefficient, the train tests' slope with its impulse, its impulse per test).
-    let mut runs: Vec<(f64, f64, Vec<Option<f64>>)> = Vec::new();
+    // (coefficient, the train tests' slope with its impulse, its impulse).
+    let mut runs: Vec<(f64, f64, Impulses)> = Vec::new();
     // The coefficient the runs give: their slopes' line's fixed point (with the start's
     // slope at a zero coefficient where no offset comes with the wear), else, without a line
     // yet (one run and an offset), the last run's slope, as plain iteration would.
     let start = (offset == 0.0).then_some((0.0, k0));
-    let slopes_of = |runs: &[(f64, f64, Vec<Option<f64>>)]| -> Vec<(f64, f64)> {
+    let slopes_of = |runs: &[(f64, f64, Impulses)]| -> Vec<(f64, f64)> {
         start
             .into_iter()
             .chain(runs.iter().map(|r| (r.0, r.1)))
             .collect()
     };
-    let estimate = |runs: &[(f64, f64, Vec<Option<f64>>)]| -> Option<f64> {
+    let estimate = |runs: &[(f64, f64, Impulses)]| -> Option<f64> {
         fixed_point(&slopes_of(runs)).or_else(|| runs.last().map(|r| r.1))
     };
     let mut next = if side_by_side {
@@ -763,11 +789,11 @@ pub(super) fn wear_stage(
         .min_by(|a, b| (a.0 - k).abs().total_cmp(&(b.0 - k).abs()))
     {
         for p in &mut points {
-            if let Some(x) = impulse.get(p.test_index).copied().flatten() {
+            if let Some(x) = at_points(impulse, p.test_index) {
                 p.contact_impulse_ns = x;
             }
         }
-        record_impulses(ce, impulse);
+        record_impulses(ce, &impulse.at_test_start);
     }
     // The coefficient's standard error, from the train tests' clearances against the impulse
     // of the run nearest it.
@@ -794,7 +820,7 @@ pub(super) fn wear_stage(
     evidence["coefficient_standard_error_m_per_ns"] = json!(k_se.is_finite().then_some(k_se));
     evidence["points"] = json!(points);
     evidence["points_against"] = json!(
-        "the model's accumulated normal contact impulse before each test (N s), with the fitted wear"
+        "the model's accumulated normal contact impulse at each test's first contact steps (the mean over the record windows its clearance is read from, N s), with the fitted wear"
     );
     evidence["impulse_error_gain"] = json!(gain);
     evidence["coefficient_runs"] = json!(runs
@@ -894,7 +920,21 @@ pub(super) fn wear_stage(
     }
     if !accepted {
         let why = unexplained_trend(k_all, se_all, growth);
-        work.undecided("wear", why.clone());
+        // What the judge said of the last wear judged: the session may hold no test that
+        // tells the fitted wear from none.
+        let judged = (work.effects.iter().rev())
+            .find(|e| e.effect == "wear" && !e.validation_tests.is_empty())
+            .map(|e| {
+                format!(
+                    "; fitted on {} ({:.3e} m/(N s)), it was not validated on {}: {}",
+                    e.train_tests.join(", "),
+                    e.parameters["coefficient"].as_f64().unwrap_or(f64::NAN),
+                    e.validation_tests.join(", "),
+                    e.reason
+                )
+            })
+            .unwrap_or_default();
+        work.undecided("wear", format!("{why}{judged}"));
         work.unexplained.push(why);
     }
     Ok(accepted)
@@ -1180,6 +1220,30 @@ mod tests {
         assert!(poorly_conditioned_range(2.44e-5, 2.4e-6, Some(1.47)).is_none());
         assert!(poorly_conditioned_range(6.86e-5, f64::NAN, Some(3.83)).is_none());
         assert!(poorly_conditioned_range(6.86e-5, 4.15e-5, None).is_none());
+    }
+
+    #[test]
+    fn a_point_is_placed_at_the_impulse_of_the_steps_its_clearance_is_read_from() {
+        // identify.toml with friction in the lower clamp and a 2e-5 m/(N s) wear: high-up
+        // (test 7) starts at 1.34 N s and its first contact is at step 8; the clearance is
+        // read over steps 8-10, within which the contact goes on exchanging impulse.
+        let mut impulse = Impulses {
+            at_test_start: vec![Some(0.0); 9],
+            at_record: std::collections::BTreeMap::new(),
+        };
+        impulse.at_test_start[7] = Some(1.34);
+        for (step, p) in [(7, 1.34), (8, 1.5), (9, 1.8), (10, 2.04), (11, 2.5)] {
+            impulse.at_record.insert((7, step), p);
+        }
+        let windows = [(7, (8, 10)), (6, (3, 5))];
+        let at = at_fitted_steps(&impulse, &windows, 7).unwrap();
+        assert!((at - 1.78).abs() < 1e-12, "{at}");
+        // A window without record readings (not run that far) falls back to the test's start;
+        // a test without a window too.
+        assert_eq!(at_fitted_steps(&impulse, &windows, 6), Some(0.0));
+        assert_eq!(at_fitted_steps(&impulse, &[], 7), Some(1.34));
+        assert_eq!(impulse.over_records(7, 12, 20), None);
+        assert_eq!(impulse.over_records(8, 0, 30), None);
     }
 
     #[test]

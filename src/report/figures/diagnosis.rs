@@ -898,7 +898,7 @@ fn evidence_clearance(d: &Diagnosis) -> Option<Panels> {
             p.series
                 .push(line(pts, BLACK, LineKind::Markers, width() + 2));
             legend.push(entry(
-                "measured: the model runs' and the onsets' value, each weighted by its spread",
+                "measured: the model runs' and the onsets' value, each weighted by its spread, at the impulse of the steps it was read from",
                 BLACK,
                 LineKind::Markers,
             ));

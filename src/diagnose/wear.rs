@@ -288,12 +288,12 @@ fn measured_clearance(by_runs: (f64, f64), at_onsets: Option<(f64, Option<f64>)>
 /// validate wear where the model with it differs from the model without: where the line over
 /// all points (slope `k_all`, m/(N s)) predicts a growth of more than 2 % of the plan's
 /// clearance `plan` (the trend's own threshold) by the test's first contact steps. A bracketed
-/// test below that is fitted instead. Without a bracketed test left to validate on, the tests with contact that
-/// are not bracketed (`contact`: test index and the model's impulse by its end, N s,
-/// [`impulse_by_end`]) and above that growth validate: their clearances were not fitted,
-/// and the wear the model exchanges in them is what it predicts. Where the alternate train
-/// tests span less than [`LEVER_SHARE`] of the bracketed tests' impulse, the line would be
-/// extrapolated from a growth within the clearances' errors: the lever trains instead
+/// test below that is fitted instead. Without a bracketed test left to validate on, the tests
+/// with contact that are not bracketed (`contact`: test index and the model's impulse by its
+/// end, N s, [`impulse_by_end`]) and above that growth validate: their clearances were not
+/// fitted, and the wear the model exchanges in them is what it predicts. Where the alternate
+/// train tests span less than [`LEVER_SHARE`] of the bracketed tests' impulse, the line would
+/// be extrapolated from a growth within the clearances' errors: the lever trains instead
 /// ([`lever_split`]).
 ///
 /// NOTE: on `identify.toml` the bracketed tests are the two low-level tests (0 and 0.6 N s
@@ -846,9 +846,8 @@ pub(super) fn wear_stage(
     };
     let within = work.names(&validation).join(", ");
     let uncapped_alternatives: Vec<String> = range.into_iter().collect();
-    // The wears to judge, in order, until one is accepted: (coefficient, cap, alternatives,
-    // the cap's verdict where it is rejected and the next is judged).
-    let mut wears: Vec<(f64, Option<f64>, Vec<String>, Option<&str>)> = Vec::new();
+    // The wears to judge, in order, until one is accepted.
+    let mut wears: Vec<WearToJudge> = Vec::new();
     let capped_alternatives = |c: &CapChoice, g: f64| {
         vec![
             format!("wear capped at {g:.2e} m with another coefficient: the session does not place it, the cap being reached within {within}, which no clearance brackets ({} tried with the cap: {}; the uncapped {k:.2e}: {:.3})", c.coefficients.len(), tried_with_cap(&c.coefficients, &c.errors[1..]), c.errors[0]),
@@ -856,50 +855,40 @@ pub(super) fn wear_stage(
         ]
     };
     match capped {
-        Some((c, g)) => {
-            match c.cap {
-                Cap::Taken(i) => {
-                    let kc = c.coefficients[i];
-                    (work.progress)(DiagnoseProgress::Note(format!(
+        Some((c, g)) => match c.cap {
+            Cap::Taken(i) => {
+                let kc = c.coefficients[i];
+                (work.progress)(DiagnoseProgress::Note(format!(
                     "wear: capped at {g:.2e} m, at {kc:.2e} m/(N s): every step of the wear's tests prefers it to the uncapped {k:.2e} ({:.3} against {:.3}; the growth stops within {within}); the uncapped wear is judged if it is rejected",
                     c.errors[i + 1],
                     c.errors[0]
                 )));
-                    wears.push((
-                    kc,
-                    Some(g),
-                    capped_alternatives(&c, g),
-                    Some("taken, then rejected by the judge: the uncapped wear judged in its place"),
-                ));
-                    wears.push((k, max_growth, uncapped_alternatives, None));
-                }
-                Cap::Equal(i) => {
-                    let mut alternatives = uncapped_alternatives;
-                    alternatives.push(format!(
+                let capped = capped_alternatives(&c, g);
+                wears.push((kc, Some(g), capped, Some(TAKEN_THEN_REJECTED)));
+                wears.push((k, max_growth, uncapped_alternatives, None));
+            }
+            Cap::Equal(i) => {
+                let mut alternatives = uncapped_alternatives;
+                alternatives.push(format!(
                     "wear capped at {g:.2e} m (the growth seen) at {:.2e} m/(N s), or another coefficient: every step of the wear's tests within the null spread of the uncapped wear ({:.3} against {:.3}; {}); the clearances cannot tell a cap reached within {within}, which no clearance brackets, from a growth that goes on",
                     c.coefficients[i],
                     c.errors[i + 1],
                     c.errors[0],
                     tried_with_cap(&c.coefficients, &c.errors[1..])
                 ));
-                    // NOTE: as good as the uncapped wear on the whole tests, the capped one
-                    // is judged where the uncapped one is rejected. On `identify.toml` with
-                    // a hidden 2.5e-5 m/(N s) capped at 2e-4 m, the uncapped wear's draws
-                    // went from 6.17 to 4.14 with its points placed at their steps' impulse,
-                    // the capped ones 3.26-3.35: equal within the null spread, and the
-                    // uncapped 8.65e-6 was rejected (BENCHMARKS.md, "Wear points at the
-                    // impulse of the steps their clearance is read from").
-                    wears.push((
-                    k,
-                    max_growth,
-                    alternatives,
-                    Some("equal, the uncapped wear rejected by the judge: the capped one judged in its place"),
-                ));
-                    wears.push((c.coefficients[i], Some(g), capped_alternatives(&c, g), None));
-                }
-                Cap::Worse => wears.push((k, max_growth, uncapped_alternatives, None)),
+                // NOTE: as good as the uncapped wear on the whole tests, the capped one is
+                // judged where the uncapped one is rejected. On `identify.toml` with a hidden
+                // 2.5e-5 m/(N s) capped at 2e-4 m, the uncapped wear's draws went from 6.17
+                // to 4.14 with its points placed at their steps' impulse, the capped ones
+                // 3.26-3.35: equal within the null spread, and the uncapped 8.65e-6 was
+                // rejected (BENCHMARKS.md, "Wear points at the impulse of the steps their
+                // clearance is read from").
+                wears.push((k, max_growth, alternatives, Some(EQUAL_THEN_REJECTED)));
+                let capped = capped_alternatives(&c, g);
+                wears.push((c.coefficients[i], Some(g), capped, None));
             }
-        }
+            Cap::Worse => wears.push((k, max_growth, uncapped_alternatives, None)),
+        },
         None => wears.push((k, max_growth, uncapped_alternatives, None)),
     }
     // NOTE: where the twin's own step rejects it, the candidate is judged on the same whole
@@ -958,6 +947,19 @@ pub(super) fn wear_stage(
     }
     Ok(accepted)
 }
+
+/// A wear to judge: its coefficient (m/(N s)), cap (m), alternatives, and the evidence's
+/// `cap.verdict` where it is rejected and the next one is judged.
+type WearToJudge = (f64, Option<f64>, Vec<String>, Option<&'static str>);
+
+/// The wear evidence's `cap.verdict` where a taken cap is rejected by the judge.
+const TAKEN_THEN_REJECTED: &str =
+    "taken, then rejected by the judge: the uncapped wear judged in its place";
+
+/// The wear evidence's `cap.verdict` where the uncapped wear, with a cap as good, is rejected
+/// by the judge.
+const EQUAL_THEN_REJECTED: &str =
+    "equal, the uncapped wear rejected by the judge: the capped one judged in its place";
 
 /// The multiples of the uncapped coefficient a capped wear is tried at ([`capped_choice`]).
 ///

@@ -239,8 +239,20 @@ fn a_wear_capped_within_high_up_on_identify_toml_is_named_with_its_cap() {
     // The cap is reached within high-up, which no clearance brackets: the points alone give
     // a slower wear with no cap.
     let d = wear_is_found_on((2.5e-5, Some(2e-4)), &repo_plan("identify.toml"), "", 0);
+    // Named with its cap because the whole tests prefer the cap, or because the cap does as
+    // well and the uncapped wear was rejected. Measured: `taken` at first; with the points at
+    // their steps' impulse, `equal` and the uncapped 8.65e-6 rejected (BENCHMARKS.md, "Wear
+    // points at the impulse of the steps their clearance is read from").
     let w = accepted(&d, "wear");
-    assert_eq!(w[0]["evidence"]["cap"]["verdict"], "taken", "{d:#}");
+    let verdict = w[0]["evidence"]["cap"]["verdict"]
+        .as_str()
+        .unwrap_or_default();
+    assert!(
+        verdict == "taken"
+            || verdict
+                == "equal, the uncapped wear rejected by the judge: the capped one judged in its place",
+        "{d:#}"
+    );
 }
 
 #[test]

@@ -122,11 +122,8 @@ pub(super) fn test_clearance_by_runs(
 /// measured contact. Where wear grows the clearance, it grows over these steps.
 pub(super) fn contact_steps_fitted(work: &Work<'_>, ti: usize) -> Option<(usize, usize)> {
     let first = work.steps.first_contact(ti)?;
-    let last_of_test = (work.steps.steps.iter())
-        .filter(|s| s.test_index == ti)
-        .map(|s| s.info.step)
-        .max()?;
-    Some((first, (first + STEPS_PAST_FIRST_CONTACT).min(last_of_test)))
+    let last = (first + STEPS_PAST_FIRST_CONTACT).min(work.steps.last_step(ti)?);
+    Some((first, last))
 }
 
 /// The steps of test `ti` that carry its clearance, (first, last): from two before its first

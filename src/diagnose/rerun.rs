@@ -240,13 +240,15 @@ impl SessionSteps {
         } else {
             contact.next_back()
         }? + past;
-        let last = self
-            .steps
-            .iter()
+        (at < self.last_step(ti)?).then_some(at)
+    }
+
+    /// The last step of test `ti` recorded; `None` without any.
+    pub fn last_step(&self, ti: usize) -> Option<usize> {
+        (self.steps.iter())
             .filter(|s| s.test_index == ti)
             .map(|s| s.info.step)
-            .max()?;
-        (at < last).then_some(at)
+            .max()
     }
 
     /// The sample where the step of record window `w` starts: the last `step_start` of its

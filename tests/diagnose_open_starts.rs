@@ -10,8 +10,8 @@
 //! - a capture during which a pair closed is not kept;
 //! - runs made side by side on two threads (`ModelRunner::run_many`, a fit's grid) give what
 //!   the same runs one after the other give;
-//! - a run with wear starts a test worn as a run from the session's start left it
-//!   (`ModelRunner::set_wear_from`);
+//! - a run with wear starts a test worn as a run from the session's start at the step asked
+//!   left it (`ModelRunner::set_wear_from`);
 //! - an ensemble member's run (`ModelRunner::run_members`, the judge's draws in the band)
 //!   differs from the plain run only from the first step with contact, and draws the same
 //!   perturbations whatever it runs beside.
@@ -177,13 +177,13 @@ steps = 3
 "#;
 
 /// `ModelRunner::set_wear_from`: a run of a model with wear starts a test from rest at its
-/// lead-in, with the clearance and wear a run from the session's start at the twin's own step
-/// had there. The lead-in of `again` (the last three steps of `quiet`) has no contact, so
-/// the normal contact impulse at `again`'s start is the run from the start's exactly, at the
-/// twin's step and at a 3x finer one (where a finer run from the session's start exchanges
-/// its own).
+/// lead-in, with the clearance and wear a run from the session's start at the step asked had
+/// there. The lead-in of `again` (the last three steps of `quiet`) has no contact, so the
+/// normal contact impulse at `again`'s start is the run from the start's exactly: at the
+/// twin's step and at a 3x finer one from the twin's step's states, and at the finer step
+/// from the states of its own run from the session's start (which exchanges its own).
 #[test]
-fn a_run_with_wear_starts_a_test_worn_as_the_twins_step_left_it() {
+fn a_run_with_wear_starts_a_test_worn_as_a_run_at_the_step_asked_left_it() {
     let dir = tempfile::tempdir().unwrap();
     let (log, _) = sim_session(
         dir.path(),
@@ -246,11 +246,25 @@ fn a_run_with_wear_starts_a_test_worn_as_the_twins_step_left_it() {
     assert_eq!(fine_scores.len(), 3);
     assert!(fine_scores.iter().all(|s| !s.features.is_empty()));
     runner.set_wear_from(None);
+    let c0 = runner.cost.rig_seconds;
     let fine_from_start = runner.contact_impulse(&wear, (2, 0)).unwrap();
+    let fine_whole = runner.cost.rig_seconds - c0;
     let q = fine_from_start.at_test_start[2].expect("the impulse at the start of `again`");
     assert!(
         q > 0.0 && q != p,
         "{q} N s at the finer step, {p} N s at the twin's"
+    );
+
+    // That run left the finer step's own states (a wear fitted at the finer step is judged
+    // from them): from them, `again` starts worn as the finer run left it.
+    runner.set_wear_from(Some(3));
+    let c1 = runner.cost.rig_seconds;
+    let fine_from_fine = runner.contact_impulse(&wear, (2, 0)).unwrap();
+    assert_eq!(fine_from_fine.at_test_start[2], Some(q));
+    let fine_short = runner.cost.rig_seconds - c1;
+    assert!(
+        fine_short < 0.5 * fine_whole,
+        "{fine_short} s of rig time, {fine_whole} s from the start"
     );
 }
 

@@ -827,22 +827,24 @@ pub(super) fn wear_stage(
     }
     let k = estimate(&runs).unwrap_or(k0);
     let gain = impulse_error_gain(&slopes_of(&runs));
-    // The same fixed point against the impulse at the finer step the clearances are fitted at
-    // (the start without wear and the last round's coefficients, run again there): how far
-    // the model's own step moves the coefficient.
-    let last_round: Vec<f64> = (runs.iter().rev())
-        .take(if side_by_side { 2 } else { 1 })
-        .map(|r| r.0)
-        .collect();
+    // The same fixed point against the impulse at the finer step the clearances are fitted at:
+    // how far the model's own step moves the coefficient. The line through two runs there,
+    // side by side: without wear (the start) and at the coefficient; with an offset (no
+    // start), at 0.9 and 1.1 times it.
+    let finer_ks: Vec<f64> = if start.is_some() {
+        vec![k]
+    } else {
+        vec![0.9 * k, 1.1 * k]
+    };
     let finer_exts: Vec<PhysicsSpec> = (start.map(|_| accepted.clone()).into_iter())
-        .chain(last_round.iter().map(|&k| with(k, None)))
+        .chain(finer_ks.iter().map(|&k| with(k, None)))
         .collect();
     let mut finer = impulses_at_fit_step(work, &finer_exts, last)?.into_iter();
     let finer_start = (start.and_then(|_| finer.next()))
         .and_then(|i| slope_with(&i))
         .map(|k0| (0.0, k0));
     let finer_runs: Vec<(f64, f64)> = (finer_start.into_iter())
-        .chain((last_round.iter().zip(finer)).filter_map(|(&k, i)| Some((k, slope_with(&i)?))))
+        .chain((finer_ks.iter().zip(finer)).filter_map(|(&k, i)| Some((k, slope_with(&i)?))))
         .collect();
     let k_finer = fixed_point(&finer_runs).filter(|k| k.is_finite() && *k > 0.0);
     if let Some(kf) = k_finer {

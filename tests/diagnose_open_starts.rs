@@ -230,14 +230,24 @@ fn a_run_with_wear_starts_a_test_worn_as_a_run_at_the_step_asked_left_it() {
     let mean = from_start.over_records(0, 0, 99).unwrap();
     assert!(mean > down[0] && mean < down[down.len() - 1], "{mean}");
 
-    runner.set_wear_from(Some(1));
-    let worn = runner.contact_impulse(&wear, (2, 0)).unwrap();
-    assert_eq!(worn.at_test_start[2], Some(p));
-    let short = runner.cost.rig_seconds - whole;
-    assert!(
-        short < 0.5 * whole,
-        "{short} s of rig time, {whole} s from the start"
-    );
+    // From the states a run at refinement `r` left, `again` starts as that run had it
+    // (`expected` N s), for less than half the rig time of the run from the start (`whole`).
+    let from_states = |runner: &mut ModelRunner<'_>, r: u32, expected: f64, whole: f64| {
+        runner.set_wear_from(Some(r));
+        let c = runner.cost.rig_seconds;
+        let worn = runner.contact_impulse(&wear, (2, 0)).unwrap();
+        assert_eq!(
+            worn.at_test_start[2],
+            Some(expected),
+            "from the states at x{r}"
+        );
+        let short = runner.cost.rig_seconds - c;
+        assert!(
+            short < 0.5 * whole,
+            "from the states at x{r}: {short} s of rig time, {whole} s from the start"
+        );
+    };
+    from_states(&mut runner, 1, p, whole);
 
     runner.set_refinement(3);
     let fine_worn = runner.contact_impulse(&wear, (2, 0)).unwrap();
@@ -255,17 +265,8 @@ fn a_run_with_wear_starts_a_test_worn_as_a_run_at_the_step_asked_left_it() {
         "{q} N s at the finer step, {p} N s at the twin's"
     );
 
-    // That run left the finer step's own states (a wear fitted at the finer step is judged
-    // from them): from them, `again` starts worn as the finer run left it.
-    runner.set_wear_from(Some(3));
-    let c1 = runner.cost.rig_seconds;
-    let fine_from_fine = runner.contact_impulse(&wear, (2, 0)).unwrap();
-    assert_eq!(fine_from_fine.at_test_start[2], Some(q));
-    let fine_short = runner.cost.rig_seconds - c1;
-    assert!(
-        fine_short < 0.5 * fine_whole,
-        "{fine_short} s of rig time, {fine_whole} s from the start"
-    );
+    // That run left the finer step's own states, which runs at that step start from.
+    from_states(&mut runner, 3, q, fine_whole);
 }
 
 /// `ModelRunner::run_members`: member 0 is the plain run; member m > 0 is perturbed at the

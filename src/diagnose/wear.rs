@@ -445,8 +445,8 @@ fn impulse_by_end(impulse: &[Option<f64>], ti: usize) -> Option<f64> {
 /// tests' slope against the impulse of a 2.93e-5 m/(N s) model was 3.60e-5 at the twin's
 /// step and 2.81e-5 at the 3x finer one (6.5 us, near the simulated rig's own 7.5 us). Fitted
 /// wholly at the finer step, five sessions' coefficients came out -24 % to +3 % where the
-/// twin's step gave -0 % to +86 %: neither step is the rig's, and the two bracketed the
-/// hidden value in four of the five (BENCHMARKS.md, "The wear's impulse at two twin
+/// twin's step gave -11 % to +86 %: neither step is the rig's, and the two bracketed the
+/// hidden value in three of the five (BENCHMARKS.md, "The wear's impulse at two twin
 /// steps").
 fn impulses_at_fit_step(
     work: &mut Work<'_>,

@@ -460,6 +460,14 @@ fn impulses_at_fit_step(
     impulses
 }
 
+/// The fixed point's runs, (coefficient, the train tests' slope against its impulse), both
+/// m/(N s), for the evidence.
+fn runs_evidence(runs: impl Iterator<Item = (f64, f64)>) -> serde_json::Value {
+    json!(runs
+        .map(|(k, g)| json!({"coefficient_m_per_ns": k, "train_slope_m_per_ns": g}))
+        .collect::<Vec<_>>())
+}
+
 /// The largest of `ps` less the smallest (an impulse span, N s); -inf without any.
 fn span(ps: impl Iterator<Item = f64>) -> f64 {
     let (lo, hi) = ps.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
@@ -901,17 +909,11 @@ pub(super) fn wear_stage(
         "the model's accumulated normal contact impulse at each test's first contact steps (the mean over the record windows its clearance is read from, N s), with the fitted wear"
     );
     evidence["impulse_error_gain"] = json!(gain);
-    evidence["coefficient_runs"] = json!(runs
-        .iter()
-        .map(|r| json!({"coefficient_m_per_ns": r.0, "train_slope_m_per_ns": r.1}))
-        .collect::<Vec<_>>());
+    evidence["coefficient_runs"] = runs_evidence(runs.iter().map(|r| (r.0, r.1)));
     evidence["at_finer_step"] = json!({
         "refinement": FIT_REFINEMENT,
         "coefficient_m_per_ns": k_finer,
-        "runs": finer_runs
-            .iter()
-            .map(|r| json!({"coefficient_m_per_ns": r.0, "train_slope_m_per_ns": r.1}))
-            .collect::<Vec<_>>(),
+        "runs": runs_evidence(finer_runs.iter().copied()),
     });
     // A cap: where the growth the session saw happened within a test with contact that no
     // point brackets (the wear validates on it by its end), a faster wear capped at that

@@ -85,15 +85,13 @@ pub(super) fn test_clearance_by_runs(
     // twin over-counts contact in the band (BENCHMARKS.md, "Why the nominal twin over-counts
     // contact"), which a smaller clearance absorbs (-6 % on identify.toml with nothing
     // hidden); the few steps run make the finer step affordable.
-    let own = work.runner.refinement();
-    work.runner.set_refinement(own * FIT_REFINEMENT);
     // One run per clearance, not the band's draws as the joint offset's: the clearance, wear
     // and tilt stages share these fits (13 runs per bracketed test, three times as many with
     // the draws), and the offset the diagnosis reports is fitted over the draws
     // (`joint_offset_by_runs`) wherever two train tests share a range.
-    let tried = fit_on_grid(work, &[(t.test_index, 1.0)], (lo, hi), &with_clearance, 1);
-    work.runner.set_refinement(own);
-    let mut tried = tried?;
+    let mut tried = work.at_finer_step(FIT_REFINEMENT, |w| {
+        fit_on_grid(w, &[(t.test_index, 1.0)], (lo, hi), &with_clearance, 1)
+    })?;
     tried.sort_by(|a, b| a.0.total_cmp(&b.0));
     let Some(&(best, error)) = tried.iter().min_by(|a, b| a.1.total_cmp(&b.1)) else {
         return Ok(None);
@@ -144,7 +142,6 @@ fn evidence_spans(
     a: &PhysicsSpec,
     b: &PhysicsSpec,
 ) -> Result<Vec<Span>, DiagnoseError> {
-    let own = work.runner.refinement();
     let mut spans = Vec::new();
     for t in tests {
         let (from, through) = evidence_steps(work, t.test_index);
@@ -153,10 +150,9 @@ fn evidence_spans(
             b.test_clearance(&t.test, t.plan_clearance_m),
         );
         let closest = a.with_test_clearance(&t.test, ca.min(cb));
-        work.runner.set_refinement(own * FIT_REFINEMENT);
-        let span = work.open_span(&closest, t.test_index, from, through);
-        work.runner.set_refinement(own);
-        spans.push(span?);
+        spans.push(work.at_finer_step(FIT_REFINEMENT, |w| {
+            w.open_span(&closest, t.test_index, from, through)
+        })?);
     }
     Ok(spans)
 }
@@ -228,12 +224,10 @@ fn joint_offset_by_runs(
         .copied()
         .zip(sharpness_weights(spreads))
         .collect();
-    let own = work.runner.refinement();
-    work.runner.set_refinement(own * FIT_REFINEMENT);
     let members = work.opts.band_members;
-    let tried = fit_on_grid(work, &weighted, (lo, hi), &with_offset, members);
-    work.runner.set_refinement(own);
-    let tried = tried?;
+    let tried = work.at_finer_step(FIT_REFINEMENT, |w| {
+        fit_on_grid(w, &weighted, (lo, hi), &with_offset, members)
+    })?;
     let Some(&(best, error)) = tried.iter().min_by(|a, b| a.1.total_cmp(&b.1)) else {
         return Ok(None);
     };

@@ -335,6 +335,17 @@ impl<'a> Work<'a> {
 }
 
 impl<'a> Work<'a> {
+    /// `f` with the twin step `factor` times finer than the one in force, then the step and
+    /// the worn starts ([`ModelRunner::set_wear_from`]) as they were, whatever `f` returned.
+    pub(super) fn at_finer_step<T>(&mut self, factor: u32, f: impl FnOnce(&mut Self) -> T) -> T {
+        let (own, wear_from) = (self.runner.refinement(), self.runner.wear_from());
+        self.runner.set_refinement(own * factor);
+        let out = f(self);
+        self.runner.set_refinement(own);
+        self.runner.set_wear_from(wear_from);
+        out
+    }
+
     /// Stage `stage` begins (`line` on the terminal); the stage before ends.
     pub(super) fn stage(&mut self, stage: &'static str, line: impl Into<String>) {
         self.end_stage();
@@ -638,40 +649,38 @@ impl<'a> Work<'a> {
         if !ok || c.steps != Steps::All {
             return Ok((ok, before, after, reason));
         }
-        let own = self.runner.refinement();
-        self.runner.set_refinement(own * CONFIRM_REFINEMENT);
-        // With wear: each validation test from its lead-in, worn as the twin's step left it.
-        self.runner.set_wear_from(Some(own));
-        let (line, cand_ext) = (
-            format!(
-                "{} again at a {CONFIRM_REFINEMENT}x finer twin step on {}",
-                c.effect,
-                self.names(&c.validation).join(", ")
-            ),
-            c.ext.clone(),
+        let line = format!(
+            "{} again at a {CONFIRM_REFINEMENT}x finer twin step on {}",
+            c.effect,
+            self.names(&c.validation).join(", ")
         );
         (self.progress)(DiagnoseProgress::Evaluation(line));
         let (validation, steps, channel) = (c.validation.clone(), c.steps, c.channel.clone());
         let whole: Vec<Span> = validation.iter().map(|&t| Span::whole(t)).collect();
         let members = self.members(steps);
+        let cand_ext = c.ext.clone();
         let fine = |w: &mut Self, ext: &PhysicsSpec| -> Result<Option<f64>, DiagnoseError> {
             let runs = w.member_runs(ext, &whole, members)?;
             Ok(members_error(&runs, &validation, steps, channel.as_deref()))
         };
-        let both = self.prefetch_members(
-            (0..members)
-                .flat_map(|m| {
-                    [
-                        (accepted.clone(), whole.clone(), m),
-                        (cand_ext.clone(), whole.clone(), m),
-                    ]
-                })
-                .collect(),
-        );
-        let fb = both.and_then(|()| fine(self, &accepted));
-        let fa = fb.as_ref().ok().map(|_| fine(self, &cand_ext));
-        self.runner.set_refinement(own);
-        self.runner.set_wear_from(None);
+        let own = self.runner.refinement();
+        let (fb, fa) = self.at_finer_step(CONFIRM_REFINEMENT, |w| {
+            // With wear: each validation test from its lead-in, worn as the twin's step left it.
+            w.runner.set_wear_from(Some(own));
+            let both = w.prefetch_members(
+                (0..members)
+                    .flat_map(|m| {
+                        [
+                            (accepted.clone(), whole.clone(), m),
+                            (cand_ext.clone(), whole.clone(), m),
+                        ]
+                    })
+                    .collect(),
+            );
+            let fb = both.and_then(|()| fine(w, &accepted));
+            let fa = fb.as_ref().ok().map(|_| fine(w, &cand_ext));
+            (fb, fa)
+        });
         let (fb, fa) = (fb?, fa.transpose()?.flatten());
         let as_set = |v: Option<f64>, train: Option<SetError>| {
             v.zip(train).map(|(validation, t)| SetError {
@@ -719,16 +728,14 @@ impl<'a> Work<'a> {
         )));
         let accepted = self.accepted.clone();
         let own = self.runner.refinement();
-        self.runner.set_refinement(own * w.refinement);
-        // A wear candidate's tests each from their lead-in, worn as the twin's step left them
-        // (as the confirmation runs them); any other candidate's as it was fitted.
-        if c.ext.wear.is_some() && c.ext.wear != accepted.wear {
-            self.runner.set_wear_from(Some(own));
-        }
-        let fitted_step = self.errors_before_after(&accepted, &c, true);
-        self.runner.set_refinement(own);
-        self.runner.set_wear_from(None);
-        let (before, after) = fitted_step?;
+        let (before, after) = self.at_finer_step(w.refinement, |work| {
+            // A wear candidate's tests each from their lead-in, worn as the twin's step left
+            // them (as the confirmation runs them); any other candidate's as it was fitted.
+            if c.ext.wear.is_some() && c.ext.wear != accepted.wear {
+                work.runner.set_wear_from(Some(own));
+            }
+            work.errors_before_after(&accepted, &c, true)
+        })?;
         let null = where_fitted_null_spread(&self.opts, w, c.steps);
         let (ok, reason) = self.assess_with(&c, before, after, true, null);
         c.evidence["judged_on"] = serde_json::json!({

@@ -453,11 +453,7 @@ fn impulses_at_fit_step(
     exts: &[PhysicsSpec],
     through: (usize, usize),
 ) -> Result<Vec<Impulses>, DiagnoseError> {
-    let own = work.runner.refinement();
-    work.runner.set_refinement(own * FIT_REFINEMENT);
-    let impulses = work.runner.contact_impulses(exts, through);
-    work.runner.set_refinement(own);
-    impulses
+    work.at_finer_step(FIT_REFINEMENT, |w| w.runner.contact_impulses(exts, through))
 }
 
 /// The fixed point's runs, (coefficient, the train tests' slope against its impulse), both

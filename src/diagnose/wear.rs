@@ -756,8 +756,11 @@ pub(super) fn wear_stage(
     // coefficient is the line's fixed point instead: the coefficient whose model, re-run from
     // the session's start (through the last bracketed test's first step), gives the train
     // tests' clearances against its impulse a slope equal to it. The clearances are measured
-    // (model runs within each bracket) and the impulse converges with the step, so this needs
-    // no scoring of chaotic features.
+    // (model runs within each bracket), so this needs no scoring of chaotic features. The
+    // band's impulse does not converge with the step: by high-down's start on
+    // `identify.toml`, 12-16 N s at the twin's step, 16-17 at the simulated rig's own (7.5
+    // us), 18-21 at 3.3 us (BENCHMARKS.md, "The band's impulse against the model's
+    // discretisation, and the simulated rig's own"); the coefficient is the twin's step's.
     //
     // The coefficients run: the start and 1.6x it side by side, then 0.9x and 1.1x the fixed
     // point of the least-squares line of the train tests' slope against the coefficient over

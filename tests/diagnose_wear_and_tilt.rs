@@ -112,6 +112,9 @@ fn wear_is_found_on(
     let (_, log) = sim_session(dir.path(), "wear", &truth, plan);
     let d = diagnose(&log, dir.path(), "wear", &[]);
     assert_eq!(d["verdict"], "mismatch", "{d:#}");
+    // Never a constant offset for a clearance that grows: where the wear's trend is not
+    // validated, the clearance stage does not fit one.
+    assert!(accepted(&d, "clearance").is_empty(), "{d:#}");
     let w = accepted(&d, "wear");
     assert_eq!(w.len(), 1, "{d:#}");
     assert_eq!(w[0]["rank"], 1 + named_before, "{d:#}");

@@ -512,12 +512,24 @@ pub struct WearPoint {
     pub train: bool,
 }
 
-/// Stage 4a: wear (module docs). Returns whether wear was accepted. `ce` is the clearance
-/// evidence of the session.
+/// What the wear stage found ([`wear_stage`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum WearFound {
+    /// A wear accepted: the model's clearance moves with its contact impulse from now on.
+    Accepted,
+    /// The clearance per test moves with the contact impulse (3 standard errors and 2 % of the
+    /// plan's clearance), but no wear fitted to it was accepted.
+    TrendOnly,
+    /// No such trend, or too few bracketed tests to tell.
+    NoTrend,
+}
+
+/// Stage 4a: wear (module docs). Returns what it found. `ce` is the clearance evidence of the
+/// session.
 pub(super) fn wear_stage(
     work: &mut Work<'_>,
     ce: &mut ClearanceEvidence,
-) -> Result<bool, DiagnoseError> {
+) -> Result<WearFound, DiagnoseError> {
     let is_bracketed = |t: &TestClearance| t.clearance_m.is_some() && t.lower_bound_m.is_some();
     let n = ce.tests.iter().filter(|t| is_bracketed(t)).count();
     if n < 3 {
@@ -528,7 +540,7 @@ pub(super) fn wear_stage(
                 "its trend with the contact impulse needs three or more, two to fit and one to validate",
             ),
         );
-        return Ok(false);
+        return Ok(WearFound::NoTrend);
     }
     let accepted = work.accepted.clone();
     let bracketed: Vec<TestClearance> = ce
@@ -558,7 +570,7 @@ pub(super) fn wear_stage(
             "wear",
             format!("the model's contact exchanges {:.2e} N s of normal impulse between the first and last bracketed tests: nothing for wear to grow with", p_span.max(0.0)),
         );
-        return Ok(false);
+        return Ok(WearFound::NoTrend);
     }
     (work.progress)(DiagnoseProgress::Note(format!(
         "wear: the model's normal contact impulse at the bracketed tests' first contact steps (the mean over the steps their clearance is read from): {}",
@@ -626,7 +638,7 @@ pub(super) fn wear_stage(
             "wear",
             "the clearance per test could not be refined by model runs in three or more tests",
         );
-        return Ok(false);
+        return Ok(WearFound::NoTrend);
     };
     let growth = k_all * p_span;
     let evidence = json!({
@@ -650,7 +662,7 @@ pub(super) fn wear_stage(
                 format!("no trend of the clearance with the contact impulse: slope {k_all:.2e} m/(N s), standard error {se_all:.1e} m/(N s), growth {growth:.2e} m over the session (3 standard errors and 2 % of the plan's clearance are needed)"),
             )
         });
-        return Ok(false);
+        return Ok(WearFound::NoTrend);
     }
     // A test with contact that brackets nothing validates by the growth its own contact
     // makes: by its end, not its start.
@@ -692,7 +704,7 @@ pub(super) fn wear_stage(
         );
         work.unexplained
             .push(unexplained_trend(k_all, se_all, growth));
-        return Ok(false);
+        return Ok(WearFound::TrendOnly);
     }
     let said = format!(
         "wear: fitted on {}, validated on {} (tests where the line predicts a growth above 2 % of the plan's clearance)",
@@ -1033,7 +1045,11 @@ pub(super) fn wear_stage(
         work.undecided("wear", format!("{why}{judged}"));
         work.unexplained.push(why);
     }
-    Ok(accepted)
+    Ok(if accepted {
+        WearFound::Accepted
+    } else {
+        WearFound::TrendOnly
+    })
 }
 
 /// A wear to judge: its coefficient (m/(N s)), cap (m), alternatives, and the evidence's

@@ -205,6 +205,9 @@ pub(super) struct Candidate {
     /// Where it was fitted ([`Candidate::judged_where_fitted`]): the steps of its tests and
     /// the twin step refinement it is judged on when the judging on every step rejects it.
     pub(super) where_fitted: Option<WhereFitted>,
+    /// Why the regime's share of the error before is not asked of it (evidence that it is no
+    /// absorbed contact excess; [`Candidate::share_waived_by`]), if it is not.
+    pub(super) share_waived: Option<String>,
 }
 
 /// The steps and the twin step a candidate was fitted on, where it is judged as well.
@@ -243,7 +246,16 @@ impl Candidate {
             steps,
             channel: None,
             where_fitted: None,
+            share_waived: None,
         }
+    }
+
+    /// Judged without the regime's share of the error before (the fall beyond the null spread
+    /// and the penalty is still asked): the share guards against an effect that absorbs the
+    /// default twin's own contact excess, and `why` says what rules that out.
+    pub(super) fn share_waived_by(mut self, why: Option<String>) -> Candidate {
+        self.share_waived = why;
+        self
     }
 
     /// Judged as well on the steps `spans` of its tests at a twin step `refinement` times
@@ -863,7 +875,14 @@ impl<'a> Work<'a> {
                         (self.opts.null_spread, self.opts.min_relative_improvement)
                     }
                 };
-                let share = if share { regime_share } else { 0.0 };
+                let share = if share && c.share_waived.is_none() {
+                    regime_share
+                } else {
+                    0.0
+                };
+                let waived = (c.share_waived.as_ref()).map_or(String::new(), |w| {
+                    format!("; the band's share not asked: {w}")
+                });
                 let null = null_spread.unwrap_or(regime_null);
                 let needed = null + self.opts.parameter_penalty * c.n_params as f64;
                 if a.validation >= b.validation {
@@ -886,7 +905,7 @@ impl<'a> Work<'a> {
                     ))
                 } else {
                     (true, format!(
-                        "the validation error falls {:.1}x ({:.3} -> {:.3}), beyond the null spread and the penalty ({needed:.3})",
+                        "the validation error falls {:.1}x ({:.3} -> {:.3}), beyond the null spread and the penalty ({needed:.3}){waived}",
                         b.validation / a.validation.max(1e-12), b.validation, a.validation
                     ))
                 }

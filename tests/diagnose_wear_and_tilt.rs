@@ -36,8 +36,10 @@
 //! falls 1.5x, one grazing step (its recording diagnosed by hand). Run again on 3496e55, "A
 //! wear trend not validated is no constant offset": the 2.5e-5 wear fitted at -11 % and
 //! rejected on the probes' band, a constant clearance offset accepted in its place (no longer
-//! fitted beside a wear's trend since 16e6309); the 1.5e-5 wear at -2 %, validated 2.8x; the
-//! tilts at -0.0281 and -0.0362 rad (41 % and 21 % off). All four fail.
+//! fitted beside a wear's trend since 16e6309; since c78ca42 the wear is named, at -11 %, on
+//! its validation probes' own clearances, but validated 1.0x with the comparison's spread:
+//! "Held-out clearances in place of the band's share"); the 1.5e-5 wear at -2 %, validated
+//! 2.8x; the tilts at -0.0281 and -0.0362 rad (41 % and 21 % off). All four fail.
 
 mod cli_support;
 mod diagnose_support;

@@ -45,7 +45,7 @@
 use serde_json::json;
 
 use crate::config::{ClearanceSpec, PhysicsSpec, WearSpec};
-use crate::signal::features::inverse_variance_weights;
+use crate::signal::features::{inverse_variance_weights, spreads_known};
 
 use super::clearance::{ClearanceEvidence, TestClearance};
 use super::clearance_fit::{contact_steps_fitted, test_clearance_by_runs, FIT_REFINEMENT};
@@ -492,11 +492,11 @@ fn held_out_confirmation(
 ) -> Option<String> {
     let train: Vec<&WearPoint> = points.iter().filter(|p| p.train).collect();
     let held: Vec<&WearPoint> = points.iter().filter(|p| !p.train).collect();
-    let ok = |p: &&WearPoint| p.spread_m.is_finite() && p.spread_m > 0.0;
-    if held.is_empty() || !held.iter().all(ok) || !train.iter().all(ok) || train.is_empty() {
+    let spreads = |ps: &[&WearPoint]| ps.iter().map(|p| p.spread_m).collect::<Vec<_>>();
+    if train.is_empty() || held.is_empty() || !spreads_known(&spreads(&held)) {
         return None;
     }
-    let w: Vec<f64> = train.iter().map(|p| p.spread_m.powi(-2)).collect();
+    let w = inverse_variance_weights(&spreads(&train))?;
     let constant = (train.iter().zip(&w))
         .map(|(p, w)| w * (p.clearance_m - p.plan_clearance_m))
         .sum::<f64>()

@@ -419,6 +419,13 @@ fn clearance_is_found(offset: f64, plan: &str) -> serde_json::Value {
         let ev = &tilt["evidence"];
         assert!(ev["angles_tried"].as_array().unwrap().len() >= 10, "{ev}");
         assert!(ev["train_error_without_tilt"].is_f64(), "{ev}");
+        // Both edges were tried, the one not taken closing as early as the best of the other.
+        let (fit, other) = (
+            tilt["parameters"]["angle"].as_f64().unwrap(),
+            ev["other_edge"]["angle"].as_f64().unwrap(),
+        );
+        assert!(fit * other < 0.0, "{ev}");
+        assert!(ev["other_edge"]["told"].is_boolean(), "{ev}");
         for ext in ["png", "svg"] {
             let f = dir
                 .path()

@@ -372,7 +372,7 @@ fn full() -> Diagnosis {
             "edge_closing_m": 5.4e-5,
             "angles_tried": angles,
             "train_error_without_tilt": 16.9,
-            "floor_angles": [-0.02, -0.016, -0.012],
+            "angle_spread": 0.002,
             "validation_contact_score_rms": {
                 "model_before": 9.8, "with_tilt": 1.2, "with_clearance_stage": 4.1
             },
@@ -512,7 +512,7 @@ fn a_diagnosis_draws_every_figure_as_png_and_svg() {
             "evidence-tilt",
             &[
                 "angle about y",
-                "mean): -0.016 rad",
+                "fitted: -0.016 +- 0.002 rad",
                 "rejected",
                 "with the clearance offset",
                 "0.054 mm early",

@@ -128,7 +128,7 @@ pub(super) fn contact_steps_fitted(work: &Work<'_>, ti: usize) -> Option<(usize,
 /// measured contact (the steps before are the same for every clearance a fit tries, run once:
 /// the smallest tried closes nothing there) to [`STEPS_PAST_FIRST_CONTACT`] after it (`None`:
 /// the test's last step).
-fn evidence_steps(work: &Work<'_>, ti: usize) -> (usize, Option<usize>) {
+pub(super) fn evidence_steps(work: &Work<'_>, ti: usize) -> (usize, Option<usize>) {
     let through = work.steps.past_contact(ti, STEPS_PAST_FIRST_CONTACT, true);
     (work.steps.before_first_contact(ti, 2), through)
 }
@@ -159,7 +159,7 @@ fn evidence_spans(
 
 /// The points a clearance search refines around its best one `best`, the first grid's spacing
 /// `h` apart: half and a quarter of it either side.
-fn refined_around(best: f64, h: f64) -> Vec<f64> {
+pub(super) fn refined_around(best: f64, h: f64) -> Vec<f64> {
     vec![
         best - 0.5 * h,
         best - 0.25 * h,
@@ -260,7 +260,7 @@ fn joint_offset_by_runs(
 /// let the flatter test's draws pick the offset: with -8e-5 m hidden beside 1FU at 50.9 Hz
 /// (low-down +-21, high-down +-45 um), -102 um; weighted so, -71 um (BENCHMARKS.md, "The
 /// joint offset weighted by each test's sharpness").
-fn sharpness_weights(spreads: &[f64]) -> Vec<f64> {
+pub(super) fn sharpness_weights(spreads: &[f64]) -> Vec<f64> {
     match inverse_variance_weights(spreads) {
         Some(w) if !w.is_empty() => {
             let mean = w.iter().sum::<f64>() / w.len() as f64;
@@ -273,7 +273,10 @@ fn sharpness_weights(spreads: &[f64]) -> Vec<f64> {
 /// The error of runs `runs` over the tests `tests`, (index, weight): each test's own error
 /// ([`members_error`], the median per step over the runs) combined as the weighted root mean
 /// square (`None` where a test was not compared).
-fn weighted_tests_error(runs: &[Vec<StepScores>], tests: &[(usize, f64)]) -> Option<f64> {
+pub(super) fn weighted_tests_error(
+    runs: &[Vec<StepScores>],
+    tests: &[(usize, f64)],
+) -> Option<f64> {
     let (mut sum, mut total) = (0.0, 0.0);
     for &(ti, w) in tests {
         let e = members_error(runs, &[ti], Steps::All, None)?;

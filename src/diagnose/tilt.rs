@@ -12,15 +12,18 @@
 //! Parameterisation: the angle about y, signed (positive: the tip-side edge, larger x, closes
 //! first), the axis fixed at `[0, 1]`. A slope across the beams (about x) is not fitted: the
 //! channels (bending along the beams, one contact voltage) carry no torsion, so it would be a
-//! smaller clearance to them. The angle starts from the clearance the train tests show before
-//! their first impact (the model-run clearance per test,
-//! `clearance_fit::test_clearance_by_runs`): `sin(angle) x_edge = c_model - c_measured`, for
-//! either edge; a grid of model runs of the train tests (their steps from two before the first
-//! measured contact to two past the last, started from a state of open contact) over both
-//! signs and 0.6-1.5 times that angle, refined once, gives the landscape; the angle is the
-//! mean of its floor around the best point (within the band's chaos the best point is a draw
-//! from the floor); the face as given on the same steps is the landscape's reference
-//! (`evidence-tilt`).
+//! smaller clearance to them. The edge closing starts from the clearance the train tests show
+//! before their first impact (the model-run clearance per test,
+//! `clearance_fit::test_clearance_by_runs`, which fits a flat face): `sin(angle) x_edge =
+//! c_model - c_measured`. The fit ([`fit_by_runs`]) searches half to 1.5 times that closing,
+//! within what the train tests' brackets admit, on the steps that carry a face's geometry, as
+//! the clearance offset is fitted: each train test's steps from two before its first measured
+//! contact to two past it, at a 3x finer twin step, each angle's error the median per step over
+//! the band's draws, the tests weighted by how sharply their own runs told their clearance. The
+//! tip-side edge on a grid of 9 closings, refined once; then the clamp-side edge closing as
+//! early, and the face as given on the same steps (the landscape's reference,
+//! `evidence-tilt`). The edge with the lower error is taken; the evidence says whether the two
+//! differ by more than the null spread of those steps (`other_edge.told`).
 //!
 //! Selection: the tilt is judged by the pipeline's rule against the model without the
 //! clearance offset (the two compete for the same evidence). Where the clearance offset was
@@ -41,8 +44,11 @@ use crate::config::{PhysicsSpec, TiltSpec};
 use crate::rom::Rom;
 
 use super::clearance::{ClearanceEvidence, TestClearance};
-use super::clearance_fit::test_clearance_by_runs;
-use super::judge::{alternate, grid_then_refine, set_error, set_error_of, Candidate, Steps, Work};
+use super::clearance_fit::{
+    evidence_steps, refined_around, sharpness_weights, test_clearance_by_runs, valley_spread,
+    weighted_tests_error, FIT_REFINEMENT,
+};
+use super::judge::{alternate, grid_then_refine, set_error_of, Candidate, Steps, Work};
 use super::outcome::EffectResult;
 use super::rerun::Span;
 use super::{DiagnoseError, DiagnoseProgress};
@@ -71,37 +77,159 @@ fn edges(rom: &Rom) -> (f64, f64) {
         })
 }
 
-/// The train errors within this share of the smallest one are the valley's floor: the band's
-/// chaos moves a run's error by about that much (the floor of a hidden 0.025 rad tilt on the
-/// four-probe plan: 1.52, 1.52, 1.49 at 0.0265, 0.0286, 0.0318 rad; of a hidden 0.02 rad on
-/// `identify.toml`: 3.61-3.97 from -0.0166 to -0.0277 rad).
-const FLOOR_SHARE: f64 = 0.1;
+/// What the tilt's fit compares, in words.
+const FIT_STEPS: &str = "each train test's steps from two before its first measured contact to two past it, at a 3x finer twin step, each angle's error the median per step over the band's draws";
 
-/// The angle the tried `(angle, train error)` points fit, the smallest error and the floor's
-/// angles: the mean angle of the valley's floor around the best point, i.e. the contiguous
-/// points of the best one's sign whose errors are within [`FLOOR_SHARE`] of the smallest. Where the floor is
-/// flat within the chaos the best point is a draw from it, at either end as often as in the
-/// middle (BENCHMARKS.md, "The tilt's angle from the valley's floor"); None without points.
-fn valley_floor(tried: &[(f64, f64)]) -> Option<(f64, f64, Vec<f64>)> {
-    let &(best, smallest) = tried.iter().min_by(|a, b| a.1.total_cmp(&b.1))?;
-    let mut side: Vec<(f64, f64)> = (tried.iter().copied())
-        .filter(|p| p.0.signum() == best.signum() && p.1.is_finite())
+/// `base` with its face tilted by `angle` about y (`base` itself at 0).
+fn with_tilt(base: &PhysicsSpec, angle: f64) -> PhysicsSpec {
+    let mut ext = base.clone();
+    ext.tilt = (angle != 0.0).then_some(TiltSpec { angle, axis: AXIS });
+    ext
+}
+
+/// The edge closings (m: how much earlier than the mean gap an edge closes) a tilt's fit
+/// searches, (lowest, highest): half to 1.5 times `closing` (the train tests' first contact
+/// before the model's, by their clearance runs, which fit a flat face), within what every train
+/// test's bracket admits where they admit a common range (test `t`'s first contact lies between
+/// its bounds, so an edge closing lies within `base`'s clearance for it less the bounds).
+fn closing_range(base: &PhysicsSpec, train: &[&TestClearance], closing: f64) -> (f64, f64) {
+    let (lo, hi) = (train.iter())
+        .filter_map(|t| {
+            let (a, b) = (t.lower_bound_m?, t.upper_bound_m?);
+            let c = base.test_clearance(&t.test, t.plan_clearance_m);
+            Some((c - a.max(b), c - a.min(b)))
+        })
+        .fold((0.5 * closing, 1.5 * closing), |(lo, hi), r| {
+            (lo.max(r.0), hi.min(r.1))
+        });
+    match hi > lo {
+        true => (lo, hi),
+        false => (0.5 * closing, 1.5 * closing),
+    }
+}
+
+/// The tilt fitted by model runs ([`fit_by_runs`]).
+#[derive(Clone, Debug, PartialEq)]
+struct TiltFit {
+    /// The angle about y, rad (signed: which edge closes first).
+    angle: f64,
+    /// Its error, -.
+    error: f64,
+    /// The runs' own spread, rad ([`valley_spread`]).
+    spread: f64,
+    /// The runs of the tip-side edge, (angle rad, error -).
+    tried: Vec<(f64, f64)>,
+    /// The clamp-side edge closing as early as the best tip-side run, (angle rad, error -).
+    clamp_side: (f64, f64),
+    /// The edge not taken, (angle rad, error -): `clamp_side` or the best tip-side run.
+    other: (f64, f64),
+    /// Whether the edges' errors differ by more than the band's null spread.
+    edge_told: bool,
+    /// The face as given on the same steps, -.
+    flat: Option<f64>,
+}
+
+/// The tilt whose model runs match the train tests `train` best where a tilted face first
+/// closes: each test's steps from two before its first measured contact to two past it
+/// ([`evidence_steps`]) at the clearance fits' finer twin step, each angle's error the median
+/// per step over the band's draws, the tests weighted by how sharply their own clearance fits
+/// told their first contact (`spreads`, m: [`sharpness_weights`]), as the clearance offset is
+/// fitted. The tip-side edge on a grid of 9 over the edge closings `range` (m), refined once
+/// around the best; then the clamp-side edge closing as early, and the face as given. `None`
+/// where no run compared.
+///
+/// NOTE: over the whole band the angles' errors are draws of its chaos: a grid over every
+/// contact step of the train tests took -0.0282 rad (+41 %, the other edge) for a hidden 0.02
+/// and -0.0362 (+21 %) for 0.03 on the four-probe plan, its best points 5 % apart differing by
+/// 0.3-0.6 (BENCHMARKS.md, "A hidden tilt (issue 15)"). The steps about the first contact carry
+/// the face's geometry (where an edge first touches, how much contact follows), as they carry a
+/// clearance; the later ones, chaos and the twin's own step.
+fn fit_by_runs(
+    work: &mut Work<'_>,
+    base: &PhysicsSpec,
+    (tip_edge, clamp_edge): (f64, f64),
+    train: &[&TestClearance],
+    spreads: &[f64],
+    (lo, hi): (f64, f64),
+) -> Result<Option<TiltFit>, DiagnoseError> {
+    let angle_of = |closing: f64, edge: f64| (closing / edge).clamp(-1.0, 1.0).asin();
+    let (a_lo, a_hi) = (angle_of(lo, tip_edge), angle_of(hi, tip_edge));
+    let h = (a_hi - a_lo) / 8.0;
+    let grid: Vec<f64> = (0..9)
+        .map(|k| a_lo + h * k as f64)
+        .filter(|a| *a > 0.0)
         .collect();
-    side.sort_by(|a, b| a.0.total_cmp(&b.0));
-    let k = side.iter().position(|p| p.0 == best)?;
-    let on_floor = |p: &(f64, f64)| p.1 <= smallest * (1.0 + FLOOR_SHARE);
-    let lo = (0..k)
-        .rev()
-        .take_while(|&i| on_floor(&side[i]))
-        .last()
-        .unwrap_or(k);
-    let hi = (k + 1..side.len())
-        .take_while(|&i| on_floor(&side[i]))
-        .last()
-        .unwrap_or(k);
-    let floor = &side[lo..=hi];
-    let angle = floor.iter().map(|p| p.0).sum::<f64>() / floor.len() as f64;
-    Some((angle, smallest, floor.iter().map(|p| p.0).collect()))
+    let weighted: Vec<(usize, f64)> = (train.iter().map(|t| t.test_index))
+        .zip(sharpness_weights(spreads))
+        .collect();
+    // Every run starts from a state of open contact two steps before each test's first
+    // contact, captured with the clearances closed by more than any edge tried.
+    let widest = 1.1 * (a_hi + 0.5 * h).sin() * tip_edge;
+    let mut closest = base.clone();
+    for t in train {
+        let c = base.test_clearance(&t.test, t.plan_clearance_m);
+        closest = closest.with_test_clearance(&t.test, c - widest);
+    }
+    let members = work.opts.band_members;
+    let error = |_: &mut Work<'_>, _: f64, runs: &[Vec<super::outcome::StepScores>]| {
+        weighted_tests_error(runs, &weighted)
+    };
+    let (tried, checks) = work.at_finer_step(FIT_REFINEMENT, |w| {
+        let mut spans = Vec::new();
+        for &(ti, _) in &weighted {
+            let (from, through) = evidence_steps(w, ti);
+            spans.push(w.open_span(&closest, ti, from, through)?);
+        }
+        let plan = |_: &Work<'_>, a: f64| (with_tilt(base, a), spans.clone());
+        let tried = grid_then_refine(
+            w,
+            grid,
+            |best| {
+                refined_around(best, h)
+                    .into_iter()
+                    .filter(|a| *a > 0.0)
+                    .collect()
+            },
+            &plan,
+            members,
+            error,
+        )?;
+        let Some(&(best, _)) = tried.iter().min_by(|a, b| a.1.total_cmp(&b.1)) else {
+            return Ok::<_, DiagnoseError>((tried, Vec::new()));
+        };
+        let other = -angle_of(best.sin() * tip_edge, clamp_edge);
+        let checks = grid_then_refine(w, vec![other, 0.0], |_| Vec::new(), &plan, members, error)?;
+        Ok((tried, checks))
+    })?;
+    let Some(&(best, best_error)) = tried.iter().min_by(|a, b| a.1.total_cmp(&b.1)) else {
+        return Ok(None);
+    };
+    let flat = checks.iter().find(|c| c.0 == 0.0).map(|c| c.1);
+    let clamp_side = (checks.iter().copied())
+        .find(|c| c.0 != 0.0)
+        .unwrap_or((-angle_of(best.sin() * tip_edge, clamp_edge), f64::NAN));
+    // The null spread of a band fit's own steps at the finer step (its valley, the edges).
+    let null = work.opts.fitted_steps_null_spread;
+    let ((angle, error), other) = match clamp_side.1 < best_error {
+        true => (clamp_side, (best, best_error)),
+        false => ((best, best_error), clamp_side),
+    };
+    // The spread in the chosen edge's angle: the tip side's valley, scaled to its edge.
+    let scale = if angle > 0.0 {
+        1.0
+    } else {
+        tip_edge / clamp_edge
+    };
+    Ok(Some(TiltFit {
+        angle,
+        error,
+        spread: scale * valley_spread(&tried, (best, best_error), null),
+        edge_told: (clamp_side.1 - best_error).abs() > null,
+        tried,
+        clamp_side,
+        other,
+        flat,
+    }))
 }
 
 /// Stage 5: tilt (module docs). `base` is the model before the clearance stage (without its
@@ -141,9 +269,11 @@ pub(super) fn tilt_stage(
     // same model runs as the clearance stage (shared through the cache).
     let after_clearance = std::mem::replace(&mut work.accepted, base.clone());
     let mut closes = Vec::new();
+    let mut spreads = Vec::new();
     for t in bracketed.iter().filter(|t| train.contains(&t.test_index)) {
         if let Some(r) = test_clearance_by_runs(work, t)? {
             closes.push(base.test_clearance(&t.test, t.plan_clearance_m) - r.clearance_m);
+            spreads.push(r.spread_m);
         }
     }
     let plan = bracketed[0].plan_clearance_m;
@@ -152,7 +282,7 @@ pub(super) fn tilt_stage(
     } else {
         closes.iter().sum::<f64>() / closes.len() as f64
     };
-    if closing.is_nan() || closing <= 0.02 * plan {
+    if closing.is_nan() || closing <= 0.02 * plan || closes.len() < train.len() {
         work.accepted = after_clearance;
         (work.progress)(DiagnoseProgress::Note(format!(
             "tilt: the train tests' first contact comes {closing:+.2e} m from the model's clearance: no edge closes early, a tilt is not indicated"
@@ -168,49 +298,33 @@ pub(super) fn tilt_stage(
         });
         return Ok(());
     }
-    let with = |angle: f64| {
-        let mut ext = base.clone();
-        ext.tilt = Some(TiltSpec { angle, axis: AXIS });
-        ext
-    };
-    let start_tip = (closing / tip_edge).min(1.0).asin();
-    let start_clamp = -(closing / clamp_edge).min(1.0).asin();
-    let grid: Vec<f64> = [start_tip, start_clamp]
-        .iter()
-        .flat_map(|s| [0.6, 0.8, 1.0, 1.2, 1.5].map(|m| (m * s).clamp(-0.1, 0.1)))
+    let train_tests: Vec<&TestClearance> = (bracketed.iter().copied())
+        .filter(|t| train.contains(&t.test_index))
         .collect();
-    // The train tests' steps from two before their first measured contact to two past their
-    // last: a tilt acts in contact. The steps before are the same for every angle tried, run
-    // once: with the clearance closed by the largest edge closing tried, nothing closes there.
-    let widest = grid.iter().fold(0.0f64, |m, a| m.max(a.abs())) * 1.1;
-    let closing_max = widest.sin() * tip_edge.max(clamp_edge);
-    let train_spans = contact_spans(work, base, &bracketed, &train, closing_max)?;
-    let tried = grid_then_refine(
+    let range = closing_range(base, &train_tests, closing);
+    let fit = fit_by_runs(
         work,
-        grid,
-        |best| vec![0.9 * best, 1.1 * best],
-        &|_, angle| (with(angle), train_spans.clone()),
-        1,
-        |work, angle, s| {
-            (work.progress)(DiagnoseProgress::Evaluation(format!(
-                "tilt {angle:.3e} rad about y on the train tests"
-            )));
-            set_error(&s[0], &train, Steps::All)
-        },
+        base,
+        (tip_edge, clamp_edge),
+        &train_tests,
+        &spreads,
+        range,
     )?;
-    let Some((angle, train_error, floor)) = valley_floor(&tried) else {
+    let Some(fit) = fit else {
         work.accepted = after_clearance;
         return Ok(());
     };
-    // The face as given on the same steps: the reference of the angles' errors (the
-    // evidence's landscape).
-    let flat = work.scores_spans(base, &train_spans)?;
-    let train_error_flat = set_error(&flat, &train, Steps::All);
+    let angle = fit.angle;
+    let with = |angle: f64| with_tilt(base, angle);
     (work.progress)(DiagnoseProgress::Note(format!(
-        "tilt: {angle:.3e} rad about y by {} runs of the train tests' contact steps (the mean of the valley's floor, {} angles within {:.0} % of the smallest error {train_error:.3}; the edge closes {closing:.2e} m early)",
-        tried.len(),
-        floor.len(),
-        100.0 * FLOOR_SHARE
+        "tilt: {angle:.3e} +- {:.1e} rad about y by {} runs of the train tests' steps about their first contact (the {} edge; the other {:.3e} rad scores {:.3}, the best {:.3}; the edge closes {:.2e} m early)",
+        fit.spread,
+        fit.tried.len(),
+        if angle > 0.0 { "tip-side" } else { "clamp-side" },
+        fit.other.0,
+        fit.other.1,
+        fit.error,
+        (angle.abs().sin() * if angle > 0.0 { tip_edge } else { clamp_edge }),
     )));
     // The contact channel's statistics on the validation tests, before and with the tilt and
     // with the clearance offset: what separates the two.
@@ -231,9 +345,14 @@ pub(super) fn tilt_stage(
             "with_tilt": contact_rms(&s_tilt),
             "with_clearance_stage": contact_rms(&s_clear),
         },
-        "angles_tried": tried.iter().map(|(a, e)| json!({"angle": a, "train_error": e})).collect::<Vec<_>>(),
-        "train_error_without_tilt": train_error_flat,
-        "floor_angles": floor,
+        "closing_range_m": [range.0, range.1],
+        "angles_tried": (fit.tried.iter().chain([&fit.clamp_side]))
+            .map(|(a, e)| json!({"angle": a, "train_error": e}))
+            .collect::<Vec<_>>(),
+        "train_error_without_tilt": fit.flat,
+        "angle_spread": fit.spread,
+        "other_edge": {"angle": fit.other.0, "train_error": fit.other.1, "told": fit.edge_told},
+        "steps": FIT_STEPS,
     });
     let cand = Candidate::new(
         "tilt",
@@ -267,7 +386,7 @@ pub(super) fn tilt_stage(
         // Rejected on the whole tests beside an accepted clearance offset: the two compared
         // where a tilt acts. Within the null spread of each other there, the session cannot
         // tell them apart.
-        let spans = contact_spans(work, base, &bracketed, &all, closing_max)?;
+        let spans = contact_spans(work, base, &bracketed, &all, 1.1 * range.1)?;
         let cmp = Candidate::new(
             "tilt",
             with(angle),
@@ -372,39 +491,61 @@ fn contact_spans(
 mod tests {
     use super::*;
 
-    #[test]
-    fn the_angle_is_the_mean_of_the_floor_around_the_best_point() {
-        // A flat floor at 0.0265-0.0318 rad, a cliff beyond, the other sign as low.
-        let tried = [
-            (0.0159, 3.35),
-            (0.0212, 2.34),
-            (0.0265, 1.52),
-            (0.0286, 1.52),
-            (0.0318, 1.49),
-            (0.0350, 16.9),
-            (-0.0318, 1.50),
-            (-0.0265, 1.51),
-        ];
-        let (angle, smallest, floor) = valley_floor(&tried).unwrap();
-        assert_eq!(floor, [0.0265, 0.0286, 0.0318]);
-        assert!((angle - 0.0869 / 3.0).abs() < 1e-12, "{angle}");
-        assert_eq!(smallest, 1.49);
+    /// A train test `name` bracketed by `bounds` (m) about the plan's 699 um.
+    fn bracketed(name: &str, bounds: (f64, f64)) -> TestClearance {
+        TestClearance {
+            test: name.into(),
+            plan_clearance_m: 699e-6,
+            lower_bound_m: Some(bounds.0),
+            upper_bound_m: Some(bounds.1),
+            ..super::super::clearance::tests::test(0, Some(bounds.1))
+        }
     }
 
     #[test]
-    fn a_floor_interrupted_by_a_higher_point_ends_there() {
-        let tried = [
-            (-0.03, 1.0),
-            (-0.025, 2.0),
-            (-0.02, 1.05),
-            (-0.015, 1.08),
-            (-0.01, 3.0),
-        ];
-        let (angle, _, floor) = valley_floor(&tried).unwrap();
-        assert_eq!(floor, [-0.03]);
-        assert_eq!(angle, -0.03);
-        let tried = [(0.01, 5.0), (0.02, 1.0), (0.03, 4.0)];
-        assert_eq!(valley_floor(&tried).unwrap().0, 0.02);
-        assert_eq!(valley_floor(&[]), None);
+    fn the_closings_searched_lie_about_the_runs_within_every_bracket() {
+        let base = PhysicsSpec::default();
+        // Brackets wide about the plan: half the runs' closing, to what the second admits
+        // (699 - 591 um).
+        let (a, b) = (
+            bracketed("probe-1", (439e-6, 1065e-6)),
+            bracketed("probe-3", (591e-6, 1523e-6)),
+        );
+        let (lo, hi) = closing_range(&base, &[&a, &b], 80e-6);
+        assert!(
+            (lo - 40e-6).abs() < 1e-12 && (hi - 108e-6).abs() < 1e-12,
+            "{lo} {hi}"
+        );
+        let (lo, hi) = closing_range(&base, &[&a], 80e-6);
+        assert!(
+            (lo - 40e-6).abs() < 1e-12 && (hi - 120e-6).abs() < 1e-12,
+            "{lo} {hi}"
+        );
+        // A bracket whose first contact came no earlier than 699 - 620 = 79 um before the
+        // model's, and one later than 699 - 660 = 39 um: 79 um at most, 39 um at least.
+        let c = bracketed("probe-1", (620e-6, 700e-6));
+        let d = bracketed("probe-3", (500e-6, 660e-6));
+        let (lo, hi) = closing_range(&base, &[&c, &d], 80e-6);
+        assert!(
+            (lo - 40e-6).abs() < 1e-12 && (hi - 79e-6).abs() < 1e-12,
+            "{lo} {hi}"
+        );
+        let (lo, _) = closing_range(&base, &[&d], 60e-6);
+        assert!((lo - 39e-6).abs() < 1e-12, "{lo}");
+        // Brackets that share no closing with the runs': the runs' range alone.
+        let e = bracketed("probe-1", (690e-6, 700e-6));
+        let (lo, hi) = closing_range(&base, &[&e], 80e-6);
+        assert!(
+            (lo - 40e-6).abs() < 1e-12 && (hi - 120e-6).abs() < 1e-12,
+            "{lo} {hi}"
+        );
+    }
+
+    #[test]
+    fn the_face_as_given_carries_no_tilt() {
+        let base = PhysicsSpec::default();
+        assert_eq!(with_tilt(&base, 0.0), base);
+        let t = with_tilt(&base, -0.02).tilt.unwrap();
+        assert_eq!((t.angle, t.axis), (-0.02, AXIS));
     }
 }

@@ -1257,11 +1257,11 @@ fn evidence_discretisation(d: &Diagnosis) -> Option<Panels> {
     })
 }
 
-/// The tilt's fit (the tilt stage's evidence): the train tests' error over their contact
-/// steps against the face's angle about y, through the face as given (angle 0), the valley's
-/// floor and the fitted angle (its mean) marked; and the contact channel's RMS score on the validation tests for the model
-/// without the clearance offset, with the tilt and with the clearance offset (what separates
-/// a tilt from a smaller clearance).
+/// The tilt's fit (the tilt stage's evidence): the train tests' error over their steps about
+/// the first contact against the face's angle about y, through the face as given (angle 0),
+/// the fitted angle and its spread marked; and the contact channel's RMS score on the
+/// validation tests for the model without the clearance offset, with the tilt and with the
+/// clearance offset (what separates a tilt from a smaller clearance).
 fn evidence_tilt(d: &Diagnosis) -> Option<Panels> {
     let e = d.effects.iter().find(|e| e.effect == "tilt")?;
     let ev = &e.evidence;
@@ -1273,13 +1273,13 @@ fn evidence_tilt(d: &Diagnosis) -> Option<Panels> {
     tried.extend(flat.map(|f| (0.0, f)));
     tried.sort_by(|a, b| a.0.total_cmp(&b.0));
     let fitted = number(&e.parameters["angle"]);
-    let floor: Vec<(f64, f64)> = (ev["floor_angles"].as_array().into_iter().flatten())
-        .filter_map(number)
-        .filter_map(|a| tried.iter().copied().find(|p| p.0 == a))
-        .collect();
+    let spread = number(&ev["angle_spread"]).filter(|s| *s > 0.0);
     let xs: Vec<f64> = tried.iter().map(|p| p.0).collect();
     let ys: Vec<f64> = tried.iter().map(|p| p.1).chain([0.0]).collect();
-    let desc = ("angle about y (rad)", "train error, contact steps (-)");
+    let desc = (
+        "angle about y (rad)",
+        "train error, about the first contact (-)",
+    );
     let caption = format!("train tests: {}", e.train_tests.join(", "));
     let mut p = Panel::over(caption, desc, &xs, &ys)?;
     if let Some(f) = flat {
@@ -1293,14 +1293,6 @@ fn evidence_tilt(d: &Diagnosis) -> Option<Panels> {
     }
     p.series
         .push(line(tried, palette(0), LineKind::Markers, width()));
-    if !floor.is_empty() {
-        p.series.push(Series {
-            runs: floor.iter().map(|&q| vec![q]).collect(),
-            color: palette(1),
-            kind: LineKind::Markers,
-            width: width() + 3,
-        });
-    }
     if let Some(a) = fitted {
         let (y0, y1) = p.y;
         p.series.push(line(
@@ -1309,6 +1301,15 @@ fn evidence_tilt(d: &Diagnosis) -> Option<Panels> {
             LineKind::Dashed,
             width(),
         ));
+        if let Some(s) = spread {
+            let y = y0 + 0.05 * (y1 - y0);
+            p.series.push(line(
+                vec![(a - s, y), (a + s, y)],
+                palette(1),
+                LineKind::Solid,
+                width() + 2,
+            ));
+        }
     }
     let mut panels = vec![p];
     let contact = &ev["validation_contact_score_rms"];
@@ -1346,20 +1347,16 @@ fn evidence_tilt(d: &Diagnosis) -> Option<Panels> {
     }
     let verdict = judged(e).unwrap_or_default();
     let mut legend = vec![entry(
-        "train error per angle tried (refined once around the best)",
+        "train error per angle tried (the tip-side edge refined once around its best; the clamp-side edge closing as early)",
         palette(0),
         LineKind::Markers,
     )];
-    if !floor.is_empty() {
-        legend.push(entry(
-            "the valley's floor (within the band's chaos of the smallest error)",
-            palette(1),
-            LineKind::Markers,
-        ));
-    }
     if let Some(a) = fitted {
+        let pm = spread
+            .map(|s| format!(" +- {}", sig(s)))
+            .unwrap_or_default();
         legend.push(entry(
-            format!("fitted (the floor's mean): {} rad{verdict}", sig(a)),
+            format!("fitted: {}{pm} rad{verdict}", sig(a)),
             palette(1),
             LineKind::Dashed,
         ));

@@ -39,7 +39,11 @@
 //! fitted beside a wear's trend since 16e6309; since c78ca42 the wear is named, at -11 %, on
 //! its validation probes' own clearances, but validated 1.0x with the comparison's spread:
 //! "Held-out clearances in place of the band's share"); the 1.5e-5 wear at -2 %, validated
-//! 2.8x; the tilts at -0.0281 and -0.0362 rad (41 % and 21 % off). All four fail.
+//! 2.8x; the tilts at -0.0281 and -0.0362 rad (41 % and 21 % off). All four fail. Since the
+//! tilt is fitted about the first contact ("The tilt fitted about the first contact"; the
+//! plan's recordings diagnosed by hand): 0.02 rad at +0.0195 (-2 %), named the clearance's
+//! equal alternative where a tilt acts, validated 2.9x with the comparison's spread (fails);
+//! 0.03 rad at +0.0310 (+3 %), an equal alternative, 3.3x (holds).
 
 mod cli_support;
 mod diagnose_support;
@@ -178,10 +182,11 @@ fn tilt_is_found(angle: f64) {
                 .unwrap()
                 .iter()
                 .any(|a| a.as_str().unwrap().starts_with("tilt"))
+            // on the whole tests, or where a tilt acts (rejected on the whole tests)
             && tilt["reason"]
                 .as_str()
                 .unwrap()
-                .starts_with("an equal alternative"));
+                .contains("an equal alternative"));
     assert!(named, "{d:#}");
     // The sign says which edge closes first; the tip-side edge is the one the beams' bending
     // can tell (either sign within 20 % of the magnitude is accepted as found).

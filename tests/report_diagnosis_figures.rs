@@ -373,6 +373,7 @@ fn full() -> Diagnosis {
             "angles_tried": angles,
             "train_error_without_tilt": 16.9,
             "angle_spread": 0.002,
+            "floor_angles": [-0.02, -0.016, -0.012],
             "validation_contact_score_rms": {
                 "model_before": 9.8, "with_tilt": 1.2, "with_clearance_stage": 4.1
             },
@@ -512,7 +513,7 @@ fn a_diagnosis_draws_every_figure_as_png_and_svg() {
             "evidence-tilt",
             &[
                 "angle about y",
-                "fitted: -0.016 +- 0.002 rad",
+                "mean): -0.016 +- 0.002 rad",
                 "rejected",
                 "with the clearance offset",
                 "0.054 mm early",

@@ -318,6 +318,8 @@ pub(super) struct Work<'a> {
     stage_start: Option<(&'static str, RunCost)>,
     /// The lines [`Work::note_once`] has shown.
     notes_shown: std::collections::HashSet<String>,
+    /// The model each judged effect was judged with, by its index in `effects`.
+    judged_models: HashMap<usize, PhysicsSpec>,
 }
 
 impl<'a> Work<'a> {
@@ -342,6 +344,7 @@ impl<'a> Work<'a> {
             stage_costs: Vec::new(),
             stage_start: None,
             notes_shown: std::collections::HashSet::new(),
+            judged_models: HashMap::new(),
         }
     }
 }
@@ -456,6 +459,11 @@ impl<'a> Work<'a> {
 
     /// The band's runs of `ext` over `spans` (members 0, 1, ... [`DiagnoseOptions::band_members`])
     /// made so far at the runner's twin step as it is now; None where one was not made.
+    /// The model the effect at index `i` of `effects` was judged with (None: not judged).
+    pub(super) fn judged_model(&self, i: usize) -> Option<&PhysicsSpec> {
+        self.judged_models.get(&i)
+    }
+
     pub(super) fn band_runs_made(
         &self,
         ext: &PhysicsSpec,
@@ -930,6 +938,7 @@ impl<'a> Work<'a> {
         if ok {
             self.accepted = c.ext.clone();
         }
+        self.judged_models.insert(self.effects.len(), c.ext.clone());
         self.effects.push(EffectResult {
             effect: c.effect.to_string(),
             rank: 0,

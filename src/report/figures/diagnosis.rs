@@ -1259,9 +1259,10 @@ fn evidence_discretisation(d: &Diagnosis) -> Option<Panels> {
 
 /// The tilt's fit (the tilt stage's evidence): the train tests' error over their steps about
 /// the first contact against the face's angle about y, through the face as given (angle 0),
-/// the fitted angle and its spread marked; and the contact channel's RMS score on the
-/// validation tests for the model without the clearance offset, with the tilt and with the
-/// clearance offset (what separates a tilt from a smaller clearance).
+/// the valley's floor, the fitted angle (the floor's mean on the edge taken) and its spread
+/// marked; and the contact channel's RMS score on the validation tests for the model without
+/// the clearance offset, with the tilt and with the clearance offset (what separates a tilt
+/// from a smaller clearance).
 fn evidence_tilt(d: &Diagnosis) -> Option<Panels> {
     let e = d.effects.iter().find(|e| e.effect == "tilt")?;
     let ev = &e.evidence;
@@ -1274,6 +1275,10 @@ fn evidence_tilt(d: &Diagnosis) -> Option<Panels> {
     tried.sort_by(|a, b| a.0.total_cmp(&b.0));
     let fitted = number(&e.parameters["angle"]);
     let spread = number(&ev["angle_spread"]).filter(|s| *s > 0.0);
+    let floor: Vec<(f64, f64)> = (ev["floor_angles"].as_array().into_iter().flatten())
+        .filter_map(number)
+        .filter_map(|a| tried.iter().copied().find(|p| p.0 == a))
+        .collect();
     let xs: Vec<f64> = tried.iter().map(|p| p.0).collect();
     let ys: Vec<f64> = tried.iter().map(|p| p.1).chain([0.0]).collect();
     let desc = (
@@ -1293,6 +1298,14 @@ fn evidence_tilt(d: &Diagnosis) -> Option<Panels> {
     }
     p.series
         .push(line(tried, palette(0), LineKind::Markers, width()));
+    if !floor.is_empty() {
+        p.series.push(Series {
+            runs: floor.iter().map(|&q| vec![q]).collect(),
+            color: palette(1),
+            kind: LineKind::Markers,
+            width: width() + 3,
+        });
+    }
     if let Some(a) = fitted {
         let (y0, y1) = p.y;
         p.series.push(line(
@@ -1351,12 +1364,19 @@ fn evidence_tilt(d: &Diagnosis) -> Option<Panels> {
         palette(0),
         LineKind::Markers,
     )];
+    if !floor.is_empty() {
+        legend.push(entry(
+            "the valley's floor (within the band's chaos of the smallest error)",
+            palette(1),
+            LineKind::Markers,
+        ));
+    }
     if let Some(a) = fitted {
         let pm = spread
             .map(|s| format!(" +- {}", sig(s)))
             .unwrap_or_default();
         legend.push(entry(
-            format!("fitted: {}{pm} rad{verdict}", sig(a)),
+            format!("fitted (the floor's mean): {}{pm} rad{verdict}", sig(a)),
             palette(1),
             LineKind::Dashed,
         ));

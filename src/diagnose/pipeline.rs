@@ -298,15 +298,7 @@ fn lone_band_effect_with_spread(
     if !BAND_EFFECTS.contains(&e.effect.as_str()) {
         return None;
     }
-    let steps = work.steps;
-    let (train, validation) = (
-        steps.indices_of(&e.train_tests),
-        steps.indices_of(&e.validation_tests),
-    );
-    let mut whole: Vec<usize> = train.iter().chain(&validation).copied().collect();
-    whole.sort_unstable();
-    whole.dedup();
-    let spans: Vec<Span> = whole.into_iter().map(Span::whole).collect();
+    let (train, validation, spans) = judged_tests(work.steps, e);
     // Both models' draws, or neither's: the two sides are compared like with like.
     let made = work
         .band_runs_made(given, &spans)
@@ -356,6 +348,20 @@ fn lone_band_effect_with_spread(
     Some((b, a))
 }
 
+/// The train and validation tests of effect `e` (indices in `steps`) and the whole of each,
+/// as the judge ran them.
+fn judged_tests(steps: &SessionSteps, e: &EffectResult) -> (Vec<usize>, Vec<usize>, Vec<Span>) {
+    let (train, validation) = (
+        steps.indices_of(&e.train_tests),
+        steps.indices_of(&e.validation_tests),
+    );
+    let mut whole: Vec<usize> = train.iter().chain(&validation).copied().collect();
+    whole.sort_unstable();
+    whole.dedup();
+    let spans = whole.into_iter().map(Span::whole).collect();
+    (train, validation, spans)
+}
+
 /// The equal alternatives of the lone accepted band effect (band effects the session cannot
 /// tell from it: named in its `alternatives`, on the whole tests or where they act), reported
 /// on its footing: their errors
@@ -399,15 +405,7 @@ fn equal_alternatives_with_spread(
         let Some(model) = work.judged_model(i).cloned() else {
             continue;
         };
-        let e = &work.effects[i];
-        let (train, validation) = (
-            steps.indices_of(&e.train_tests),
-            steps.indices_of(&e.validation_tests),
-        );
-        let mut whole: Vec<usize> = train.iter().chain(&validation).copied().collect();
-        whole.sort_unstable();
-        whole.dedup();
-        let spans: Vec<Span> = whole.into_iter().map(Span::whole).collect();
+        let (train, validation, spans) = judged_tests(steps, &work.effects[i]);
         let Some((made_before, made_after)) = work
             .band_runs_made(given, &spans)
             .zip(work.band_runs_made(&model, &spans))

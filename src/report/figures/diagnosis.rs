@@ -1401,7 +1401,7 @@ fn judged(e: &EffectResult) -> Option<String> {
     let (b, a) = (e.error_before.as_ref()?, e.error_after.as_ref()?);
     let verdict = match () {
         _ if e.accepted => "accepted",
-        _ if e.reason.starts_with("an equal alternative") => "an equal alternative",
+        _ if e.reason.contains("an equal alternative") => "an equal alternative",
         _ => "rejected",
     };
     Some(format!(

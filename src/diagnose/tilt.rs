@@ -327,9 +327,13 @@ pub(super) fn tilt_stage(
     let mut closes = Vec::new();
     let mut spreads = Vec::new();
     for t in bracketed.iter().filter(|t| train.contains(&t.test_index)) {
-        if let Some(r) = test_clearance_by_runs(work, t)? {
-            closes.push(base.test_clearance(&t.test, t.plan_clearance_m) - r.clearance_m);
-            spreads.push(r.spread_m);
+        // One spread per train test (NaN where its runs compared nothing: equal weights).
+        match test_clearance_by_runs(work, t)? {
+            Some(r) => {
+                closes.push(base.test_clearance(&t.test, t.plan_clearance_m) - r.clearance_m);
+                spreads.push(r.spread_m);
+            }
+            None => spreads.push(f64::NAN),
         }
     }
     let plan = bracketed[0].plan_clearance_m;
@@ -338,7 +342,7 @@ pub(super) fn tilt_stage(
     } else {
         closes.iter().sum::<f64>() / closes.len() as f64
     };
-    if closing.is_nan() || closing <= 0.02 * plan || closes.len() < train.len() {
+    if closing.is_nan() || closing <= 0.02 * plan {
         work.accepted = after_clearance;
         (work.progress)(DiagnoseProgress::Note(format!(
             "tilt: the train tests' first contact comes {closing:+.2e} m from the model's clearance: no edge closes early, a tilt is not indicated"

@@ -338,7 +338,7 @@ struct JointOffset {
 /// The offsets (m) to the clearances `current` (m, one per test) that lie within every one
 /// of `tests`' brackets, (lowest, highest); None where a test has no bracket or the brackets
 /// share no offset.
-fn common_offsets(tests: &[&TestClearance], current: &[f64]) -> Option<(f64, f64)> {
+pub(super) fn common_offsets(tests: &[&TestClearance], current: &[f64]) -> Option<(f64, f64)> {
     let (mut lo, mut hi) = (f64::NEG_INFINITY, f64::INFINITY);
     for (t, c) in tests.iter().zip(current) {
         let (a, b) = (t.lower_bound_m?, t.upper_bound_m?);

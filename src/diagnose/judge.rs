@@ -457,13 +457,13 @@ impl<'a> Work<'a> {
             .collect()
     }
 
-    /// The band's runs of `ext` over `spans` (members 0, 1, ... [`DiagnoseOptions::band_members`])
-    /// made so far at the runner's twin step as it is now; None where one was not made.
     /// The model the effect at index `i` of `effects` was judged with (None: not judged).
     pub(super) fn judged_model(&self, i: usize) -> Option<&PhysicsSpec> {
         self.judged_models.get(&i)
     }
 
+    /// The band's runs of `ext` over `spans` (members 0, 1, ... [`DiagnoseOptions::band_members`])
+    /// made so far at the runner's twin step as it is now; None where one was not made.
     pub(super) fn band_runs_made(
         &self,
         ext: &PhysicsSpec,

@@ -304,37 +304,74 @@ fn lone_band_effect_with_spread(
         .band_runs_made(given, &spans)
         .zip(work.band_runs_made(&work.accepted, &spans))
         .unwrap_or_default();
-    let draws_of = |show: &[StepScores], made: &[Vec<StepScores>]| -> Vec<Vec<StepScores>> {
-        std::iter::once(show.to_vec())
-            .chain(made.iter().map(|r| scored_as(show, r, tolerance)))
-            .collect()
-    };
-    let (before_runs, after_runs) = (draws_of(before, &made.0), draws_of(after, &made.1));
-    let error = |runs: &[Vec<StepScores>]| -> Option<SetError> {
-        Some(SetError {
-            train: members_error(runs, &train, Steps::All, None)?,
-            validation: members_error(runs, &validation, Steps::All, None)?,
-        })
-    };
+    let (before_runs, after_runs) = (
+        draws_against(before, &made.0, tolerance),
+        draws_against(after, &made.1, tolerance),
+    );
+    let error = |runs: &[Vec<StepScores>]| set_error_over(runs, &train, &validation);
     let one = |s: &[StepScores]| error(&[s.to_vec()]);
     let (b, a) = (error(&before_runs)?, error(&after_runs)?);
     let draws = before_runs.len();
     let (b1, a1) = (one(before), one(after));
-    let e = work.effects.iter_mut().find(|e| e.accepted)?;
-    e.evidence["pointwise"] = json!({
-        "error_before": e.error_before,
-        "error_after": e.error_after,
-    });
-    e.evidence["with_spread"] = json!({
-        "draws": draws,
-        "per_step": "the median over the draws of the step's mean squared score, each draw against the locate (before) or show (after) run's spreads",
-        "locate_and_show_runs_alone": {"error_before": b1, "error_after": a1},
-    });
     let whose = if draws > 1 {
         format!("the locate and show runs and the judge's {} runs of each model, each step's median over the {draws} draws", draws - 1)
     } else {
         "the locate and show runs".to_string()
     };
+    let e = work.effects.iter_mut().find(|e| e.accepted)?;
+    reported_with_spread(
+        e,
+        (b, a),
+        &whose,
+        json!({
+            "draws": draws,
+            "per_step": "the median over the draws of the step's mean squared score, each draw against the locate (before) or show (after) run's spreads",
+            "locate_and_show_runs_alone": {"error_before": b1, "error_after": a1},
+        }),
+    );
+    equal_alternatives_with_spread(work, given, tolerance, before, after);
+    Some((b, a))
+}
+
+/// `show`'s run, then each run of `made` scored against the spreads of `show`'s comparison
+/// ([`scored_as`]): the draws of one model's band.
+fn draws_against(
+    show: &[StepScores],
+    made: &[Vec<StepScores>],
+    tolerance: &ComparisonTolerance,
+) -> Vec<Vec<StepScores>> {
+    std::iter::once(show.to_vec())
+        .chain(made.iter().map(|r| scored_as(show, r, tolerance)))
+        .collect()
+}
+
+/// The train and validation errors of the draws `runs` ([`members_error`]: each step's median
+/// over them); None where a set was not compared.
+fn set_error_over(
+    runs: &[Vec<StepScores>],
+    train: &[usize],
+    validation: &[usize],
+) -> Option<SetError> {
+    Some(SetError {
+        train: members_error(runs, train, Steps::All, None)?,
+        validation: members_error(runs, validation, Steps::All, None)?,
+    })
+}
+
+/// Effect `e` reported with the comparison's spread: its errors `(before, after)`, the judge's
+/// pointwise ones moved to `evidence.pointwise`, how they were drawn (`with_spread`, `whose`
+/// in words) in the evidence and the reason.
+fn reported_with_spread(
+    e: &mut EffectResult,
+    (b, a): (SetError, SetError),
+    whose: &str,
+    with_spread: serde_json::Value,
+) {
+    e.evidence["pointwise"] = json!({
+        "error_before": e.error_before,
+        "error_after": e.error_after,
+    });
+    e.evidence["with_spread"] = with_spread;
     e.reason = format!(
         "{}; with the comparison's spread ({whose}, reported as its error) the validation error falls {:.1}x ({:.3} -> {:.3})",
         e.reason,
@@ -344,8 +381,6 @@ fn lone_band_effect_with_spread(
     );
     e.error_before = Some(b);
     e.error_after = Some(a);
-    equal_alternatives_with_spread(work, given, tolerance, before, after);
-    Some((b, a))
 }
 
 /// The train and validation tests of effect `e` (indices in `steps`) and the whole of each,
@@ -412,41 +447,30 @@ fn equal_alternatives_with_spread(
         else {
             continue;
         };
-        let before_runs: Vec<Vec<StepScores>> = std::iter::once(before.to_vec())
-            .chain(made_before.iter().map(|r| scored_as(before, r, tolerance)))
-            .collect();
+        // The alternative has no show run: its draws are the judge's runs alone.
+        let before_runs = draws_against(before, &made_before, tolerance);
         let after_runs: Vec<Vec<StepScores>> = (made_after.iter())
             .map(|r| scored_as(after, r, tolerance))
             .collect();
-        let error = |runs: &[Vec<StepScores>]| -> Option<SetError> {
-            Some(SetError {
-                train: members_error(runs, &train, Steps::All, None)?,
-                validation: members_error(runs, &validation, Steps::All, None)?,
-            })
-        };
-        let (Some(b), Some(a)) = (error(&before_runs), error(&after_runs)) else {
+        let (Some(b), Some(a)) = (
+            set_error_over(&before_runs, &train, &validation),
+            set_error_over(&after_runs, &train, &validation),
+        ) else {
             continue;
         };
-        let e = &mut work.effects[i];
-        e.evidence["pointwise"] = json!({
-            "error_before": e.error_before,
-            "error_after": e.error_after,
-        });
-        e.evidence["with_spread"] = json!({
-            "draws_before": before_runs.len(),
-            "draws_after": after_runs.len(),
-            "per_step": "the median over the draws of the step's mean squared score; before, the locate run and the judge's runs of the model as given against the locate run's spreads; after, the judge's runs of this effect's model against the show run's spreads (the fixed model's)",
-        });
-        e.reason = format!(
-            "{}; with the comparison's spread (as the accepted effect's: the judge's {} runs of this model against the fixed model's spreads, reported as its error) the validation error falls {:.1}x ({:.3} -> {:.3})",
-            e.reason,
-            after_runs.len(),
-            b.validation / a.validation.max(1e-12),
-            b.validation,
-            a.validation
+        reported_with_spread(
+            &mut work.effects[i],
+            (b, a),
+            &format!(
+                "as the accepted effect's: the judge's {} runs of this model against the fixed model's spreads",
+                after_runs.len()
+            ),
+            json!({
+                "draws_before": before_runs.len(),
+                "draws_after": after_runs.len(),
+                "per_step": "the median over the draws of the step's mean squared score; before, the locate run and the judge's runs of the model as given against the locate run's spreads; after, the judge's runs of this effect's model against the show run's spreads (the fixed model's)",
+            }),
         );
-        e.error_before = Some(b);
-        e.error_after = Some(a);
     }
 }
 

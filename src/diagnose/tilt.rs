@@ -46,8 +46,8 @@ use crate::rom::Rom;
 
 use super::clearance::{ClearanceEvidence, TestClearance};
 use super::clearance_fit::{
-    evidence_steps, refined_around, sharpness_weights, test_clearance_by_runs, valley_spread,
-    weighted_tests_error, FIT_REFINEMENT,
+    common_offsets, evidence_steps, refined_around, sharpness_weights, test_clearance_by_runs,
+    valley_spread, weighted_tests_error, FIT_REFINEMENT,
 };
 use super::judge::{alternate, grid_then_refine, set_error_of, Candidate, Steps, Work};
 use super::outcome::EffectResult;
@@ -95,18 +95,16 @@ fn with_tilt(base: &PhysicsSpec, angle: f64) -> PhysicsSpec {
 /// test's bracket admits where they admit a common range (test `t`'s first contact lies between
 /// its bounds, so an edge closing lies within `base`'s clearance for it less the bounds).
 fn closing_range(base: &PhysicsSpec, train: &[&TestClearance], closing: f64) -> (f64, f64) {
-    let (lo, hi) = (train.iter())
-        .filter_map(|t| {
-            let (a, b) = (t.lower_bound_m?, t.upper_bound_m?);
-            let c = base.test_clearance(&t.test, t.plan_clearance_m);
-            Some((c - a.max(b), c - a.min(b)))
-        })
-        .fold((0.4 * closing, 2.0 * closing), |(lo, hi), r| {
-            (lo.max(r.0), hi.min(r.1))
-        });
-    match hi > lo {
-        true => (lo, hi),
-        false => (0.4 * closing, 2.0 * closing),
+    let runs = (0.4 * closing, 2.0 * closing);
+    let current: Vec<f64> = (train.iter())
+        .map(|t| base.test_clearance(&t.test, t.plan_clearance_m))
+        .collect();
+    // A closing is an offset to the model's clearances with the sign turned.
+    match common_offsets(train, &current) {
+        Some((o_lo, o_hi)) if runs.1.min(-o_lo) > runs.0.max(-o_hi) => {
+            (runs.0.max(-o_hi), runs.1.min(-o_lo))
+        }
+        _ => runs,
     }
 }
 
@@ -204,11 +202,10 @@ fn fit_by_runs(
     // Every run starts from a state of open contact two steps before each test's first
     // contact, captured with the clearances closed by more than any edge tried.
     let widest = 1.1 * (a_hi + 0.5 * h).sin() * tip_edge;
-    let mut closest = base.clone();
-    for t in train {
-        let c = base.test_clearance(&t.test, t.plan_clearance_m);
-        closest = closest.with_test_clearance(&t.test, c - widest);
-    }
+    let named: Vec<(&str, f64)> = (train.iter())
+        .map(|t| (t.test.as_str(), t.plan_clearance_m))
+        .collect();
+    let closest = closed_by(base, &named, widest);
     let members = work.opts.band_members;
     let error = |_: &mut Work<'_>, _: f64, runs: &[Vec<super::outcome::StepScores>]| {
         weighted_tests_error(runs, &weighted)
@@ -531,14 +528,15 @@ fn contact_spans(
     tests: &[usize],
     closing: f64,
 ) -> Result<Vec<Span>, DiagnoseError> {
-    let mut closest = base.clone();
-    for &ti in tests {
-        let name = work.steps.tests[ti].clone();
-        let plan = (bracketed.iter())
-            .find(|b| b.test_index == ti)
-            .map_or(0.0, |b| b.plan_clearance_m);
-        closest = closest.with_test_clearance(&name, base.test_clearance(&name, plan) - closing);
-    }
+    let named: Vec<(&str, f64)> = (tests.iter())
+        .map(|&ti| {
+            let plan = (bracketed.iter())
+                .find(|b| b.test_index == ti)
+                .map_or(0.0, |b| b.plan_clearance_m);
+            (work.steps.tests[ti].as_str(), plan)
+        })
+        .collect();
+    let closest = closed_by(base, &named, closing);
     let mut spans = Vec::new();
     for &ti in tests {
         let from = work.steps.before_first_contact(ti, 2);
@@ -546,6 +544,14 @@ fn contact_spans(
         spans.push(work.open_span(&closest, ti, from, through)?);
     }
     Ok(spans)
+}
+
+/// `base` with the clearance of each test of `tests`, (name, the plan's clearance m), closed
+/// by `closing` (m): a geometry nowhere more open than the runs that start from its state.
+fn closed_by(base: &PhysicsSpec, tests: &[(&str, f64)], closing: f64) -> PhysicsSpec {
+    (tests.iter()).fold(base.clone(), |ext, &(name, plan)| {
+        ext.with_test_clearance(name, base.test_clearance(name, plan) - closing)
+    })
 }
 
 #[cfg(test)]

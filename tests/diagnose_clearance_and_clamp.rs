@@ -417,14 +417,32 @@ fn clearance_is_found(offset: f64, plan: &str) -> serde_json::Value {
             .find(|e| e["effect"] == "tilt")
             .unwrap_or_else(|| panic!("no tilt tried: {d:#}"));
         let ev = &tilt["evidence"];
-        assert!(ev["angles_tried"].as_array().unwrap().len() >= 10, "{ev}");
+        assert!(ev["angles_tried"].as_array().unwrap().len() >= 9, "{ev}");
         assert!(ev["train_error_without_tilt"].is_f64(), "{ev}");
-        // Both edges were tried, the one not taken closing as early as the best of the other.
-        let (fit, other) = (
-            tilt["parameters"]["angle"].as_f64().unwrap(),
-            ev["other_edge"]["angle"].as_f64().unwrap(),
+        // Every edge was tried closing as early: along the beams on both sides, across them.
+        let edges = ev["edges"].as_array().unwrap();
+        let names: Vec<&str> = edges.iter().map(|e| e["edge"].as_str().unwrap()).collect();
+        assert_eq!(
+            names,
+            ["tip_side", "clamp_side", "across_the_beams"],
+            "{ev}"
         );
-        assert!(fit * other < 0.0, "{ev}");
+        let closings: Vec<f64> = edges
+            .iter()
+            .map(|e| e["closing_m"].as_f64().unwrap())
+            .collect();
+        assert!(
+            closings
+                .iter()
+                .all(|c| (c - closings[0]).abs() < 1e-9 * closings[0].max(1e-6)),
+            "{ev}"
+        );
+        // The edge taken is the fitted one; the other named is another edge.
+        let taken = ev["edge"].as_str().unwrap();
+        let at = edges.iter().find(|e| e["edge"] == taken).unwrap();
+        assert_eq!(at["angle"], tilt["parameters"]["angle"], "{ev}");
+        assert_eq!(at["axis"], tilt["parameters"]["axis"], "{ev}");
+        assert_ne!(ev["other_edge"]["edge"].as_str().unwrap(), taken, "{ev}");
         assert!(ev["other_edge"]["told"].is_boolean(), "{ev}");
         for ext in ["png", "svg"] {
             let f = dir

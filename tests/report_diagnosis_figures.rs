@@ -358,10 +358,23 @@ fn full() -> Diagnosis {
             validation: 1.2,
         }),
     };
-    let angles: Vec<serde_json::Value> = [-0.02, -0.016, -0.012, 0.012, 0.016, 0.02]
+    // The tip-side edge's runs (3 mm from the centroid), its best at 0.016 rad.
+    let angles: Vec<serde_json::Value> = [0.008, 0.012, 0.016, 0.02, 0.024]
         .iter()
-        .map(|a: &f64| serde_json::json!({"angle": a, "train_error": 2.0 + 400.0 * (a + 0.016).abs()}))
+        .map(|a: &f64| {
+            serde_json::json!({
+                "angle": a,
+                "closing_m": 3e-3 * a.sin(),
+                "train_error": 2.0 + 400.0 * (a - 0.016).abs() + 900.0 * (a - 0.02).max(0.0),
+            })
+        })
         .collect();
+    let edge = |name: &str, axis: [f64; 2], angle: f64, extent: f64, error: f64| {
+        serde_json::json!({
+            "edge": name, "axis": axis, "angle": angle,
+            "closing_m": extent * angle.abs().sin(), "train_error": error,
+        })
+    };
     let tilt = EffectResult {
         effect: "tilt".into(),
         rank: 2,
@@ -369,11 +382,20 @@ fn full() -> Diagnosis {
         parameters: serde_json::json!({"angle": -0.016, "axis": [0.0, 1.0]}),
         alternatives: vec!["clearance".into()],
         evidence: serde_json::json!({
-            "edge_closing_m": 5.4e-5,
+            "edge": "clamp_side",
+            "edge_closing_m": 3e-3 * 0.016f64.sin(),
+            "runs_closing_m": 5.4e-5,
             "angles_tried": angles,
+            "edges": [
+                edge("tip_side", [0.0, 1.0], 0.016, 3e-3, 2.0),
+                edge("clamp_side", [0.0, 1.0], -0.016, 3e-3, 1.9),
+                edge("across_the_beams", [1.0, 0.0], 0.0229, 2.1e-3, 2.3),
+            ],
+            "other_edge": {"edge": "tip_side", "angle": 0.016, "train_error": 2.0, "told": false},
             "train_error_without_tilt": 16.9,
             "angle_spread": 0.002,
-            "floor_angles": [-0.02, -0.016, -0.012],
+            "closing_spread_m": 6e-6,
+            "floor_angles": [0.012, 0.016],
             "validation_contact_score_rms": {
                 "model_before": 9.8, "with_tilt": 1.2, "with_clearance_stage": 4.1
             },
@@ -512,11 +534,13 @@ fn a_diagnosis_draws_every_figure_as_png_and_svg() {
         (
             "evidence-tilt",
             &[
-                "angle about y",
-                "mean): -0.016 +- 0.002 rad",
+                "how much earlier than the mean gap",
+                "the clamp side edge, not told from the others, -0.016 +- 0.002 rad about y",
+                "the across the beams edge closing as early",
                 "rejected",
                 "with the clearance offset",
-                "0.054 mm early",
+                "the fitted edge closes 48 µm early (a flat face",
+                "runs: 54 µm)",
             ],
         ),
         (
@@ -607,7 +631,11 @@ fn missing_data_leaves_figures_out() {
     d.linear = None;
     d.clearance = None;
     d.effects[1].evidence = serde_json::json!({
-        "angles_tried": [{"angle": f64::NAN, "train_error": 1.0}, {"angle": 0.01}],
+        "angles_tried": [
+            {"angle": f64::NAN, "closing_m": 1e-5, "train_error": 1.0},
+            {"angle": 0.01, "closing_m": -1.0, "train_error": -2.0},
+        ],
+        "edges": [{"edge": "clamp_side", "closing_m": 3e-5, "train_error": 0.0}],
         "train_error_without_tilt": null,
     });
     d.effects[2].evidence = serde_json::json!({});

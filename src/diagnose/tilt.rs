@@ -1,30 +1,32 @@
 //! The tilt stage of the diagnosis: a tilted contact face (`[model.tilt]`, `physics::tilt`)
 //! against a smaller clearance.
 //!
-//! A face tilted by `angle` about the axis `[0, 1]` (y: the gap varies along the beams) closes
-//! first at one edge of the patch, `sin(angle) x_edge` earlier than the mean gap (`x_edge` the
-//! edge's distance from the patch's centroid along x, from the ROM's pair positions): before
+//! A face tilted by `angle` about an axis in the contact plane closes first at one edge of the
+//! patch, `sin(angle) edge` earlier than the mean gap (`edge` the edge's distance from the
+//! patch's centroid across the axis, from the ROM's pair positions): before
 //! the first impact it looks exactly like a clearance smaller by that much. What can separate
 //! them is what follows the first contact: the contact-regime statistics (contact fraction,
 //! impacts per period, the tip amplitudes in contact), as the pairs close progressively
 //! instead of all at once.
 //!
-//! Parameterisation: the angle about y, signed (positive: the tip-side edge, larger x, closes
-//! first), the axis fixed at `[0, 1]`. A slope across the beams (about x) is not fitted: the
-//! channels (bending along the beams, one contact voltage) carry no torsion, so it would be a
-//! smaller clearance to them. The edge closing starts from the clearance the train tests show
-//! before their first impact (the model-run clearance per test,
-//! `clearance_fit::test_clearance_by_runs`, which fits a flat face): `sin(angle) x_edge =
-//! c_model - c_measured`. The fit ([`fit_by_runs`]) searches 0.4 to 2 times that closing,
-//! within what the train tests' brackets admit, on the steps that carry a face's geometry, as
-//! the clearance offset is fitted: each train test's steps from two before its first measured
-//! contact to two past it, at a 3x finer twin step, each angle's error the median per step over
-//! the band's draws, the tests weighted by how sharply their own runs told their clearance. The
-//! tip-side edge on a grid of 9 closings, refined once, its angle the mean of the valley's
-//! floor (within the chaos, the best run is a draw from it); then the clamp-side edge closing
-//! as early, and the face as given on the same steps (the landscape's reference,
-//! `evidence-tilt`). The edge with the lower error is taken; the evidence says whether the two
-//! differ by more than the null spread of those steps (`other_edge.told`).
+//! Parameterisation: the angle about an in-plane axis, signed, and the edge it closes first:
+//! the tip side (about y, positive: larger x), the clamp side (about y, negative) or the side
+//! across the beams (about x, positive: smaller y; the side at larger y is its mirror image).
+//! The edge closing starts from the clearance the train tests show before their first impact
+//! (the model-run clearance per test, `clearance_fit::test_clearance_by_runs`, which fits a
+//! flat face): `sin(angle) edge = c_model - c_measured`. The fit ([`fit_by_runs`]) searches 0.4
+//! to 2 times that closing, within what the train tests' brackets admit, on the steps that carry
+//! a face's geometry, as the clearance offset is fitted: each train test's steps from two before
+//! its first measured contact to two past it, at a 3x finer twin step, each angle's error the
+//! median per step over the band's draws, the tests weighted by how sharply their own runs told
+//! their clearance. The tip-side edge on a grid of 9 closings, refined once, its angle the mean
+//! of the valley's floor (within the chaos, the best run is a draw from it); then every other
+//! edge closing as early, and the face as given on the same steps (the landscape's reference,
+//! `evidence-tilt`). The edge with the lowest error is taken; the evidence says whether every
+//! other one is higher by more than the null spread of those steps (`other_edge.told`): where
+//! it is not, the session places the closing but not the edge, and the angle only through the
+//! edge's distance from the centroid (3.0 mm along the beams, 2.1 mm across them on the
+//! embedded rig's patch).
 //!
 //! Selection: the tilt is judged by the pipeline's rule against the model without the
 //! clearance offset (the two compete for the same evidence). Where the clearance offset was
@@ -54,38 +56,91 @@ use super::outcome::EffectResult;
 use super::rerun::Span;
 use super::{DiagnoseError, DiagnoseProgress};
 
-/// The tilt axis fitted, `[x, y]`.
-const AXIS: [f64; 2] = [0.0, 1.0];
+/// An edge of the contact patch that a tilt closes first: the axis the face tilts about, the
+/// sign of the angle that closes this edge, and its distance from the patch's area centroid
+/// across that axis (`physics::tilt`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Edge {
+    /// What the evidence calls it.
+    name: &'static str,
+    /// The tilt axis, `[x, y]`.
+    axis: [f64; 2],
+    /// The sign of the angles that close this edge first.
+    sign: f64,
+    /// Its distance from the centroid, m (>= 0).
+    extent: f64,
+}
 
-/// The patch's edges along x from its area centroid, m: (tip side, larger x; clamp side),
-/// both >= 0.
-fn edges(rom: &Rom) -> (f64, f64) {
+impl Edge {
+    /// The angle (rad, signed) that closes this edge `closing` (m) earlier than the mean gap.
+    fn angle(&self, closing: f64) -> f64 {
+        self.sign * (closing / self.extent).clamp(-1.0, 1.0).asin()
+    }
+
+    /// How much earlier (m) than the mean gap this edge closes at `angle` (rad).
+    fn closing(&self, angle: f64) -> f64 {
+        angle.abs().sin() * self.extent
+    }
+}
+
+/// The patch's edges from its area centroid (the ROM's lower pair positions and tributary
+/// areas): the tip side (larger x) and the clamp side, closed first by a tilt about y, positive
+/// and negative; and the side at smaller y, closed first by a positive tilt about x. The side at
+/// larger y is its mirror image (the parts are centred on y = 0, the channels see bending along
+/// the beams), not run apart.
+fn edges(rom: &Rom) -> [Edge; 3] {
     let total: f64 = rom.pair_area.iter().sum();
-    let cx = if total > 0.0 {
-        rom.pair_position
-            .iter()
-            .zip(&rom.pair_area)
-            .map(|(p, a)| a * p[0])
-            .sum::<f64>()
-            / total
-    } else {
-        0.0
+    let centroid = |d: usize| {
+        if total > 0.0 {
+            (rom.pair_position.iter().zip(&rom.pair_area))
+                .map(|(p, a)| a * p[d])
+                .sum::<f64>()
+                / total
+        } else {
+            0.0
+        }
     };
-    rom.pair_position
-        .iter()
-        .fold((0.0f64, 0.0f64), |(t, c), p| {
-            (t.max(p[0] - cx), c.max(cx - p[0]))
-        })
+    let (cx, cy) = (centroid(0), centroid(1));
+    let reach = |f: &dyn Fn(&[f64; 3]) -> f64| rom.pair_position.iter().map(f).fold(0.0, f64::max);
+    [
+        Edge {
+            name: "tip_side",
+            axis: [0.0, 1.0],
+            sign: 1.0,
+            extent: reach(&|p| p[0] - cx),
+        },
+        Edge {
+            name: "clamp_side",
+            axis: [0.0, 1.0],
+            sign: -1.0,
+            extent: reach(&|p| cx - p[0]),
+        },
+        Edge {
+            name: "across_the_beams",
+            axis: [1.0, 0.0],
+            sign: 1.0,
+            extent: reach(&|p| cy - p[1]),
+        },
+    ]
 }
 
 /// What the tilt's fit compares, in words.
 const FIT_STEPS: &str = "each train test's steps from two before its first measured contact to two past it, at a 3x finer twin step, each angle's error the median per step over the band's draws";
 
-/// `base` with its face tilted by `angle` about y (`base` itself at 0).
-fn with_tilt(base: &PhysicsSpec, angle: f64) -> PhysicsSpec {
+/// `base` with its face tilted by `angle` about `axis` (`base` itself at 0).
+fn with_tilt(base: &PhysicsSpec, axis: [f64; 2], angle: f64) -> PhysicsSpec {
     let mut ext = base.clone();
-    ext.tilt = (angle != 0.0).then_some(TiltSpec { angle, axis: AXIS });
+    ext.tilt = (angle != 0.0).then_some(TiltSpec { angle, axis });
     ext
+}
+
+/// An axis in words.
+fn axis_name(axis: [f64; 2]) -> &'static str {
+    if axis[0].abs() > axis[1].abs() {
+        "x"
+    } else {
+        "y"
+    }
 }
 
 /// The edge closings (m: how much earlier than the mean gap an edge closes) a tilt's fit
@@ -142,27 +197,56 @@ fn valley_floor(tried: &[(f64, f64)]) -> Option<(f64, f64, Vec<f64>)> {
     Some((angle, smallest, floor.iter().map(|p| p.0).collect()))
 }
 
+/// An edge's run closing as early as the tip side's fit: the edge, its angle (rad, signed) and
+/// its train error (-; NaN where nothing compared).
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct EdgeRun {
+    edge: Edge,
+    angle: f64,
+    error: f64,
+}
+
 /// The tilt fitted by model runs ([`fit_by_runs`]).
 #[derive(Clone, Debug, PartialEq)]
 struct TiltFit {
-    /// The angle about y, rad (signed: which edge closes first).
-    angle: f64,
-    /// Its error, -.
-    error: f64,
-    /// The runs' own spread, rad ([`valley_spread`]).
+    /// The edge taken, its angle (rad, about its axis, signed) and its error (-).
+    taken: EdgeRun,
+    /// The runs' own spread in the taken edge's angle, rad ([`valley_spread`]).
     spread: f64,
     /// The runs of the tip-side edge, (angle rad, error -).
     tried: Vec<(f64, f64)>,
     /// The tip-side angles of the valley's floor ([`valley_floor`]), rad.
     floor: Vec<f64>,
-    /// The clamp-side edge closing as early as the best tip-side run, (angle rad, error -).
-    clamp_side: (f64, f64),
-    /// The edge not taken, (angle rad, error -): `clamp_side` or the best tip-side run.
-    other: (f64, f64),
-    /// Whether the edges' errors differ by more than the band's null spread.
+    /// Every edge closing as early as the tip side's floor (the tip side's own run first).
+    edges: Vec<EdgeRun>,
+    /// The edge not taken with the lowest error.
+    other: EdgeRun,
+    /// Whether every other edge's error exceeds the taken one's by more than the null spread.
     edge_told: bool,
     /// The face as given on the same steps, -.
     flat: Option<f64>,
+}
+
+/// The edge taken among `runs` (each edge closing equally early): the lowest error (NaN
+/// last), the best of the others, and whether every other one is higher by more than `null`.
+/// None without runs.
+fn edge_taken(runs: &[EdgeRun], null: f64) -> Option<(EdgeRun, EdgeRun, bool)> {
+    let lowest = |it: &mut dyn Iterator<Item = &EdgeRun>| {
+        it.min_by(|a, b| {
+            let key = |r: &EdgeRun| {
+                if r.error.is_nan() {
+                    f64::INFINITY
+                } else {
+                    r.error
+                }
+            };
+            key(a).total_cmp(&key(b))
+        })
+        .copied()
+    };
+    let taken = lowest(&mut runs.iter())?;
+    let other = lowest(&mut runs.iter().filter(|r| r.edge != taken.edge))?;
+    Some((taken, other, other.error - taken.error > null))
 }
 
 /// The tilt whose model runs match the train tests `train` best where a tilted face first
@@ -170,10 +254,10 @@ struct TiltFit {
 /// ([`evidence_steps`]) at the clearance fits' finer twin step, each angle's error the median
 /// per step over the band's draws, the tests weighted by how sharply their own clearance fits
 /// told their first contact (`spreads`, m: [`sharpness_weights`]), as the clearance offset is
-/// fitted. The tip-side edge on a grid of 9 over the edge closings `range` (m), refined once
-/// around the best; its angle the mean of the valley's floor ([`valley_floor`]); then that
-/// angle, the clamp-side edge closing as early, and the face as given; the edge whose run
-/// scores lower is taken. `None` where no run compared.
+/// fitted. The tip-side edge (`edges[0]`) on a grid of 9 over the edge closings `range` (m),
+/// refined once around the best; its angle the mean of the valley's floor ([`valley_floor`]);
+/// then every edge of `edges` closing as early, and the face as given; the edge whose run
+/// scores lowest is taken ([`edge_taken`]). `None` where no run compared.
 ///
 /// NOTE: over the whole band the angles' errors are draws of its chaos: a grid over every
 /// contact step of the train tests took -0.0282 rad (+41 %, the other edge) for a hidden 0.02
@@ -184,13 +268,13 @@ struct TiltFit {
 fn fit_by_runs(
     work: &mut Work<'_>,
     base: &PhysicsSpec,
-    (tip_edge, clamp_edge): (f64, f64),
+    edges: &[Edge],
     train: &[&TestClearance],
     spreads: &[f64],
     (lo, hi): (f64, f64),
 ) -> Result<Option<TiltFit>, DiagnoseError> {
-    let angle_of = |closing: f64, edge: f64| (closing / edge).clamp(-1.0, 1.0).asin();
-    let (a_lo, a_hi) = (angle_of(lo, tip_edge), angle_of(hi, tip_edge));
+    let tip = edges[0];
+    let (a_lo, a_hi) = (tip.angle(lo), tip.angle(hi));
     let h = (a_hi - a_lo) / 8.0;
     let grid: Vec<f64> = (0..9)
         .map(|k| a_lo + h * k as f64)
@@ -201,7 +285,7 @@ fn fit_by_runs(
         .collect();
     // Every run starts from a state of open contact two steps before each test's first
     // contact, captured with the clearances closed by more than any edge tried.
-    let widest = 1.1 * (a_hi + 0.5 * h).sin() * tip_edge;
+    let widest = 1.1 * tip.closing(a_hi + 0.5 * h);
     let named: Vec<(&str, f64)> = (train.iter())
         .map(|t| (t.test.as_str(), t.plan_clearance_m))
         .collect();
@@ -210,13 +294,25 @@ fn fit_by_runs(
     let error = |_: &mut Work<'_>, _: f64, runs: &[Vec<super::outcome::StepScores>]| {
         weighted_tests_error(runs, &weighted)
     };
+    // Each edge's angle closing as early as the tip side's `mean` (the tip side's own exactly).
+    let angles_at = |mean: f64| -> Vec<f64> {
+        (edges.iter().enumerate())
+            .map(|(k, e)| {
+                if k == 0 {
+                    mean
+                } else {
+                    e.angle(tip.closing(mean))
+                }
+            })
+            .collect()
+    };
     let (tried, checks) = work.at_finer_step(FIT_REFINEMENT, |w| {
         let mut spans = Vec::new();
         for &(ti, _) in &weighted {
             let (from, through) = evidence_steps(w, ti);
             spans.push(w.open_span(&closest, ti, from, through)?);
         }
-        let plan = |_: &Work<'_>, a: f64| (with_tilt(base, a), spans.clone());
+        let plan = |_: &Work<'_>, a: f64| (with_tilt(base, tip.axis, a), spans.clone());
         let tried = grid_then_refine(
             w,
             grid,
@@ -233,15 +329,13 @@ fn fit_by_runs(
         let Some((mean, _, _)) = valley_floor(&tried) else {
             return Ok::<_, DiagnoseError>((tried, Vec::new()));
         };
-        let other = -angle_of(mean.sin() * tip_edge, clamp_edge);
-        let checks = grid_then_refine(
-            w,
-            vec![mean, other, 0.0],
-            |_| Vec::new(),
-            &plan,
-            members,
-            error,
-        )?;
+        // The face as given (point 0) and every edge (point k + 1, edge k).
+        let models: Vec<PhysicsSpec> = std::iter::once(base.clone())
+            .chain((edges.iter().zip(angles_at(mean))).map(|(e, a)| with_tilt(base, e.axis, a)))
+            .collect();
+        let by_index = |_: &Work<'_>, k: f64| (models[k as usize].clone(), spans.clone());
+        let points = (0..models.len()).map(|k| k as f64).collect();
+        let checks = grid_then_refine(w, points, |_| Vec::new(), &by_index, members, error)?;
         Ok((tried, checks))
     })?;
     let (Some(&(best, best_error)), Some((mean, _, floor))) = (
@@ -250,36 +344,33 @@ fn fit_by_runs(
     ) else {
         return Ok(None);
     };
-    let at = |a: f64| checks.iter().find(|c| c.0 == a).map(|c| c.1);
-    let flat = at(0.0);
-    let tip_side = (mean, at(mean).unwrap_or(f64::NAN));
-    let clamp_side = (checks.iter().copied())
-        .find(|c| c.0 < 0.0)
-        .unwrap_or((-angle_of(mean.sin() * tip_edge, clamp_edge), f64::NAN));
+    let at = |k: usize| checks.iter().find(|c| c.0 == k as f64).map(|c| c.1);
+    let flat = at(0);
+    let runs: Vec<EdgeRun> = (edges.iter().zip(angles_at(mean)).enumerate())
+        .map(|(k, (&edge, angle))| EdgeRun {
+            edge,
+            angle,
+            error: at(k + 1).unwrap_or(f64::NAN),
+        })
+        .collect();
     // The null spread of a band fit's own steps at the finer step (its valley, the edges).
     let null = work.opts.fitted_steps_null_spread;
+    let Some((taken, other, edge_told)) = edge_taken(&runs, null) else {
+        return Ok(None);
+    };
     let mut tried = tried;
-    if !tried.iter().any(|p| p.0 == mean) && tip_side.1.is_finite() {
-        tried.push(tip_side);
+    if !tried.iter().any(|p| p.0 == mean) && runs[0].error.is_finite() {
+        tried.push((mean, runs[0].error));
     }
-    let ((angle, error), other) = match clamp_side.1 < tip_side.1 {
-        true => (clamp_side, tip_side),
-        false => (tip_side, clamp_side),
-    };
-    // The spread in the chosen edge's angle: the tip side's valley, scaled to its edge.
-    let scale = if angle > 0.0 {
-        1.0
-    } else {
-        tip_edge / clamp_edge
-    };
+    // The spread in the taken edge's angle: the tip side's valley, scaled to its edge.
+    let scale = tip.extent / taken.edge.extent;
     Ok(Some(TiltFit {
-        angle,
-        error,
+        taken,
         spread: scale * valley_spread(&tried, (best, best_error), null),
-        edge_told: (clamp_side.1 - tip_side.1).abs() > null,
+        edge_told,
         tried,
         floor,
-        clamp_side,
+        edges: runs,
         other,
         flat,
     }))
@@ -308,14 +399,16 @@ pub(super) fn tilt_stage(
         );
         return Ok(());
     }
-    let (tip_edge, clamp_edge) = edges(rom);
-    if tip_edge <= 0.0 || clamp_edge <= 0.0 {
+    let all_edges = edges(rom);
+    if all_edges[0].extent <= 0.0 || all_edges[1].extent <= 0.0 {
         work.undecided(
             "tilt",
             "the contact patch has no extent along the beams in the ROM",
         );
         return Ok(());
     }
+    // A patch one pair wide has no edge across the beams.
+    let edges: Vec<Edge> = (all_edges.into_iter()).filter(|e| e.extent > 0.0).collect();
     let idx: Vec<usize> = bracketed.iter().map(|t| t.test_index).collect();
     let (train, validation) = alternate(&idx);
     // The train tests' clearance before the first impact against the base model's, by the
@@ -359,29 +452,24 @@ pub(super) fn tilt_stage(
         .filter(|t| train.contains(&t.test_index))
         .collect();
     let range = closing_range(base, &train_tests, closing);
-    let fit = fit_by_runs(
-        work,
-        base,
-        (tip_edge, clamp_edge),
-        &train_tests,
-        &spreads,
-        range,
-    )?;
+    let fit = fit_by_runs(work, base, &edges, &train_tests, &spreads, range)?;
     let Some(fit) = fit else {
         work.accepted = after_clearance;
         return Ok(());
     };
-    let angle = fit.angle;
-    let with = |angle: f64| with_tilt(base, angle);
+    let (taken, other) = (fit.taken, fit.other);
+    let (angle, axis) = (taken.angle, taken.edge.axis);
+    let about = axis_name(axis);
+    let with = |angle: f64| with_tilt(base, axis, angle);
     (work.progress)(DiagnoseProgress::Note(format!(
-        "tilt: {angle:.3e} +- {:.1e} rad about y by {} runs of the train tests' steps about their first contact (the {} edge; the other {:.3e} rad scores {:.3}, the best {:.3}; the edge closes {:.2e} m early)",
+        "tilt: {angle:.3e} +- {:.1e} rad about {about} by {} angles tried on the train tests' steps about their first contact (the {} edge, closing {:.2e} m early, scores {:.3}; the {} edge as early {:.3})",
         fit.spread,
-        fit.tried.len(),
-        if angle > 0.0 { "tip-side" } else { "clamp-side" },
-        fit.other.0,
-        fit.other.1,
-        fit.error,
-        (angle.abs().sin() * if angle > 0.0 { tip_edge } else { clamp_edge }),
+        fit.tried.len() + fit.edges.len(),
+        taken.edge.name,
+        taken.edge.closing(angle),
+        taken.error,
+        other.edge.name,
+        other.error,
     )));
     // The contact channel's statistics on the validation tests, before and with the tilt and
     // with the clearance offset: what separates the two.
@@ -393,35 +481,69 @@ pub(super) fn tilt_stage(
     let s_base = work.scores(base, &all)?;
     let s_tilt = work.scores(&with(angle), &all)?;
     let s_clear = work.scores(&after_clearance, &all)?;
+    let edge_run = |r: &EdgeRun| {
+        json!({
+            "edge": r.edge.name,
+            "axis": r.edge.axis,
+            "angle": r.angle,
+            "closing_m": r.edge.closing(r.angle),
+            "train_error": r.error,
+        })
+    };
+    let mut other_edge = edge_run(&other);
+    other_edge["told"] = json!(fit.edge_told);
     let evidence = json!({
-        "edge_closing_m": closing,
-        "patch_edges_m": {"tip_side": tip_edge, "clamp_side": clamp_edge},
-        "axis": AXIS,
+        "edge": taken.edge.name,
+        "edge_closing_m": taken.edge.closing(angle),
+        "runs_closing_m": closing,
+        "patch_edges_m": (edges.iter())
+            .map(|e| (e.name.to_string(), json!(e.extent)))
+            .collect::<serde_json::Map<_, _>>(),
+        "axis": axis,
         "validation_contact_score_rms": {
             "model_before": contact_rms(&s_base),
             "with_tilt": contact_rms(&s_tilt),
             "with_clearance_stage": contact_rms(&s_clear),
         },
         "closing_range_m": [range.0, range.1],
-        "angles_tried": (fit.tried.iter().chain([&fit.clamp_side]))
-            .map(|(a, e)| json!({"angle": a, "train_error": e}))
+        "angles_tried": (fit.tried.iter())
+            .map(|&(a, e)| json!({"angle": a, "closing_m": edges[0].closing(a), "train_error": e}))
             .collect::<Vec<_>>(),
+        "edges": fit.edges.iter().map(edge_run).collect::<Vec<_>>(),
         "train_error_without_tilt": fit.flat,
         "angle_spread": fit.spread,
+        "closing_spread_m": fit.spread * taken.edge.extent,
         "floor_angles": fit.floor,
-        "other_edge": {"angle": fit.other.0, "train_error": fit.other.1, "told": fit.edge_told},
+        "other_edge": other_edge,
         "steps": FIT_STEPS,
     });
     let cand = Candidate::new(
         "tilt",
         with(angle),
-        json!({"angle": angle, "axis": AXIS}),
+        json!({"angle": angle, "axis": axis}),
         1,
         evidence,
         (train.clone(), validation.clone()),
         Steps::All,
     );
     let tilt_ok = work.judge(cand)?;
+    // The edges the runs do not tell from the one taken: the same closing, another angle.
+    let edge_null = work.opts.fitted_steps_null_spread;
+    let untold: Vec<String> = (fit.edges.iter())
+        .filter(|r| r.edge != taken.edge && !(r.error - taken.error > edge_null))
+        .map(|r| {
+            format!(
+                "tilt {} (the {} edge closing as early: train error {:.3} against {:.3}, within the null spread {edge_null} of the steps about the first contact)",
+                json!({"angle": r.angle, "axis": r.edge.axis}),
+                r.edge.name.replace('_', " "),
+                r.error,
+                taken.error
+            )
+        })
+        .collect();
+    if let Some(t) = work.effects.last_mut().filter(|e| e.effect == "tilt") {
+        t.alternatives.extend(untold);
+    }
     // The clearance offset judged before, if it was accepted.
     let Some(ci) = work
         .effects
@@ -478,7 +600,7 @@ pub(super) fn tilt_stage(
                 c.validation
             ));
             work.effects[ci].alternatives.push(format!(
-                "tilt: {angle:.3e} rad about y (equal where a tilt acts, {IN_CONTACT}: validation {:.3} against {:.3}; rejected on the whole tests)",
+                "tilt: {angle:.3e} rad about {about} (equal where a tilt acts, {IN_CONTACT}: validation {:.3} against {:.3}; rejected on the whole tests)",
                 t.validation, c.validation
             ));
         }
@@ -492,7 +614,7 @@ pub(super) fn tilt_stage(
         c.accepted = false;
         c.reason = format!("replaced by the tilt, which predicts the validation tests better ({t_after:.3} against {c_after:.3}, beyond the null spread {null})");
         c.alternatives.push(format!(
-            "tilt: {angle:.3e} rad about y (better on validation)"
+            "tilt: {angle:.3e} rad about {about} (better on validation)"
         ));
         work.effects[ti].alternatives.push(format!(
             "clearance {c_param}: the same first contact, worse on validation ({c_after:.3})"
@@ -508,7 +630,7 @@ pub(super) fn tilt_stage(
             "clearance {c_param} (equal: validation {c_after:.3})"
         ));
         work.effects[ci].alternatives.push(format!(
-            "tilt: {angle:.3e} rad about y (equal: validation {t_after:.3}; the channels cannot tell them apart)"
+            "tilt: {angle:.3e} rad about {about} (equal: validation {t_after:.3}; the channels cannot tell them apart)"
         ));
     }
     Ok(())
@@ -600,9 +722,86 @@ mod tests {
     #[test]
     fn the_face_as_given_carries_no_tilt() {
         let base = PhysicsSpec::default();
-        assert_eq!(with_tilt(&base, 0.0), base);
-        let t = with_tilt(&base, -0.02).tilt.unwrap();
-        assert_eq!((t.angle, t.axis), (-0.02, AXIS));
+        assert_eq!(with_tilt(&base, [0.0, 1.0], 0.0), base);
+        let t = with_tilt(&base, [1.0, 0.0], -0.02).tilt.unwrap();
+        assert_eq!((t.angle, t.axis), (-0.02, [1.0, 0.0]));
+    }
+
+    /// The embedded rig's patch edges: 3 mm along the beams each side, 2.1 mm across them.
+    fn patch_edges() -> [Edge; 3] {
+        let e = |name, axis, sign, extent| Edge {
+            name,
+            axis,
+            sign,
+            extent,
+        };
+        [
+            e("tip_side", [0.0, 1.0], 1.0, 3e-3),
+            e("clamp_side", [0.0, 1.0], -1.0, 3e-3),
+            e("across_the_beams", [1.0, 0.0], 1.0, 2.1e-3),
+        ]
+    }
+
+    #[test]
+    fn each_edge_closes_as_early_at_its_own_angle() {
+        let edges = patch_edges();
+        let closing = 63e-6;
+        let angles: Vec<f64> = edges.iter().map(|e| e.angle(closing)).collect();
+        assert!(
+            (angles[0] - 0.021).abs() < 1e-5 && angles[1] == -angles[0],
+            "{angles:?}"
+        );
+        assert!((angles[2] - 0.03).abs() < 1e-5, "{angles:?}");
+        for (e, a) in edges.iter().zip(&angles) {
+            assert!((e.closing(*a) - closing).abs() < 1e-15);
+            // The tilt the model carries closes that edge by as much (`physics::tilt`).
+            let x = if e.axis[1] != 0.0 {
+                e.sign * e.extent
+            } else {
+                0.0
+            };
+            let y = if e.axis[0] != 0.0 {
+                -e.sign * e.extent
+            } else {
+                0.0
+            };
+            let spec = TiltSpec {
+                angle: *a,
+                axis: e.axis,
+            };
+            let off = crate::physics::tilt::gap_offsets(
+                &[[x, y, 0.0], [-x, -y, 0.0]],
+                &[1.0, 1.0],
+                &spec,
+            );
+            assert!((off[0] + closing).abs() < 1e-12, "{}: {off:?}", e.name);
+        }
+    }
+
+    #[test]
+    fn the_edge_taken_scores_lowest_and_is_told_beyond_the_null_spread() {
+        let [tip, clamp, across] = patch_edges();
+        let run = |edge, error| EdgeRun {
+            edge,
+            angle: 0.02,
+            error,
+        };
+        let runs = [run(tip, 1.4), run(clamp, 2.1), run(across, 0.8)];
+        let (taken, other, told) = edge_taken(&runs, 0.5).unwrap();
+        assert_eq!(
+            (taken.edge.name, other.edge.name, told),
+            ("across_the_beams", "tip_side", true)
+        );
+        let (_, _, told) = edge_taken(&runs, 0.7).unwrap();
+        assert!(!told);
+        // A run that compared nothing is never taken, and tells nothing.
+        let runs = [run(tip, f64::NAN), run(clamp, 2.1)];
+        let (taken, other, told) = edge_taken(&runs, 0.5).unwrap();
+        assert_eq!(
+            (taken.edge.name, other.edge.name, told),
+            ("clamp_side", "tip_side", false)
+        );
+        assert_eq!(edge_taken(&runs[..1], 0.5), None);
     }
 
     #[test]

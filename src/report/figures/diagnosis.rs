@@ -23,6 +23,8 @@
 
 use std::path::{Path, PathBuf};
 
+use plotters::coord::ranged1d::ValueFormatter;
+use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
@@ -495,7 +497,7 @@ struct Bars {
 }
 
 /// An x-y panel: bands, curves and error bars; `x_names` names the integer x ticks (a
-/// categorical axis) when not empty.
+/// categorical axis) when not empty; `log_y`: a logarithmic y axis (`y` then positive).
 struct Panel {
     caption: String,
     x_desc: String,
@@ -503,6 +505,7 @@ struct Panel {
     x: (f64, f64),
     y: (f64, f64),
     x_names: Vec<String>,
+    log_y: bool,
     bands: Vec<Band>,
     series: Vec<Series>,
     bars: Vec<Bars>,
@@ -525,10 +528,40 @@ impl Panel {
             x: padded(x0, x1, 0.06),
             y: padded(y0, y1, 0.08),
             x_names: Vec::new(),
+            log_y: false,
             bands: Vec::new(),
             series: Vec::new(),
             bars: Vec::new(),
         })
+    }
+
+    /// A panel as [`Panel::over`] with a logarithmic y axis over the finite positive values of
+    /// `ys`, padded by a fifth of the decades they span (a tenth of a decade at least).
+    fn over_log_y<'a>(
+        caption: String,
+        desc: (&str, &str),
+        xs: impl IntoIterator<Item = &'a f64>,
+        ys: impl IntoIterator<Item = &'a f64>,
+    ) -> Option<Panel> {
+        let positive: Vec<f64> = (ys.into_iter().copied())
+            .filter(|y| y.is_finite() && *y > 0.0)
+            .collect();
+        let (y0, y1) = finite_range(&positive)?;
+        let pad = (0.2 * (y1 / y0).log10()).max(0.1);
+        let xs: Vec<f64> = xs.into_iter().copied().collect();
+        let mut p = Panel::over(caption, desc, &xs, &positive)?;
+        p.y = (y0 / 10f64.powf(pad), y1 * 10f64.powf(pad));
+        p.log_y = true;
+        Some(p)
+    }
+
+    /// The y value at `share` (0: bottom, 1: top) of the panel's height, on its axis's scale.
+    fn y_at(&self, share: f64) -> f64 {
+        let (y0, y1) = self.y;
+        match self.log_y {
+            true => y0 * (y1 / y0).powf(share),
+            false => y0 + share * (y1 - y0),
+        }
     }
 
     fn draw<DB: DrawingBackend>(
@@ -537,13 +570,38 @@ impl Panel {
         fonts: &Fonts,
     ) -> Result<(), String> {
         let (margin, x_area, y_area) = axis_areas(fonts);
-        let mut chart = ChartBuilder::on(area)
+        let mut builder = ChartBuilder::on(area);
+        builder
             .caption(&self.caption, text(fonts.caption))
             .margin(margin)
             .x_label_area_size(x_area)
-            .y_label_area_size(y_area)
-            .build_cartesian_2d(self.x.0..self.x.1, self.y.0..self.y.1)
-            .map_err(err)?;
+            .y_label_area_size(y_area);
+        let (x, (y0, y1)) = (self.x.0..self.x.1, self.y);
+        if self.log_y {
+            let keys = log_keys(y0, y1);
+            let y = (y0..y1).log_scale().with_key_points(keys);
+            let mut chart = builder.build_cartesian_2d(x, y).map_err(err)?;
+            let ticks = |v: &f64| log_tick(*v, (y1 / y0).log10());
+            self.draw_mesh(&mut chart, fonts, Some(&ticks))?;
+            self.draw_content(&mut chart, fonts)
+        } else {
+            let mut chart = builder.build_cartesian_2d(x, y0..y1).map_err(err)?;
+            self.draw_mesh(&mut chart, fonts, None)?;
+            self.draw_content(&mut chart, fonts)
+        }
+    }
+
+    /// The panel's axes and grid on `chart`, the y labels by `y_ticks` where given.
+    fn draw_mesh<DB, Y>(
+        &self,
+        chart: &mut ChartContext<'_, DB, Cartesian2d<RangedCoordf64, Y>>,
+        fonts: &Fonts,
+        y_ticks: Option<&dyn Fn(&f64) -> String>,
+    ) -> Result<(), String>
+    where
+        DB: DrawingBackend,
+        Y: Ranged<ValueType = f64> + ValueFormatter<f64>,
+    {
         let (bold, light) = grid_styles();
         let names = |v: &f64| name_at(&self.x_names, *v);
         let mut mesh = chart.configure_mesh();
@@ -559,7 +617,22 @@ impl Panel {
             mesh.x_labels(self.x_names.len() + 1)
                 .x_label_formatter(&names);
         }
-        mesh.draw().map_err(err)?;
+        if let Some(ticks) = y_ticks {
+            mesh.y_label_formatter(ticks);
+        }
+        mesh.draw().map_err(err)
+    }
+
+    /// The panel's bands, curves and error bars on `chart`.
+    fn draw_content<DB, CT>(
+        &self,
+        chart: &mut ChartContext<'_, DB, CT>,
+        fonts: &Fonts,
+    ) -> Result<(), String>
+    where
+        DB: DrawingBackend,
+        CT: CoordTranslate<From = (f64, f64)>,
+    {
         for band in &self.bands {
             chart
                 .draw_series(
@@ -569,7 +642,7 @@ impl Panel {
                 .map_err(err)?;
         }
         for s in &self.series {
-            draw_runs(&mut chart, &s.runs, s.color, s.kind, s.width, fonts)?;
+            draw_runs(chart, &s.runs, s.color, s.kind, s.width, fonts)?;
         }
         let cap = marker_radius(fonts) + 1;
         for b in &self.bars {
@@ -594,6 +667,16 @@ impl Panel {
         }
         Ok(())
     }
+}
+
+/// The key points of a log axis over `lo..hi` (both positive): 1, 2 and 5 times the powers of
+/// ten within it.
+fn log_keys(lo: f64, hi: f64) -> Vec<f64> {
+    let (first, last) = (lo.log10().floor() as i32, hi.log10().ceil() as i32);
+    (first..=last)
+        .flat_map(|e| [1.0, 2.0, 5.0].map(|m| m * 10f64.powi(e)))
+        .filter(|v| (lo..=hi).contains(v))
+        .collect()
 }
 
 /// A grid of [`Panel`]s with a title and a legend strip.
@@ -1258,35 +1341,53 @@ fn evidence_discretisation(d: &Diagnosis) -> Option<Panels> {
 }
 
 /// The tilt's fit (the tilt stage's evidence): the train tests' error over their steps about
-/// the first contact against the face's angle about y, through the face as given (angle 0),
-/// the valley's floor, the fitted angle (the floor's mean on the edge taken) and its spread
-/// marked; and the contact channel's RMS score on the validation tests for the model without
-/// the clearance offset, with the tilt and with the clearance offset (what separates a tilt
-/// from a smaller clearance).
+/// the first contact against how much earlier than the mean gap the first edge closes (log:
+/// past the cliff, an edge closing before the measured contact, the errors are tens of times
+/// the floor's): the tip-side edge's runs, the valley's floor, every other edge closing as
+/// early, the face as given (closing 0), the fitted edge's closing and its spread; and the
+/// contact channel's RMS score on the validation tests for the model without the clearance
+/// offset, with the tilt and with the clearance offset (what separates a tilt from a smaller
+/// clearance).
 fn evidence_tilt(d: &Diagnosis) -> Option<Panels> {
     let e = d.effects.iter().find(|e| e.effect == "tilt")?;
     let ev = &e.evidence;
     let number = |v: &serde_json::Value| v.as_f64().filter(|x| x.is_finite());
-    let mut tried: Vec<(f64, f64)> = (ev["angles_tried"].as_array()?.iter())
-        .filter_map(|t| Some((number(&t["angle"])?, number(&t["train_error"])?)))
+    // (closing um, error, angle rad)
+    let um = |t: &serde_json::Value| Some(1e6 * number(&t["closing_m"])?);
+    let tried: Vec<(f64, f64, f64)> = (ev["angles_tried"].as_array()?.iter())
+        .filter_map(|t| Some((um(t)?, number(&t["train_error"])?, number(&t["angle"])?)))
         .collect();
+    let mut curve: Vec<(f64, f64)> = tried.iter().map(|t| (t.0, t.1)).collect();
+    curve.sort_by(|a, b| a.0.total_cmp(&b.0));
     let flat = number(&ev["train_error_without_tilt"]);
-    tried.extend(flat.map(|f| (0.0, f)));
-    tried.sort_by(|a, b| a.0.total_cmp(&b.0));
-    let fitted = number(&e.parameters["angle"]);
-    let spread = number(&ev["angle_spread"]).filter(|s| *s > 0.0);
+    let taken = ev["edge"].as_str();
+    // (edge, closing um, error)
+    let edges: Vec<(&str, f64, f64)> = (ev["edges"].as_array().into_iter().flatten())
+        .filter_map(|r| Some((r["edge"].as_str()?, um(r)?, number(&r["train_error"])?)))
+        .filter(|r| r.0 != "tip_side")
+        .collect();
+    let fitted = number(&ev["edge_closing_m"]).map(|c| 1e6 * c);
+    let spread = number(&ev["closing_spread_m"])
+        .filter(|s| *s > 0.0)
+        .map(|s| 1e6 * s);
     let floor: Vec<(f64, f64)> = (ev["floor_angles"].as_array().into_iter().flatten())
         .filter_map(number)
-        .filter_map(|a| tried.iter().copied().find(|p| p.0 == a))
+        .filter_map(|a| tried.iter().find(|t| t.2 == a).map(|t| (t.0, t.1)))
         .collect();
-    let xs: Vec<f64> = tried.iter().map(|p| p.0).collect();
-    let ys: Vec<f64> = tried.iter().map(|p| p.1).chain([0.0]).collect();
+    let xs: Vec<f64> = (curve.iter().map(|p| p.0))
+        .chain(edges.iter().map(|r| r.1))
+        .chain(flat.map(|_| 0.0))
+        .collect();
+    let ys: Vec<f64> = (curve.iter().map(|p| p.1))
+        .chain(edges.iter().map(|r| r.2))
+        .chain(flat)
+        .collect();
     let desc = (
-        "angle about y (rad)",
+        "how much earlier than the mean gap the first edge closes (µm)",
         "train error, about the first contact (-)",
     );
     let caption = format!("train tests: {}", e.train_tests.join(", "));
-    let mut p = Panel::over(caption, desc, &xs, &ys)?;
+    let mut p = Panel::over_log_y(caption, desc, &xs, &ys)?;
     if let Some(f) = flat {
         let (x0, x1) = p.x;
         p.series.push(line(
@@ -1297,7 +1398,7 @@ fn evidence_tilt(d: &Diagnosis) -> Option<Panels> {
         ));
     }
     p.series
-        .push(line(tried, palette(0), LineKind::Markers, width()));
+        .push(line(curve, palette(0), LineKind::Markers, width()));
     if !floor.is_empty() {
         p.series.push(Series {
             runs: floor.iter().map(|&q| vec![q]).collect(),
@@ -1306,18 +1407,26 @@ fn evidence_tilt(d: &Diagnosis) -> Option<Panels> {
             width: width() + 3,
         });
     }
-    if let Some(a) = fitted {
+    for (k, r) in edges.iter().enumerate() {
+        p.series.push(Series {
+            runs: vec![vec![(r.1, r.2)]],
+            color: palette(k + 2),
+            kind: LineKind::Markers,
+            width: width() + 3,
+        });
+    }
+    if let Some(c) = fitted {
         let (y0, y1) = p.y;
         p.series.push(line(
-            vec![(a, y0), (a, y1)],
+            vec![(c, y0), (c, y1)],
             palette(1),
             LineKind::Dashed,
             width(),
         ));
         if let Some(s) = spread {
-            let y = y0 + 0.05 * (y1 - y0);
+            let y = p.y_at(0.05);
             p.series.push(line(
-                vec![(a - s, y), (a + s, y)],
+                vec![(c - s, y), (c + s, y)],
                 palette(1),
                 LineKind::Solid,
                 width() + 2,
@@ -1360,7 +1469,7 @@ fn evidence_tilt(d: &Diagnosis) -> Option<Panels> {
     }
     let verdict = judged(e).unwrap_or_default();
     let mut legend = vec![entry(
-        "train error per angle tried (the tip-side edge refined once around its best; the clamp-side edge closing as early)",
+        "the tip-side edge (a tilt about y), its runs refined once around the best",
         palette(0),
         LineKind::Markers,
     )];
@@ -1371,28 +1480,65 @@ fn evidence_tilt(d: &Diagnosis) -> Option<Panels> {
             LineKind::Markers,
         ));
     }
-    if let Some(a) = fitted {
-        let pm = spread
+    for (k, r) in edges.iter().enumerate() {
+        legend.push(entry(
+            format!("the {} edge closing as early", r.0.replace('_', " ")),
+            palette(k + 2),
+            LineKind::Markers,
+        ));
+    }
+    if let (Some(a), Some(edge)) = (number(&e.parameters["angle"]), taken) {
+        let pm = number(&ev["angle_spread"])
+            .filter(|s| *s > 0.0)
             .map(|s| format!(" +- {}", sig(s)))
             .unwrap_or_default();
+        let told = match ev["other_edge"]["told"].as_bool() {
+            Some(false) => ", not told from the others",
+            _ => "",
+        };
         legend.push(entry(
-            format!("fitted (the floor's mean): {}{pm} rad{verdict}", sig(a)),
+            format!(
+                "fitted (the floor's mean): the {} edge{told}, {}{pm} rad about {}{verdict}",
+                edge.replace('_', " "),
+                sig(a),
+                axis_name(&e.parameters["axis"])
+            ),
             palette(1),
             LineKind::Dashed,
         ));
     }
     if flat.is_some() {
-        legend.push(entry("the face as given (angle 0)", GREY, LineKind::Dashed));
+        legend.push(entry(
+            "the face as given (closing 0)",
+            GREY,
+            LineKind::Dashed,
+        ));
     }
-    let closing = number(&ev["edge_closing_m"])
-        .map(|c| format!(": the train tests' first contact {} mm early", sig(1e3 * c)))
-        .unwrap_or_default();
+    let closing = match (fitted, number(&ev["runs_closing_m"])) {
+        (Some(c), Some(r)) => format!(
+            ": the fitted edge closes {} µm early (a flat face's runs: {} µm)",
+            sig(c),
+            sig(1e6 * r)
+        ),
+        (Some(c), None) => format!(": the fitted edge closes {} µm early", sig(c)),
+        _ => String::new(),
+    };
     Some(Panels {
         title: format!("Tilt of the contact face{closing}"),
         cols: panels.len(),
         panels,
         legend,
     })
+}
+
+/// A tilt's axis `[x, y]` in words ("y" where it is not given).
+fn axis_name(axis: &serde_json::Value) -> &'static str {
+    let c = |k: usize| axis[k].as_f64().unwrap_or(0.0).abs();
+    if c(0) > c(1) {
+        "x"
+    } else {
+        "y"
+    }
 }
 
 /// How effect `e` was judged, for a legend: "; validation BEFORE -> AFTER, VERDICT" (None

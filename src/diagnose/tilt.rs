@@ -530,7 +530,7 @@ pub(super) fn tilt_stage(
     // The edges the runs do not tell from the one taken: the same closing, another angle.
     let edge_null = work.opts.fitted_steps_null_spread;
     let untold: Vec<String> = (fit.edges.iter())
-        .filter(|r| r.edge != taken.edge && !(r.error - taken.error > edge_null))
+        .filter(|r| r.edge != taken.edge && r.error <= taken.error + edge_null)
         .map(|r| {
             format!(
                 "tilt {} (the {} edge closing as early: train error {:.3} against {:.3}, within the null spread {edge_null} of the steps about the first contact)",

@@ -424,7 +424,7 @@ fn clearance_is_found(offset: f64, plan: &str) -> serde_json::Value {
         let names: Vec<&str> = edges.iter().map(|e| e["edge"].as_str().unwrap()).collect();
         assert_eq!(
             names,
-            ["tip_side", "clamp_side", "across_the_beams"],
+            ["tip_side", "clamp_side", "smaller_y_side", "larger_y_side"],
             "{ev}"
         );
         let closings: Vec<f64> = edges

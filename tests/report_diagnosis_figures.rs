@@ -389,7 +389,8 @@ fn full() -> Diagnosis {
             "edges": [
                 edge("tip_side", [0.0, 1.0], 0.016, 3e-3, 2.0),
                 edge("clamp_side", [0.0, 1.0], -0.016, 3e-3, 1.9),
-                edge("across_the_beams", [1.0, 0.0], 0.0229, 2.1e-3, 2.3),
+                edge("smaller_y_side", [1.0, 0.0], 0.0229, 2.1e-3, 2.3),
+                edge("larger_y_side", [1.0, 0.0], -0.0229, 2.1e-3, 2.6),
             ],
             "other_edge": {"edge": "tip_side", "angle": 0.016, "train_error": 2.0, "told": false},
             "train_error_without_tilt": 16.9,
@@ -536,7 +537,7 @@ fn a_diagnosis_draws_every_figure_as_png_and_svg() {
             &[
                 "how much earlier than the mean gap",
                 "the clamp side edge, not told from the others, -0.016 +- 0.002 rad about y",
-                "the across the beams edge closing as early",
+                "the smaller y side edge closing as early",
                 "rejected",
                 "with the clearance offset",
                 "the fitted edge closes 48 µm early (a flat face",

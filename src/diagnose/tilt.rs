@@ -10,8 +10,8 @@
 //! instead of all at once.
 //!
 //! Parameterisation: the angle about an in-plane axis, signed, and the edge it closes first:
-//! the tip side (about y, positive: larger x), the clamp side (about y, negative) or the side
-//! across the beams (about x, positive: smaller y; the side at larger y is its mirror image).
+//! the tip side (about y, positive: larger x), the clamp side (about y, negative) or a side
+//! across the beams (about x, positive: the side at smaller y; negative: at larger y).
 //! The edge closing starts from the clearance the train tests show before their first impact
 //! (the model-run clearance per test, `clearance_fit::test_clearance_by_runs`, which fits a
 //! flat face): `sin(angle) edge = c_model - c_measured`. The fit ([`fit_by_runs`]) searches 0.4
@@ -85,10 +85,10 @@ impl Edge {
 
 /// The patch's edges from its area centroid (the ROM's lower pair positions and tributary
 /// areas): the tip side (larger x) and the clamp side, closed first by a tilt about y, positive
-/// and negative; and the side at smaller y, closed first by a positive tilt about x. The side at
-/// larger y is its mirror image (the parts are centred on y = 0, the channels see bending along
-/// the beams), not run apart.
-fn edges(rom: &Rom) -> [Edge; 3] {
+/// and negative; the sides at smaller and larger y, closed first by a tilt about x, positive and
+/// negative. The two sides across the beams are mirror images on a rig symmetric about y = 0,
+/// but the band's draws start from perturbed states that are not: both are run.
+fn edges(rom: &Rom) -> [Edge; 4] {
     let total: f64 = rom.pair_area.iter().sum();
     let centroid = |d: usize| {
         if total > 0.0 {
@@ -116,10 +116,16 @@ fn edges(rom: &Rom) -> [Edge; 3] {
             extent: reach(&|p| cx - p[0]),
         },
         Edge {
-            name: "across_the_beams",
+            name: "smaller_y_side",
             axis: [1.0, 0.0],
             sign: 1.0,
             extent: reach(&|p| cy - p[1]),
+        },
+        Edge {
+            name: "larger_y_side",
+            axis: [1.0, 0.0],
+            sign: -1.0,
+            extent: reach(&|p| p[1] - cy),
         },
     ]
 }
@@ -728,7 +734,7 @@ mod tests {
     }
 
     /// The embedded rig's patch edges: 3 mm along the beams each side, 2.1 mm across them.
-    fn patch_edges() -> [Edge; 3] {
+    fn patch_edges() -> [Edge; 4] {
         let e = |name, axis, sign, extent| Edge {
             name,
             axis,
@@ -738,7 +744,8 @@ mod tests {
         [
             e("tip_side", [0.0, 1.0], 1.0, 3e-3),
             e("clamp_side", [0.0, 1.0], -1.0, 3e-3),
-            e("across_the_beams", [1.0, 0.0], 1.0, 2.1e-3),
+            e("smaller_y_side", [1.0, 0.0], 1.0, 2.1e-3),
+            e("larger_y_side", [1.0, 0.0], -1.0, 2.1e-3),
         ]
     }
 
@@ -751,7 +758,10 @@ mod tests {
             (angles[0] - 0.021).abs() < 1e-5 && angles[1] == -angles[0],
             "{angles:?}"
         );
-        assert!((angles[2] - 0.03).abs() < 1e-5, "{angles:?}");
+        assert!(
+            (angles[2] - 0.03).abs() < 1e-5 && angles[3] == -angles[2],
+            "{angles:?}"
+        );
         for (e, a) in edges.iter().zip(&angles) {
             assert!((e.closing(*a) - closing).abs() < 1e-15);
             // The tilt the model carries closes that edge by as much (`physics::tilt`).
@@ -780,7 +790,7 @@ mod tests {
 
     #[test]
     fn the_edge_taken_scores_lowest_and_is_told_beyond_the_null_spread() {
-        let [tip, clamp, across] = patch_edges();
+        let [tip, clamp, across, _] = patch_edges();
         let run = |edge, error| EdgeRun {
             edge,
             angle: 0.02,
@@ -790,7 +800,7 @@ mod tests {
         let (taken, other, told) = edge_taken(&runs, 0.5).unwrap();
         assert_eq!(
             (taken.edge.name, other.edge.name, told),
-            ("across_the_beams", "tip_side", true)
+            ("smaller_y_side", "tip_side", true)
         );
         let (_, _, told) = edge_taken(&runs, 0.7).unwrap();
         assert!(!told);

@@ -419,7 +419,8 @@ fn clearance_is_found(offset: f64, plan: &str) -> serde_json::Value {
         let ev = &tilt["evidence"];
         assert!(ev["angles_tried"].as_array().unwrap().len() >= 9, "{ev}");
         assert!(ev["train_error_without_tilt"].is_f64(), "{ev}");
-        // Every edge was tried closing as early: along the beams on both sides, across them.
+        // Every edge was tried: along the beams on both sides, across them; each other edge
+        // about the tip side's closing.
         let edges = ev["edges"].as_array().unwrap();
         let names: Vec<&str> = edges.iter().map(|e| e["edge"].as_str().unwrap()).collect();
         assert_eq!(
@@ -432,9 +433,12 @@ fn clearance_is_found(offset: f64, plan: &str) -> serde_json::Value {
             .map(|e| e["closing_m"].as_f64().unwrap())
             .collect();
         assert!(
-            closings
-                .iter()
-                .all(|c| (c - closings[0]).abs() < 1e-9 * closings[0].max(1e-6)),
+            (closings.iter()).all(|c| (0.84..1.16).contains(&(c / closings[0]))),
+            "{ev}"
+        );
+        assert_eq!(
+            ev["edge_points"].as_array().unwrap().len(),
+            1 + 3 * 3,
             "{ev}"
         );
         // The edge taken is the fitted one; the other named is another edge.

@@ -537,7 +537,7 @@ fn a_diagnosis_draws_every_figure_as_png_and_svg() {
             &[
                 "how much earlier than the mean gap",
                 "the clamp side edge, not told from the others, -0.016 +- 0.002 rad about y",
-                "the smaller y side edge closing as early",
+                "the smaller y side edge",
                 "rejected",
                 "with the clearance offset",
                 "the fitted edge closes 48 µm early (a flat face",

@@ -21,7 +21,7 @@
 //! median per step over the band's draws, the tests weighted by how sharply their own runs told
 //! their clearance. The tip-side edge on a grid of 9 closings, refined once, its angle the mean
 //! of the valley's floor (within the chaos, the best run is a draw from it); then every other
-//! edge closing as early, and the face as given on the same steps (the landscape's reference,
+//! edge at 0.85, 1 and 1.15 times that closing, and the face as given on the same steps (the landscape's reference,
 //! `evidence-tilt`). The edge with the lowest error is taken; the evidence says whether every
 //! other one is higher by more than the null spread of those steps (`other_edge.told`): where
 //! it is not, the session places the closing but not the edge, and the angle only through the
@@ -203,7 +203,13 @@ fn valley_floor(tried: &[(f64, f64)]) -> Option<(f64, f64, Vec<f64>)> {
     Some((angle, smallest, floor.iter().map(|p| p.0).collect()))
 }
 
-/// An edge's run closing as early as the tip side's fit: the edge, its angle (rad, signed) and
+/// The closings at which every edge but the tip side is run, as shares of the tip side's
+/// fitted closing: the same first contact is not the same closing for every edge (a hidden
+/// 0.03 rad about x, a 63 um closing of a side, fitted on the tip side at 71 um, scored 1.89
+/// there against the tip side's 0.83 on the four-probe plan).
+const EDGE_CLOSINGS: [f64; 3] = [0.85, 1.0, 1.15];
+
+/// An edge's run about the tip side's fit: the edge, its angle (rad, signed) and
 /// its train error (-; NaN where nothing compared).
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct EdgeRun {
@@ -223,8 +229,10 @@ struct TiltFit {
     tried: Vec<(f64, f64)>,
     /// The tip-side angles of the valley's floor ([`valley_floor`]), rad.
     floor: Vec<f64>,
-    /// Every edge closing as early as the tip side's floor (the tip side's own run first).
+    /// Every edge's best point (the tip side's own run first).
     edges: Vec<EdgeRun>,
+    /// Every edge's points: the tip side's floor mean, the others at [`EDGE_CLOSINGS`].
+    points: Vec<EdgeRun>,
     /// The edge not taken with the lowest error.
     other: EdgeRun,
     /// Whether every other edge's error exceeds the taken one's by more than the null spread.
@@ -238,17 +246,8 @@ struct TiltFit {
 /// None without runs.
 fn edge_taken(runs: &[EdgeRun], null: f64) -> Option<(EdgeRun, EdgeRun, bool)> {
     let lowest = |it: &mut dyn Iterator<Item = &EdgeRun>| {
-        it.min_by(|a, b| {
-            let key = |r: &EdgeRun| {
-                if r.error.is_nan() {
-                    f64::INFINITY
-                } else {
-                    r.error
-                }
-            };
-            key(a).total_cmp(&key(b))
-        })
-        .copied()
+        it.min_by(|a, b| nan_last(a.error).total_cmp(&nan_last(b.error)))
+            .copied()
     };
     let taken = lowest(&mut runs.iter())?;
     let other = lowest(&mut runs.iter().filter(|r| r.edge != taken.edge))?;
@@ -262,8 +261,9 @@ fn edge_taken(runs: &[EdgeRun], null: f64) -> Option<(EdgeRun, EdgeRun, bool)> {
 /// told their first contact (`spreads`, m: [`sharpness_weights`]), as the clearance offset is
 /// fitted. The tip-side edge (`edges[0]`) on a grid of 9 over the edge closings `range` (m),
 /// refined once around the best; its angle the mean of the valley's floor ([`valley_floor`]);
-/// then every edge of `edges` closing as early, and the face as given; the edge whose run
-/// scores lowest is taken ([`edge_taken`]). `None` where no run compared.
+/// then every other edge of `edges` at [`EDGE_CLOSINGS`] of that closing, and the face as
+/// given; the edge whose best point scores lowest is taken ([`edge_taken`]). `None` where no
+/// run compared.
 ///
 /// NOTE: over the whole band the angles' errors are draws of its chaos: a grid over every
 /// contact step of the train tests took -0.0282 rad (+41 %, the other edge) for a hidden 0.02
@@ -300,16 +300,15 @@ fn fit_by_runs(
     let error = |_: &mut Work<'_>, _: f64, runs: &[Vec<super::outcome::StepScores>]| {
         weighted_tests_error(runs, &weighted)
     };
-    // Each edge's angle closing as early as the tip side's `mean` (the tip side's own exactly).
-    let angles_at = |mean: f64| -> Vec<f64> {
-        (edges.iter().enumerate())
-            .map(|(k, e)| {
-                if k == 0 {
-                    mean
-                } else {
-                    e.angle(tip.closing(mean))
-                }
-            })
+    // The edges' points about the tip side's `mean`, (edge, angle): the tip side's own, every
+    // other edge at [`EDGE_CLOSINGS`] of its closing (within the widest the spans admit).
+    let points_at = |mean: f64| -> Vec<(usize, f64)> {
+        let c = tip.closing(mean);
+        std::iter::once((0, mean))
+            .chain(
+                (edges.iter().enumerate().skip(1))
+                    .flat_map(|(k, e)| EDGE_CLOSINGS.map(|f| (k, e.angle((f * c).min(widest))))),
+            )
             .collect()
     };
     let (tried, checks) = work.at_finer_step(FIT_REFINEMENT, |w| {
@@ -335,9 +334,9 @@ fn fit_by_runs(
         let Some((mean, _, _)) = valley_floor(&tried) else {
             return Ok::<_, DiagnoseError>((tried, Vec::new()));
         };
-        // The face as given (point 0) and every edge (point k + 1, edge k).
+        // The face as given (point 0) and the edges' points (point j + 1, `points_at`'s j).
         let models: Vec<PhysicsSpec> = std::iter::once(base.clone())
-            .chain((edges.iter().zip(angles_at(mean))).map(|(e, a)| with_tilt(base, e.axis, a)))
+            .chain((points_at(mean).into_iter()).map(|(k, a)| with_tilt(base, edges[k].axis, a)))
             .collect();
         let by_index = |_: &Work<'_>, k: f64| (models[k as usize].clone(), spans.clone());
         let points = (0..models.len()).map(|k| k as f64).collect();
@@ -352,11 +351,19 @@ fn fit_by_runs(
     };
     let at = |k: usize| checks.iter().find(|c| c.0 == k as f64).map(|c| c.1);
     let flat = at(0);
-    let runs: Vec<EdgeRun> = (edges.iter().zip(angles_at(mean)).enumerate())
-        .map(|(k, (&edge, angle))| EdgeRun {
-            edge,
+    let points: Vec<EdgeRun> = (points_at(mean).into_iter().enumerate())
+        .map(|(j, (k, angle))| EdgeRun {
+            edge: edges[k],
             angle,
-            error: at(k + 1).unwrap_or(f64::NAN),
+            error: at(j + 1).unwrap_or(f64::NAN),
+        })
+        .collect();
+    // Each edge's best point (NaN last).
+    let runs: Vec<EdgeRun> = (edges.iter())
+        .filter_map(|e| {
+            (points.iter().filter(|p| p.edge == *e))
+                .min_by(|a, b| nan_last(a.error).total_cmp(&nan_last(b.error)))
+                .copied()
         })
         .collect();
     // The null spread of a band fit's own steps at the finer step (its valley, the edges).
@@ -377,9 +384,19 @@ fn fit_by_runs(
         tried,
         floor,
         edges: runs,
+        points,
         other,
         flat,
     }))
+}
+
+/// `x`, or infinity where it is NaN: an ordering key that puts NaN last.
+fn nan_last(x: f64) -> f64 {
+    if x.is_nan() {
+        f64::INFINITY
+    } else {
+        x
+    }
 }
 
 /// Stage 5: tilt (module docs). `base` is the model before the clearance stage (without its
@@ -516,6 +533,7 @@ pub(super) fn tilt_stage(
             .map(|&(a, e)| json!({"angle": a, "closing_m": edges[0].closing(a), "train_error": e}))
             .collect::<Vec<_>>(),
         "edges": fit.edges.iter().map(edge_run).collect::<Vec<_>>(),
+        "edge_points": fit.points.iter().map(edge_run).collect::<Vec<_>>(),
         "train_error_without_tilt": fit.flat,
         "angle_spread": fit.spread,
         "closing_spread_m": fit.spread * taken.edge.extent,

@@ -1343,8 +1343,8 @@ fn evidence_discretisation(d: &Diagnosis) -> Option<Panels> {
 /// The tilt's fit (the tilt stage's evidence): the train tests' error over their steps about
 /// the first contact against how much earlier than the mean gap the first edge closes (log:
 /// past the cliff, an edge closing before the measured contact, the errors are tens of times
-/// the floor's): the tip-side edge's runs, the valley's floor, every other edge closing as
-/// early, the face as given (closing 0), the fitted edge's closing and its spread; and the
+/// the floor's): the tip-side edge's runs, the valley's floor, every other edge's points about
+/// its closing, the face as given (closing 0), the fitted edge's closing and its spread; and the
 /// contact channel's RMS score on the validation tests for the model without the clearance
 /// offset, with the tilt and with the clearance offset (what separates a tilt from a smaller
 /// clearance).
@@ -1361,11 +1361,17 @@ fn evidence_tilt(d: &Diagnosis) -> Option<Panels> {
     curve.sort_by(|a, b| a.0.total_cmp(&b.0));
     let flat = number(&ev["train_error_without_tilt"]);
     let taken = ev["edge"].as_str();
-    // (edge, closing um, error)
-    let edges: Vec<(&str, f64, f64)> = (ev["edges"].as_array().into_iter().flatten())
+    // (edge, closing um, error): every other edge's points (its best alone in older evidence)
+    let points = match ev["edge_points"].as_array() {
+        Some(p) => p,
+        None => ev["edges"].as_array().map_or(&[][..], |e| e.as_slice()),
+    };
+    let edges: Vec<(&str, f64, f64)> = (points.iter())
         .filter_map(|r| Some((r["edge"].as_str()?, um(r)?, number(&r["train_error"])?)))
         .filter(|r| r.0 != "tip_side")
         .collect();
+    let mut names: Vec<&str> = edges.iter().map(|r| r.0).collect();
+    names.dedup();
     let fitted = number(&ev["edge_closing_m"]).map(|c| 1e6 * c);
     let spread = number(&ev["closing_spread_m"])
         .filter(|s| *s > 0.0)
@@ -1407,9 +1413,11 @@ fn evidence_tilt(d: &Diagnosis) -> Option<Panels> {
             width: width() + 3,
         });
     }
-    for (k, r) in edges.iter().enumerate() {
+    for (k, name) in names.iter().enumerate() {
         p.series.push(Series {
-            runs: vec![vec![(r.1, r.2)]],
+            runs: (edges.iter().filter(|r| r.0 == *name))
+                .map(|r| vec![(r.1, r.2)])
+                .collect(),
             color: palette(k + 2),
             kind: LineKind::Markers,
             width: width() + 3,
@@ -1480,9 +1488,9 @@ fn evidence_tilt(d: &Diagnosis) -> Option<Panels> {
             LineKind::Markers,
         ));
     }
-    for (k, r) in edges.iter().enumerate() {
+    for (k, name) in names.iter().enumerate() {
         legend.push(entry(
-            format!("the {} edge closing as early", r.0.replace('_', " ")),
+            format!("the {} edge", name.replace('_', " ")),
             palette(k + 2),
             LineKind::Markers,
         ));

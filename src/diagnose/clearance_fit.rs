@@ -539,8 +539,8 @@ pub(super) struct FittedOffset {
     pub(super) validation_tests: Vec<String>,
 }
 
-/// Where the clearance stage's offset `fitted` was not accepted (no `clearance` among
-/// `effects` is) but its train tests' first contact lies beyond [`LOCATED_STANDARD_ERRORS`]
+/// Where the clearance stage's offset `fitted` was not accepted (no `clearance`, `tilt` or
+/// `wear` among `effects` is) but its train tests' first contact lies beyond [`LOCATED_STANDARD_ERRORS`]
 /// of its error from the model's: a contact mismatch in those tests that no stage explained
 /// (why, in words). The verdict is then a mismatch: the model and the recording differ where
 /// the probes first meet, whatever the cause.
@@ -560,9 +560,9 @@ pub(super) fn unexplained_offset(
     fitted: &FittedOffset,
     effects: &[EffectResult],
 ) -> Option<String> {
-    if effects
-        .iter()
-        .any(|e| e.effect == "clearance" && e.accepted)
+    // An accepted effect on the contact geometry explains it (a tilt closes one edge early).
+    if (effects.iter())
+        .any(|e| e.accepted && matches!(e.effect.as_str(), "clearance" | "tilt" | "wear"))
     {
         return None;
     }
@@ -682,7 +682,7 @@ mod tests {
             accepted,
             ..EffectResult::unfitted(effect, serde_json::json!({}), "judged".into())
         };
-        let clearance_rejected = [judged("clearance", false), judged("tilt", true)];
+        let clearance_rejected = [judged("clearance", false), judged("tilt", false)];
         // The tilt of 0.02 rad on identify.toml: -53.5 +- 11 um.
         let why = unexplained_offset(&fitted(-53.5e-6, 11e-6), &clearance_rejected).unwrap();
         assert!(
@@ -695,6 +695,9 @@ mod tests {
         // The clearance accepted: nothing left unexplained.
         let accepted = [judged("clearance", true)];
         assert!(unexplained_offset(&fitted(-53.5e-6, 11e-6), &accepted).is_none());
+        // A tilt accepted in its place: its edge closes early, which explains the offset.
+        let tilt = [judged("clearance", false), judged("tilt", true)];
+        assert!(unexplained_offset(&fitted(-53.5e-6, 11e-6), &tilt).is_none());
         // No standard error (a single test without a spread): nothing located.
         let none = fitted(-53.5e-6, f64::NAN);
         assert!(unexplained_offset(&none, &clearance_rejected).is_none());

@@ -21,12 +21,13 @@
 //! median per step over the band's draws, the tests weighted by how sharply their own runs told
 //! their clearance. The tip-side edge on a grid of 9 closings, refined once, its angle the mean
 //! of the valley's floor (within the chaos, the best run is a draw from it); then every other
-//! edge at 0.85, 1 and 1.15 times that closing, and the face as given on the same steps (the landscape's reference,
-//! `evidence-tilt`). The edge with the lowest error is taken; the evidence says whether every
-//! other one is higher by more than the null spread of those steps (`other_edge.told`): where
-//! it is not, the session places the closing but not the edge, and the angle only through the
-//! edge's distance from the centroid (3.0 mm along the beams, 2.1 mm across them on the
-//! embedded rig's patch).
+//! edge at 0.85, 1 and 1.15 times that closing, and the face as given, on the same steps (the
+//! landscape's reference, `evidence-tilt`). The edge whose best point scores lowest is taken;
+//! the evidence says whether every other one is higher by more than the null spread of those
+//! steps (`other_edge.told`): where it is not, the session places the closing but not the
+//! edge, and the angle only through the edge's distance from the centroid (3.0 mm along the
+//! beams, 2.1 mm across them on the embedded rig's patch); the edges not told apart are named
+//! in the tilt's `alternatives` with their own angle and axis.
 //!
 //! Selection: the tilt is judged by the pipeline's rule against the model without the
 //! clearance offset (the two compete for the same evidence): on the whole tests, and where
@@ -216,8 +217,8 @@ fn valley_floor(tried: &[(f64, f64)]) -> Option<(f64, f64, Vec<f64>)> {
 /// there against the tip side's 0.83 on the four-probe plan).
 const EDGE_CLOSINGS: [f64; 3] = [0.85, 1.0, 1.15];
 
-/// An edge's run about the tip side's fit: the edge, its angle (rad, signed) and
-/// its train error (-; NaN where nothing compared).
+/// An edge's run about the tip side's fit: the edge, its angle (rad, signed) and its train
+/// error (-; NaN where nothing compared).
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct EdgeRun {
     edge: Edge,
@@ -248,9 +249,9 @@ struct TiltFit {
     flat: Option<f64>,
 }
 
-/// The edge taken among `runs` (each edge closing equally early): the lowest error (NaN
-/// last), the best of the others, and whether every other one is higher by more than `null`.
-/// None without runs.
+/// The edge taken among `runs` (each edge's best point): the lowest error (NaN last), the
+/// best of the others, and whether every other one is higher by more than `null`. None with
+/// fewer than two edges.
 fn edge_taken(runs: &[EdgeRun], null: f64) -> Option<(EdgeRun, EdgeRun, bool)> {
     let lowest = |it: &mut dyn Iterator<Item = &EdgeRun>| {
         it.min_by(|a, b| nan_last(a.error).total_cmp(&nan_last(b.error)))
@@ -569,15 +570,17 @@ pub(super) fn tilt_stage(
     )
     .judged_where_fitted(fitted_spans, FIT_REFINEMENT, WHERE_FITTED);
     let tilt_ok = work.judge(cand)?;
-    // The edges the runs do not tell from the one taken: the same closing, another angle.
+    // The edges the runs do not tell from the one taken: about the same closing, another
+    // angle.
     let edge_null = work.opts.fitted_steps_null_spread;
     let untold: Vec<String> = (fit.edges.iter())
         .filter(|r| r.edge != taken.edge && r.error <= taken.error + edge_null)
         .map(|r| {
             format!(
-                "tilt {} (the {} edge closing as early: train error {:.3} against {:.3}, within the null spread {edge_null} of the steps about the first contact)",
+                "tilt {} (the {} edge, closing {:.1} um early: train error {:.3} against {:.3}, within the null spread {edge_null} of the steps about the first contact)",
                 json!({"angle": r.angle, "axis": r.edge.axis}),
                 r.edge.name.replace('_', " "),
+                1e6 * r.edge.closing(r.angle),
                 r.error,
                 taken.error
             )
@@ -672,6 +675,7 @@ pub(super) fn tilt_stage(
                 (t_after, c_after, work.opts.fitted_steps_null_spread)
             }
             true => (t_after, c_after, null),
+            // (Nothing compared where a tilt acts: each as it was judged.)
             false => match in_contact(work)? {
                 Some((t, c)) => (t, c, null),
                 None => (t_after, c_after, null),
@@ -696,7 +700,7 @@ pub(super) fn tilt_stage(
         work.accepted = after_clearance;
         let t = &mut work.effects[ti];
         t.accepted = false;
-        t.reason = format!("an equal alternative of the clearance offset: both lower the validation error beyond the null spread, to {t_after:.3} (tilt) and {c_after:.3} (clearance), within the impact band's null spread {null} of each other; the channels cannot tell a tilted face from a smaller clearance here, the clearance stays in the model");
+        t.reason = format!("an equal alternative of the clearance offset: both lower the validation error beyond the null spread, to {t_after:.3} (tilt) and {c_after:.3} (clearance), within the null spread {null} of each other; the channels cannot tell a tilted face from a smaller clearance here, the clearance stays in the model");
         t.alternatives.push(format!(
             "clearance {c_param} (equal: validation {c_after:.3})"
         ));

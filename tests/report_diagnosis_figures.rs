@@ -398,7 +398,7 @@ fn full() -> Diagnosis {
             "closing_spread_m": 6e-6,
             "floor_angles": [0.012, 0.016],
             "validation_contact_score_rms": {
-                "model_before": 9.8, "with_tilt": 1.2, "with_clearance_stage": 4.1
+                "model_before": 9.8, "with_tilt": 1.2, "with_clearance_offset": 4.1
             },
         }),
         reason: "the validation error falls 21 %".into(),

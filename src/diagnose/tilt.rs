@@ -511,7 +511,12 @@ pub(super) fn tilt_stage(
     };
     let s_base = work.scores(base, &all)?;
     let s_tilt = work.scores(&with(angle), &all)?;
-    let s_clear = work.scores(&after_clearance, &all)?;
+    // The clearance offset as fitted, accepted or not (the model as given where none was).
+    let offset_model = (work.effects.iter())
+        .rposition(|e| e.effect == "clearance")
+        .and_then(|i| work.judged_model(i).cloned())
+        .unwrap_or_else(|| after_clearance.clone());
+    let s_clear = work.scores(&offset_model, &all)?;
     let edge_run = |r: &EdgeRun| {
         json!({
             "edge": r.edge.name,
@@ -534,7 +539,7 @@ pub(super) fn tilt_stage(
         "validation_contact_score_rms": {
             "model_before": contact_rms(&s_base),
             "with_tilt": contact_rms(&s_tilt),
-            "with_clearance_stage": contact_rms(&s_clear),
+            "with_clearance_offset": contact_rms(&s_clear),
         },
         "closing_range_m": [range.0, range.1],
         "angles_tried": (fit.tried.iter())

@@ -1446,7 +1446,7 @@ fn evidence_tilt(d: &Diagnosis) -> Option<Panels> {
     let bars: Vec<(String, f64)> = [
         ("neither", "model_before"),
         ("with the tilt", "with_tilt"),
-        ("with the clearance offset", "with_clearance_stage"),
+        ("with the clearance offset", "with_clearance_offset"),
     ]
     .iter()
     .filter_map(|(label, key)| Some((label.to_string(), number(&contact[key])?)))
@@ -1506,7 +1506,11 @@ fn evidence_tilt(d: &Diagnosis) -> Option<Panels> {
         };
         legend.push(entry(
             format!(
-                "fitted (the floor's mean): the {} edge{told}, {}{pm} rad about {}{verdict}",
+                "fitted ({}): the {} edge{told}, {}{pm} rad about {}{verdict}",
+                match edge {
+                    "tip_side" => "the floor's mean",
+                    _ => "its best point about the floor's closing",
+                },
                 edge.replace('_', " "),
                 sig(a),
                 axis_name(&e.parameters["axis"])

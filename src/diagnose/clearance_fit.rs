@@ -540,9 +540,9 @@ pub(super) struct FittedOffset {
 }
 
 /// Where the clearance stage's offset `fitted` was not accepted (no `clearance`, `tilt` or
-/// `wear` among `effects` is) but its train tests' first contact lies beyond [`LOCATED_STANDARD_ERRORS`]
-/// of its error from the model's: a contact mismatch in those tests that no stage explained
-/// (why, in words). The verdict is then a mismatch: the model and the recording differ where
+/// `wear` among `effects` is) but its train tests' first contact lies beyond
+/// [`LOCATED_STANDARD_ERRORS`] of its error from the model's: a contact mismatch in those
+/// tests that no stage explained (why, in words). The verdict is then a mismatch: the model and the recording differ where
 /// the probes first meet, whatever the cause.
 ///
 /// The error is the larger of the tests' standard error and the joint fit's own valley: on

@@ -447,8 +447,8 @@ fn equal_alternatives_with_spread(
         else {
             continue;
         };
-        // The alternative has no show run: its draws are the judge's runs alone.
         let before_runs = draws_against(before, &made_before, tolerance);
+        // The alternative has no show run: its draws are the judge's runs alone.
         let after_runs: Vec<Vec<StepScores>> = (made_after.iter())
             .map(|r| scored_as(after, r, tolerance))
             .collect();

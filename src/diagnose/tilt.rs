@@ -308,10 +308,15 @@ fn fit_by_runs(
     // Every run starts from a state of open contact two steps before each test's first
     // contact, captured with the clearances closed by more than any edge tried.
     let widest = 1.1 * tip.closing(a_hi + 0.5 * h);
-    let named: Vec<(&str, f64)> = (train.iter())
-        .map(|t| (t.test.as_str(), t.plan_clearance_m))
-        .collect();
-    let closest = closed_by(base, &named, widest);
+    let train_idx: Vec<usize> = weighted.iter().map(|w| w.0).collect();
+    let spans = open_spans(
+        work,
+        base,
+        (train, &train_idx),
+        widest,
+        FIT_REFINEMENT,
+        evidence_steps,
+    )?;
     let members = work.opts.band_members;
     let error = |_: &mut Work<'_>, _: f64, runs: &[Vec<super::outcome::StepScores>]| {
         weighted_tests_error(runs, &weighted)
@@ -328,11 +333,6 @@ fn fit_by_runs(
             .collect()
     };
     let (tried, checks) = work.at_finer_step(FIT_REFINEMENT, |w| {
-        let mut spans = Vec::new();
-        for &(ti, _) in &weighted {
-            let (from, through) = evidence_steps(w, ti);
-            spans.push(w.open_span(&closest, ti, from, through)?);
-        }
         let plan = |_: &Work<'_>, a: f64| (with_tilt(base, tip.axis, a), spans.clone());
         let tried = grid_then_refine(
             w,
@@ -501,9 +501,10 @@ pub(super) fn tilt_stage(
     let about = axis_name(axis);
     let with = |angle: f64| with_tilt(base, axis, angle);
     (work.progress)(DiagnoseProgress::Note(format!(
-        "tilt: {angle:.3e} +- {:.1e} rad about {about} by {} angles tried on the train tests' steps about their first contact (the {} edge, closing {:.2e} m early, scores {:.3}; the {} edge as early {:.3})",
+        "tilt: {angle:.3e} +- {:.1e} rad about {about} by {} angles tried on the train tests' steps about their first contact (the {} edge, closing {:.2e} m early, scores {:.3}; the {} edge's best {:.3})",
         fit.spread,
-        fit.tried.len() + fit.edges.len(),
+        // The tip side's runs (its floor mean among them), every other edge's points.
+        fit.tried.len() + fit.points.len() - 1,
         taken.edge.name,
         taken.edge.closing(angle),
         taken.error,

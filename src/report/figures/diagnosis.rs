@@ -28,7 +28,7 @@ use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use super::panel::{axis_areas, grid_styles, Band, Series};
+use super::panel::{axis_areas, grid_styles, log_tick, Band, Series};
 use crate::diagnose::outcome::{
     BandSpread, BandStep, Diagnosis, DiscretisedTwin, EffectResult, Regime, StepScores,
 };
@@ -445,22 +445,6 @@ fn sig(v: f64) -> String {
         }
     } else {
         format!("{v:.2e}")
-    }
-}
-
-/// A log-axis tick label: mantissas 1, 2 and 5 only (powers of ten only beyond three
-/// decades), plain numbers.
-fn log_tick(v: f64, decades: f64) -> String {
-    if !(v.is_finite() && v > 0.0) {
-        return String::new();
-    }
-    let m = v / 10f64.powf(v.log10().floor());
-    let near = |k: f64| (m - k).abs() < 1e-6 * k || (m - 10.0 * k).abs() < 1e-5 * k;
-    if near(1.0) || (decades <= 3.0 && (near(2.0) || near(5.0))) {
-        let s = format!("{v:.3}");
-        s.trim_end_matches('0').trim_end_matches('.').to_string()
-    } else {
-        String::new()
     }
 }
 
@@ -1802,9 +1786,6 @@ mod tests {
         assert_eq!(s.color(3.0001).0, 251);
         assert_eq!(s.color(30.0), RGBColor(103, 0, 13));
         assert_eq!(s.color(f64::INFINITY), RGBColor(103, 0, 13));
-        assert_eq!(log_tick(20.0, 2.0), "20");
-        assert_eq!(log_tick(0.5, 2.0), "0.5");
-        assert_eq!(log_tick(20.0, 4.0), "");
         assert_eq!(name_at(&["a".into(), "b".into()], 1.0), "b");
         assert_eq!(name_at(&["a".into()], 0.5), "");
         assert_eq!(sig(-4.56789), "-4.57");

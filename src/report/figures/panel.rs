@@ -32,6 +32,44 @@ pub(crate) struct LinePanel {
     pub series: Vec<Series>,
 }
 
+/// A number for a log axis tick: plain in [1e-3, 1e5), else `1e-6` style.
+pub(crate) fn tick(v: f64) -> String {
+    let a = v.abs();
+    if a == 0.0 || (1e-3..1e5).contains(&a) {
+        let s = format!("{v:.4}");
+        let s = s.trim_end_matches('0').trim_end_matches('.');
+        s.to_string()
+    } else {
+        // Three significant digits, trailing zeros of the mantissa dropped: 1.28e5, 1e-6.
+        let e = format!("{v:.2e}");
+        match e.split_once('e') {
+            Some((m, x)) => format!("{}e{x}", m.trim_end_matches('0').trim_end_matches('.')),
+            None => e,
+        }
+    }
+}
+
+/// A log-axis tick label: only mantissas 1, 2 and 5 are labelled (plotters puts a key point
+/// at every integer mantissa, whose labels would overlap), and only powers of ten when the
+/// axis spans more than three decades.
+pub(crate) fn log_tick(v: f64, decades: f64) -> String {
+    if !(v.is_finite() && v > 0.0) {
+        return String::new();
+    }
+    let m = v / 10f64.powf(v.log10().floor());
+    let near = |k: f64| (m - k).abs() < 1e-6 * k || (m - 10.0 * k).abs() < 1e-5 * k;
+    let keep = if decades > 3.0 {
+        near(1.0)
+    } else {
+        near(1.0) || near(2.0) || near(5.0)
+    };
+    if keep {
+        tick(v)
+    } else {
+        String::new()
+    }
+}
+
 /// Axis label area sizes and margin, px, for `fonts`.
 pub(crate) fn axis_areas(fonts: &Fonts) -> (u32, u32, u32) {
     (
@@ -90,5 +128,25 @@ impl LinePanel {
             draw_runs(&mut chart, &s.runs, s.color, s.kind, s.width, fonts)?;
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ticks_read_well() {
+        assert_eq!(tick(1000.0), "1000");
+        assert_eq!(tick(0.25), "0.25");
+        assert_eq!(tick(1e-6), "1e-6");
+        assert_eq!(tick(128000.0), "1.28e5");
+        assert_eq!(log_tick(2000.0, 2.0), "2000");
+        assert_eq!(log_tick(7000.0, 2.0), "");
+        assert_eq!(log_tick(2000.0, 4.0), "");
+        assert_eq!(log_tick(0.01, 4.0), "0.01");
+        assert_eq!(log_tick(20.0, 2.0), "20");
+        assert_eq!(log_tick(0.5, 2.0), "0.5");
+        assert_eq!(log_tick(20.0, 4.0), "");
     }
 }

@@ -689,12 +689,19 @@ pub(super) fn tilt_stage(
                 (t_after, c_after, work.opts.fitted_steps_null_spread)
             }
             true => (t_after, c_after, null),
-            // (Nothing compared where a tilt acts: each as it was judged.)
+            // Nothing compared where a tilt acts: errors on different steps do not tell the
+            // two apart, so neither replaces the other (an infinite spread).
             false => match in_contact(work)? {
                 Some((t, c)) => (t, c, null),
-                None => (t_after, c_after, null),
+                None => (t_after, c_after, f64::INFINITY),
             },
         };
+    let within = match null.is_finite() {
+        true => format!("within the null spread {null} of each other"),
+        false => {
+            "judged on different steps, and no step where a tilt acts compared them".to_string()
+        }
+    };
     let c_param = work.effects[ci].parameters.clone();
     if t_after + null < c_after {
         // The tilt predicts the validation tests better beyond the null spread: it replaces
@@ -714,7 +721,7 @@ pub(super) fn tilt_stage(
         work.accepted = after_clearance;
         let t = &mut work.effects[ti];
         t.accepted = false;
-        t.reason = format!("an equal alternative of the clearance offset: both lower the validation error beyond the null spread, to {t_after:.3} (tilt) and {c_after:.3} (clearance), within the null spread {null} of each other; the channels cannot tell a tilted face from a smaller clearance here, the clearance stays in the model");
+        t.reason = format!("an equal alternative of the clearance offset: both lower the validation error beyond the null spread, to {t_after:.3} (tilt) and {c_after:.3} (clearance), {within}; the channels cannot tell a tilted face from a smaller clearance here, the clearance stays in the model");
         t.alternatives.push(format!(
             "clearance {c_param} (equal: validation {c_after:.3})"
         ));

@@ -775,7 +775,7 @@ pub fn diagnose(
                 "not fitted: the clearance per test moves with the contact impulse (the wear's trend, undecided), and a tilt's early edge contact would be fitted against a moving clearance",
             );
         }
-        WearFound::NoTrend => {
+        WearFound::NoTrend | WearFound::TrendAcrossLevels { .. } => {
             work.stage(
                 "clearance",
                 "identify: the clearance as an offset to the plan's (model runs within the brackets)",
@@ -788,6 +788,9 @@ pub fn diagnose(
             let rom = work.runner.rom();
             super::tilt::tilt_stage(&mut work, rom, &before_contact, &ce)?;
         }
+    }
+    if let WearFound::TrendAcrossLevels { levels, trend } = wear {
+        levels_trend(&mut work, &levels, &trend);
     }
     let clearance = Some(ce);
 
@@ -944,6 +947,32 @@ pub fn diagnose(
         cost,
         wall_seconds: 0.0,
     })
+}
+
+/// After the clearance and tilt stages, a wear `trend` (in words) that runs between drive
+/// levels only (`levels`, in words): the wear's undecided reason says so; an accepted clearance
+/// offset or tilt names the trend among its alternatives (the level's reading of its contact),
+/// else the trend stays unexplained.
+fn levels_trend(work: &mut Work<'_>, levels: &str, trend: &str) {
+    for u in work.undecided.iter_mut().filter(|u| u.effect == "wear") {
+        u.reason = format!(
+            "{}; {levels}, so the clearance as an offset and the tilt were fitted as well",
+            u.reason
+        );
+    }
+    let explained = (work.effects.iter_mut())
+        .filter(|e| e.accepted && (e.effect == "clearance" || e.effect == "tilt"))
+        .map(|e| {
+            e.alternatives.push(format!(
+                "wear: {trend}, but {levels}; read by the flat model's runs, this effect's contact changes with the level as well"
+            ))
+        })
+        .count();
+    if explained == 0 {
+        work.unexplained.push(format!(
+            "wear: {trend}, between drive levels only, and no effect fitted to it was accepted"
+        ));
+    }
 }
 
 #[cfg(test)]

@@ -17,6 +17,7 @@ use crate::config::{Beam, ClampFrictionSpec, PhysicsSpec};
 
 use super::judge::{set_error, Candidate, Steps, Work};
 use super::linear::{AmplitudeDependence, LinearEvidence, ModeFit};
+use super::modes::linear_under_joint;
 use super::rerun::{SessionSteps, Span};
 use super::runfit::{signed_scores, RunProblem, RunResiduals};
 use super::{DiagnoseError, DiagnoseProgress};
@@ -315,8 +316,27 @@ pub(super) fn clamp_stage(work: &mut Work<'_>, lin: &LinearEvidence) -> Result<(
     evidence["from_slopes_per_m"] = json!(rho);
     evidence["slopes_damping_and_frequency_per_m"] = json!(ratios);
     let cand = joint.candidate(&base, &beams, evidence, (train.clone(), validation));
-    if work.judge(cand)? {
-        other_beam(work, &beams, Some((&fitted, &train)))?;
+    if !work.judge(cand)? {
+        return Ok(());
+    }
+    other_beam(work, &beams, Some((&fitted, &train)))?;
+    // The joint's modes' linear values, judged again under it; the joint fitted again on
+    // whatever is accepted.
+    let rom = work.runner.rom();
+    let mut corrected = Vec::new();
+    for mode in ["1FU", "1FL"] {
+        if with.iter().any(|d| d.mode == mode) && linear_under_joint(work, rom, lin, mode)? {
+            corrected.push(mode);
+        }
+    }
+    if !corrected.is_empty() {
+        refit_joint(
+            work,
+            &format!(
+                "the linear values of {} were found under the joint",
+                corrected.join(" and ")
+            ),
+        )?;
     }
     Ok(())
 }

@@ -16,7 +16,11 @@
 //!   validated 3x (alone with the comparison's spread; beside the gain by the judge's own
 //!   pointwise error before and after the wear);
 //! - clamp friction (lower clamp, 750 /m) and wear (2e-5) at once on `identify.toml`: both
-//!   named, the clamp first.
+//!   named, the clamp first;
+//! - two effects at once on `identify.toml` whose contact or linear evidence the first one
+//!   confounds ("Concealed values, a fifth sweep"): a vibrometer gain beside a tilt of -0.035
+//!   rad about x, an upper clamp joint beside a 1FU damping of 0.0035, a tilt of 0.025 rad
+//!   about y beside a 1FL damping of 0.004: both named.
 //!
 //! Each case runs 2-3 minutes of rig time and 4-10 minutes of diagnosis on the 2-core
 //! machine: all are `#[ignore]`d; their figures, and which of them hold, are in BENCHMARKS.md
@@ -349,4 +353,132 @@ fn clamp_friction_and_wear_on_identify_toml_are_both_named() {
     assert!(fit > 1e-5 && fit < 3e-5, "coefficient {fit} for 2e-5");
     let (b, a) = validation(w[0]);
     assert!(a < b, "validation {b} -> {a}");
+}
+
+/// Whether a tilt is named in `d`: accepted, or the equal alternative of an accepted
+/// clearance offset. Returns the tilt's angle about `axis`, as fitted or as an edge the runs
+/// did not tell from the one taken, where there is one.
+fn tilt_named(d: &serde_json::Value, axis: [f64; 2]) -> Option<f64> {
+    let effects = d["effects"].as_array().unwrap();
+    let tilt = effects
+        .iter()
+        .find(|e| e["effect"] == "tilt")
+        .unwrap_or_else(|| panic!("no tilt: {d:#}"));
+    let beside_clearance = accepted(d, "clearance").iter().any(|c| {
+        (c["alternatives"].as_array().unwrap().iter())
+            .any(|a| a.as_str().unwrap().starts_with("tilt"))
+    });
+    assert!(tilt["accepted"] == true || beside_clearance, "{d:#}");
+    let untold = (tilt["alternatives"].as_array().unwrap().iter())
+        .filter_map(|a| {
+            let a = a.as_str()?.strip_prefix("tilt ")?;
+            serde_json::from_str::<serde_json::Value>(&a[..=a.find('}')?]).ok()
+        })
+        .collect::<Vec<_>>();
+    let about = |t: &serde_json::Value| {
+        let a: Vec<f64> = (t["axis"].as_array()?.iter())
+            .filter_map(|c| c.as_f64())
+            .collect();
+        ((a[0] - axis[0]).abs() < 1e-9 && (a[1] - axis[1]).abs() < 1e-9).then_some(())
+    };
+    (std::iter::once(&tilt["parameters"]).chain(&untold))
+        .find(|t| about(t).is_some())
+        .and_then(|t| t["angle"].as_f64())
+}
+
+#[test]
+#[ignore = "2 minutes of rig time, 10-25 minutes of diagnosis; BENCHMARKS.md, Concealed values, a fifth sweep"]
+fn a_tilt_across_the_beams_beside_a_vibrometer_gain_are_both_named() {
+    // The tilt makes the low level's clearances read 607 and 614 um and the high level's 648:
+    // a trend with the contact impulse that the level carries, which kept the offset and the
+    // tilt from being fitted before.
+    let dir = tempfile::tempdir().unwrap();
+    let truth = "[[truth.variants.sensor_gains]]\nchannel = \"vibrometer\"\ngain = 1.03\n\
+                 [truth.variants.tilt]\nangle = -0.035\naxis = [1.0, 0.0]\n";
+    let (_, log) = sim_session(dir.path(), "gain-tilt", truth, &repo_plan("identify.toml"));
+    let d = diagnose(&log, dir.path(), "gain-tilt", &[]);
+    assert_eq!(d["verdict"], "mismatch", "{d:#}");
+    let g = accepted(&d, "sensor_gain");
+    assert_eq!(g.len(), 1, "{d:#}");
+    assert_eq!(g[0]["rank"], 1, "{d:#}");
+    assert_eq!(g[0]["parameters"]["channel"], "vibrometer", "{d:#}");
+    let gain = g[0]["parameters"]["gain"].as_f64().unwrap();
+    assert!((gain / 1.03 - 1.0).abs() < 0.01, "gain {gain}");
+    // Measured: the offset -67 um accepted (2.8x), the tilt its equal alternative at 0.0243
+    // rad about y, the side at larger y named at -0.0347 rad about x.
+    let fit = tilt_named(&d, [1.0, 0.0]).unwrap_or_else(|| panic!("no tilt about x: {d:#}"));
+    assert!(
+        (fit.abs() / 0.035 - 1.0).abs() < 0.2,
+        "angle {fit} for -0.035"
+    );
+}
+
+#[test]
+#[ignore = "2 minutes of rig time, 10-25 minutes of diagnosis; BENCHMARKS.md, Concealed values, a fifth sweep"]
+fn clamp_friction_beside_a_1fu_damping_are_both_named() {
+    // The linear stage judges the intercepts of 1FU's amplitude dependence without the joint
+    // (51.344 Hz, 0.00314: both rejected); the joint fitted without the damping took it up.
+    let dir = tempfile::tempdir().unwrap();
+    let truth = "[truth.variants.clamp_friction]\nstiffness_fraction = 0.12\n\
+                 half_slip_tip_amplitude = 1.0e-4\nbeams = [\"upper\"]\n\
+                 [[truth.variants.modes]]\nmode = \"1FU\"\ndamping_ratio = 0.0035\n";
+    let (_, log) = sim_session(
+        dir.path(),
+        "clamp-damping",
+        truth,
+        &repo_plan("identify.toml"),
+    );
+    let d = diagnose(&log, dir.path(), "clamp-damping", &[]);
+    assert_eq!(d["verdict"], "mismatch", "{d:#}");
+    let c = accepted(&d, "clamp_friction");
+    assert_eq!(c.len(), 1, "{d:#}");
+    assert_eq!(c[0]["rank"], 1, "{d:#}");
+    assert_eq!(
+        c[0]["parameters"]["beams"],
+        serde_json::json!(["upper"]),
+        "{d:#}"
+    );
+    // The share per slip amplitude is what the resonances fix (measured 1253 /m); the share
+    // itself is not fixed where the tips do not pass full slip far enough.
+    let p = &c[0]["parameters"];
+    let ratio =
+        p["stiffness_fraction"].as_f64().unwrap() / p["half_slip_tip_amplitude"].as_f64().unwrap();
+    assert!(
+        (ratio / 1200.0 - 1.0).abs() < 0.2,
+        "share per slip amplitude {ratio} /m for 1200"
+    );
+    let z = accepted(&d, "linear_damping");
+    assert_eq!(z.len(), 1, "{d:#}");
+    assert_eq!(z[0]["parameters"]["mode"], "1FU", "{d:#}");
+    // Measured: 0.00326 (-7 %), validated 4.09 -> 1.67.
+    let fit = z[0]["parameters"]["damping_ratio"].as_f64().unwrap();
+    assert!((fit / 0.0035 - 1.0).abs() < 0.2, "damping {fit} for 0.0035");
+    let (b, a) = validation(z[0]);
+    assert!(a < b, "validation {b} -> {a}");
+    assert!(accepted(&d, "linear_frequency").is_empty(), "{d:#}");
+}
+
+#[test]
+#[ignore = "2 minutes of rig time, 10-15 minutes of diagnosis; BENCHMARKS.md, Concealed values, a fifth sweep"]
+fn a_tilt_beside_a_1fl_damping_are_both_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let truth = "[truth.variants.tilt]\nangle = 0.025\naxis = [0.0, 1.0]\n\
+                 [[truth.variants.modes]]\nmode = \"1FL\"\ndamping_ratio = 0.004\n";
+    let (_, log) = sim_session(
+        dir.path(),
+        "tilt-damping",
+        truth,
+        &repo_plan("identify.toml"),
+    );
+    let d = diagnose(&log, dir.path(), "tilt-damping", &[]);
+    assert_eq!(d["verdict"], "mismatch", "{d:#}");
+    let z = accepted(&d, "linear_damping");
+    assert_eq!(z.len(), 1, "{d:#}");
+    assert_eq!(z[0]["rank"], 1, "{d:#}");
+    let fit = z[0]["parameters"]["damping_ratio"].as_f64().unwrap();
+    assert!((fit / 0.004 - 1.0).abs() < 0.2, "damping {fit} for 0.004");
+    // Measured: the offset -75 um accepted where fitted, on low-up's own onsets (590 +- 18
+    // um); the tilt named as its equal alternative where a tilt acts, at 0.0187 rad (-25 %:
+    // the issue asks two effects at once to be named).
+    assert!(tilt_named(&d, [0.0, 1.0]).is_some(), "{d:#}");
 }

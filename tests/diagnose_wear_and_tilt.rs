@@ -203,24 +203,8 @@ fn tilt_is_found(angle: f64, axis: [f64; 2]) {
                 .contains("an equal alternative"));
     assert!(named, "{d:#}");
     // The sign says which edge closes first; the tip-side edge is the one the beams' bending
-    // can tell (either sign within 20 % of the magnitude is accepted as found). The fitted
-    // tilt, or an edge not told from it: the same closing about another axis.
-    let untold = (tilt["alternatives"].as_array().unwrap().iter())
-        .filter_map(|a| {
-            let a = a.as_str()?.strip_prefix("tilt ")?;
-            serde_json::from_str::<serde_json::Value>(&a[..=a.find('}')?]).ok()
-        })
-        .collect::<Vec<_>>();
-    let about = |t: &serde_json::Value| {
-        let a: Vec<f64> = (t["axis"].as_array().unwrap().iter())
-            .map(|c| c.as_f64().unwrap())
-            .collect();
-        (a[0] - axis[0]).abs() < 1e-9 && (a[1] - axis[1]).abs() < 1e-9
-    };
-    let fit = (std::iter::once(&tilt["parameters"]).chain(&untold))
-        .find(|t| about(t))
-        .and_then(|t| t["angle"].as_f64())
-        .unwrap_or_else(|| panic!("no tilt about {axis:?}: {tilt:#}"));
+    // can tell (either sign within 20 % of the magnitude is accepted as found).
+    let fit = angle_about(tilt, axis).unwrap_or_else(|| panic!("no tilt about {axis:?}: {tilt:#}"));
     println!(
         "tilt {angle} about {axis:?}: fitted {fit} ({})",
         tilt["parameters"]
@@ -355,9 +339,18 @@ fn clamp_friction_and_wear_on_identify_toml_are_both_named() {
     assert!(a < b, "validation {b} -> {a}");
 }
 
-/// Whether a tilt is named in `d`: accepted, or the equal alternative of an accepted
-/// clearance offset. Returns the tilt's angle about `axis`, as fitted or as an edge the runs
-/// did not tell from the one taken, where there is one.
+/// A session of `identify.toml` with `truth` hidden, diagnosed as `tag`; asserts the verdict
+/// `mismatch`. Returns the diagnosis.
+fn identify_mismatch(tag: &str, truth: &str) -> serde_json::Value {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, log) = sim_session(dir.path(), tag, truth, &repo_plan("identify.toml"));
+    let d = diagnose(&log, dir.path(), tag, &[]);
+    assert_eq!(d["verdict"], "mismatch", "{d:#}");
+    d
+}
+
+/// Asserts a tilt named in `d`: accepted, or the equal alternative of an accepted clearance
+/// offset. Returns its angle about `axis` ([`angle_about`]), where there is one.
 fn tilt_named(d: &serde_json::Value, axis: [f64; 2]) -> Option<f64> {
     let effects = d["effects"].as_array().unwrap();
     let tilt = effects
@@ -369,7 +362,13 @@ fn tilt_named(d: &serde_json::Value, axis: [f64; 2]) -> Option<f64> {
             .any(|a| a.as_str().unwrap().starts_with("tilt"))
     });
     assert!(tilt["accepted"] == true || beside_clearance, "{d:#}");
-    let untold = (tilt["alternatives"].as_array().unwrap().iter())
+    angle_about(tilt, axis)
+}
+
+/// The angle about `axis` of tilt effect `tilt`: as fitted, or as an edge the runs did not
+/// tell from the one taken (the same closing about another axis, named in its alternatives).
+fn angle_about(tilt: &serde_json::Value, axis: [f64; 2]) -> Option<f64> {
+    let untold = (tilt["alternatives"].as_array()?.iter())
         .filter_map(|a| {
             let a = a.as_str()?.strip_prefix("tilt ")?;
             serde_json::from_str::<serde_json::Value>(&a[..=a.find('}')?]).ok()
@@ -379,7 +378,8 @@ fn tilt_named(d: &serde_json::Value, axis: [f64; 2]) -> Option<f64> {
         let a: Vec<f64> = (t["axis"].as_array()?.iter())
             .filter_map(|c| c.as_f64())
             .collect();
-        ((a[0] - axis[0]).abs() < 1e-9 && (a[1] - axis[1]).abs() < 1e-9).then_some(())
+        (a.len() == 2 && (a[0] - axis[0]).abs() < 1e-9 && (a[1] - axis[1]).abs() < 1e-9)
+            .then_some(())
     };
     (std::iter::once(&tilt["parameters"]).chain(&untold))
         .find(|t| about(t).is_some())
@@ -392,12 +392,9 @@ fn a_tilt_across_the_beams_beside_a_vibrometer_gain_are_both_named() {
     // The tilt makes the low level's clearances read 607 and 614 um and the high level's 648:
     // a trend with the contact impulse that the level carries, which kept the offset and the
     // tilt from being fitted before.
-    let dir = tempfile::tempdir().unwrap();
     let truth = "[[truth.variants.sensor_gains]]\nchannel = \"vibrometer\"\ngain = 1.03\n\
                  [truth.variants.tilt]\nangle = -0.035\naxis = [1.0, 0.0]\n";
-    let (_, log) = sim_session(dir.path(), "gain-tilt", truth, &repo_plan("identify.toml"));
-    let d = diagnose(&log, dir.path(), "gain-tilt", &[]);
-    assert_eq!(d["verdict"], "mismatch", "{d:#}");
+    let d = identify_mismatch("gain-tilt", truth);
     let g = accepted(&d, "sensor_gain");
     assert_eq!(g.len(), 1, "{d:#}");
     assert_eq!(g[0]["rank"], 1, "{d:#}");
@@ -418,18 +415,10 @@ fn a_tilt_across_the_beams_beside_a_vibrometer_gain_are_both_named() {
 fn clamp_friction_beside_a_1fu_damping_are_both_named() {
     // The linear stage judges the intercepts of 1FU's amplitude dependence without the joint
     // (51.344 Hz, 0.00314: both rejected); the joint fitted without the damping took it up.
-    let dir = tempfile::tempdir().unwrap();
     let truth = "[truth.variants.clamp_friction]\nstiffness_fraction = 0.12\n\
                  half_slip_tip_amplitude = 1.0e-4\nbeams = [\"upper\"]\n\
                  [[truth.variants.modes]]\nmode = \"1FU\"\ndamping_ratio = 0.0035\n";
-    let (_, log) = sim_session(
-        dir.path(),
-        "clamp-damping",
-        truth,
-        &repo_plan("identify.toml"),
-    );
-    let d = diagnose(&log, dir.path(), "clamp-damping", &[]);
-    assert_eq!(d["verdict"], "mismatch", "{d:#}");
+    let d = identify_mismatch("clamp-damping", truth);
     let c = accepted(&d, "clamp_friction");
     assert_eq!(c.len(), 1, "{d:#}");
     assert_eq!(c[0]["rank"], 1, "{d:#}");
@@ -461,17 +450,9 @@ fn clamp_friction_beside_a_1fu_damping_are_both_named() {
 #[test]
 #[ignore = "2 minutes of rig time, 10-15 minutes of diagnosis; BENCHMARKS.md, Concealed values, a fifth sweep"]
 fn a_tilt_beside_a_1fl_damping_are_both_named() {
-    let dir = tempfile::tempdir().unwrap();
     let truth = "[truth.variants.tilt]\nangle = 0.025\naxis = [0.0, 1.0]\n\
                  [[truth.variants.modes]]\nmode = \"1FL\"\ndamping_ratio = 0.004\n";
-    let (_, log) = sim_session(
-        dir.path(),
-        "tilt-damping",
-        truth,
-        &repo_plan("identify.toml"),
-    );
-    let d = diagnose(&log, dir.path(), "tilt-damping", &[]);
-    assert_eq!(d["verdict"], "mismatch", "{d:#}");
+    let d = identify_mismatch("tilt-damping", truth);
     let z = accepted(&d, "linear_damping");
     assert_eq!(z.len(), 1, "{d:#}");
     assert_eq!(z[0]["rank"], 1, "{d:#}");

@@ -208,16 +208,7 @@ pub(super) fn linear_stage(
     lin: &LinearEvidence,
 ) -> Result<(), DiagnoseError> {
     for mode in ["1FU", "1FL"] {
-        let fits: Vec<&ModeFit> = lin.fits_of(mode).collect();
-        let Some((low0, train, validation)) = mode_tests(work, mode, &fits) else {
-            continue;
-        };
-        let train_fits: Vec<&ModeFit> = fits
-            .iter()
-            .copied()
-            .filter(|f| f.test_index == low0)
-            .collect();
-        let Some(values) = linear_values(&train_fits, lin, mode) else {
+        let Some((values, tests)) = mode_values(work, lin, mode) else {
             continue;
         };
         // Refined by model runs on the fitted test, unless the values are the intercepts of an
@@ -230,20 +221,39 @@ pub(super) fn linear_stage(
             true => Refine::No,
             false => Refine::Where,
         };
-        judge_mode(work, rom, mode, values, (low0, train, validation), refine)?;
+        judge_mode(work, rom, mode, values, tests, refine)?;
     }
     Ok(())
+}
+
+/// A mode's linear frequency (Hz) and its standard error, damping ratio and its standard
+/// error.
+type ModeValues = (f64, f64, f64, f64);
+
+/// A mode's lowest-level test fitted, its train tests and its validation tests.
+type ModeTests = (usize, Vec<usize>, Vec<usize>);
+
+/// `mode`'s linear values ([`linear_values`]) on its lowest-level test, and its tests
+/// ([`mode_tests`]); None where either is missing.
+fn mode_values(
+    work: &mut Work<'_>,
+    lin: &LinearEvidence,
+    mode: &str,
+) -> Option<(ModeValues, ModeTests)> {
+    let fits: Vec<&ModeFit> = lin.fits_of(mode).collect();
+    let (low0, train, validation) = mode_tests(work, mode, &fits)?;
+    let train_fits: Vec<&ModeFit> = (fits.iter().copied())
+        .filter(|f| f.test_index == low0)
+        .collect();
+    let values = linear_values(&train_fits, lin, mode)?;
+    Some((values, (low0, train, validation)))
 }
 
 /// The tests of `mode`'s linear values from its fits `fits`: the lowest-level test fitted
 /// (the first of them), the train tests (that one) and the validation tests (the others with
 /// a fit, without measured contact where there are any). None (said undecided) with fewer
 /// than two tests.
-fn mode_tests(
-    work: &mut Work<'_>,
-    mode: &str,
-    fits: &[&ModeFit],
-) -> Option<(usize, Vec<usize>, Vec<usize>)> {
+fn mode_tests(work: &mut Work<'_>, mode: &str, fits: &[&ModeFit]) -> Option<ModeTests> {
     let mut tests: Vec<usize> = fits.iter().map(|f| f.test_index).collect();
     tests.dedup();
     if tests.len() < 2 {
@@ -293,8 +303,8 @@ fn judge_mode(
     work: &mut Work<'_>,
     rom: &Rom,
     mode: &'static str,
-    (f, fse, z, zse): (f64, f64, f64, f64),
-    (low0, train, validation): (usize, Vec<usize>, Vec<usize>),
+    (f, fse, z, zse): ModeValues,
+    (low0, train, validation): ModeTests,
     refine: Refine,
 ) -> Result<bool, DiagnoseError> {
     let Some((f0, z0)) = model_mode(rom, &work.accepted, mode) else {
@@ -373,24 +383,8 @@ pub(super) fn linear_under_joint(
     if work.accepted.modes.iter().any(|m| m.mode == mode) {
         return Ok(false);
     }
-    let fits: Vec<&ModeFit> = lin.fits_of(mode).collect();
-    let Some((low0, train, validation)) = mode_tests(work, mode, &fits) else {
+    let Some((values, tests)) = mode_values(work, lin, mode) else {
         return Ok(false);
     };
-    let train_fits: Vec<&ModeFit> = fits
-        .iter()
-        .copied()
-        .filter(|f| f.test_index == low0)
-        .collect();
-    let Some(values) = linear_values(&train_fits, lin, mode) else {
-        return Ok(false);
-    };
-    judge_mode(
-        work,
-        rom,
-        mode,
-        values,
-        (low0, train, validation),
-        Refine::Only,
-    )
+    judge_mode(work, rom, mode, values, tests, Refine::Only)
 }

@@ -7,13 +7,12 @@
 use serde_json::json;
 
 use crate::config::{ClearanceSpec, PhysicsSpec};
-use crate::signal::features::{inverse_variance_weights, spreads_known, standard_error};
+use crate::signal::features::{chi2_999, inverse_variance_weights, spreads_known, standard_error};
 
 use super::clearance::{ClearanceEvidence, TestClearance};
 use super::judge::{alternate, grid_then_refine, members_error, Candidate, Steps, Work};
 use super::outcome::{EffectResult, StepScores};
 use super::rerun::Span;
-use super::wear::chi2_999;
 use super::{DiagnoseError, DiagnoseProgress};
 
 /// A test's clearance refined by model runs.

@@ -45,7 +45,7 @@
 use serde_json::json;
 
 use crate::config::{ClearanceSpec, PhysicsSpec, WearSpec};
-use crate::signal::features::{inverse_variance_weights, spreads_known};
+use crate::signal::features::{chi2_999, inverse_variance_weights, spreads_known};
 
 use super::clearance::{ClearanceEvidence, TestClearance};
 use super::clearance_fit::{contact_steps_fitted, test_clearance_by_runs, FIT_REFINEMENT};
@@ -454,20 +454,6 @@ fn impulses_at_fit_step(
     through: (usize, usize),
 ) -> Result<Vec<Impulses>, DiagnoseError> {
     work.at_finer_step(FIT_REFINEMENT, |w| w.runner.contact_impulses(exts, through))
-}
-
-/// The 99.9 % point of chi-squared with `n` (>= 1) degrees of freedom: exact to the table's
-/// digits up to 6, the Wilson-Hilferty approximation above.
-pub(super) fn chi2_999(n: usize) -> f64 {
-    const TABLE: [f64; 6] = [10.828, 13.816, 16.266, 18.467, 20.515, 22.458];
-    match n {
-        0 => f64::NAN,
-        1..=6 => TABLE[n - 1],
-        _ => {
-            let v = 2.0 / (9.0 * n as f64);
-            n as f64 * (1.0 - v + 3.090 * v.sqrt()).powi(3)
-        }
-    }
 }
 
 /// Whether the validation tests' own clearances (the points not trained on) confirm the wear

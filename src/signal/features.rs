@@ -233,6 +233,20 @@ pub(crate) fn spreads_known(spreads: &[f64]) -> bool {
     spreads.iter().all(|s| s.is_finite() && *s > 0.0)
 }
 
+/// The 99.9 % point of chi-squared with `n` (>= 1) degrees of freedom: exact to the table's
+/// digits up to 6, the Wilson-Hilferty approximation above (NaN for 0).
+pub(crate) fn chi2_999(n: usize) -> f64 {
+    const TABLE: [f64; 6] = [10.828, 13.816, 16.266, 18.467, 20.515, 22.458];
+    match n {
+        0 => f64::NAN,
+        1..=6 => TABLE[n - 1],
+        _ => {
+            let v = 2.0 / (9.0 * n as f64);
+            n as f64 * (1.0 - v + 3.090 * v.sqrt()).powi(3)
+        }
+    }
+}
+
 /// Inverse-variance weights `1 / spread^2` of estimates with the given spreads, or `None`
 /// where a spread is missing ([`spreads_known`]): the caller then weighs them equally.
 pub(crate) fn inverse_variance_weights(spreads: &[f64]) -> Option<Vec<f64>> {

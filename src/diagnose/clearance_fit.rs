@@ -480,9 +480,10 @@ pub(super) fn clearance_stage(
         Steps::All,
     )
     .judged_where_fitted(spans, FIT_REFINEMENT, what);
-    let held_out: Vec<(String, f64, f64, f64)> = (ce.tests.iter())
+    // Every validation test's onsets, or none (a test without them confirms nothing).
+    let held_out: Option<Vec<(String, f64, f64, f64)>> = (ce.tests.iter())
         .filter(|t| cand.validation.contains(&t.test_index))
-        .filter_map(|t| {
+        .map(|t| {
             let model = accepted.test_clearance(&t.test, t.plan_clearance_m);
             Some((
                 t.test.clone(),
@@ -492,7 +493,8 @@ pub(super) fn clearance_stage(
             ))
         })
         .collect();
-    let cand = cand.share_waived_by(held_out_onsets(&held_out, offset));
+    let waived = held_out.and_then(|h| held_out_onsets(&h, offset));
+    let cand = cand.share_waived_by(waived);
     let fitted = FittedOffset {
         offset_m: offset,
         standard_error_m: standard_error,

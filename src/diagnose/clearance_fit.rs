@@ -7,7 +7,9 @@
 use serde_json::json;
 
 use crate::config::{ClearanceSpec, PhysicsSpec};
-use crate::signal::features::{chi2_999, inverse_variance_weights, spreads_known, standard_error};
+use crate::signal::features::{
+    held_out_confirms, inverse_variance_weights, spreads_known, standard_error, HeldOut,
+};
 
 use super::clearance::{ClearanceEvidence, TestClearance};
 use super::judge::{alternate, grid_then_refine, members_error, Candidate, Steps, Work};
@@ -529,22 +531,19 @@ fn held_out_onsets(held_out: &[(String, f64, f64, f64)], offset: f64) -> Option<
     let z_offset: Vec<f64> = (held_out.iter())
         .map(|(_, onset, se, model)| (onset - model - offset) / se)
         .collect();
-    let chi2_model: f64 = (held_out.iter())
-        .map(|(_, onset, se, model)| ((onset - model) / se).powi(2))
-        .sum();
-    let limit = chi2_999(held_out.len());
-    let worst = z_offset.iter().fold(0.0_f64, |m, z| m.max(z.abs()));
-    (worst <= 3.0 && chi2_model > limit).then(|| {
-        format!(
-            "the validation tests' own clearances at their contact onsets ({}) follow the offset (within {worst:.1} of their standard errors) and reject the model's clearance (chi-squared {chi2_model:.1} over {} test(s), {limit:.1} at 99.9 %), which a contact excess of the twin would not move",
-            held_out
-                .iter()
-                .map(|(t, onset, se, _)| format!("{t} {:.0} +- {:.0} um", onset * 1e6, se * 1e6))
-                .collect::<Vec<_>>()
-                .join(", "),
-            held_out.len()
-        )
-    })
+    let z_model: Vec<f64> = (held_out.iter())
+        .map(|(_, onset, se, model)| (onset - model) / se)
+        .collect();
+    let HeldOut { worst, chi2, limit } = held_out_confirms(&z_offset, &z_model)?;
+    Some(format!(
+        "the validation tests' own clearances at their contact onsets ({}) follow the offset (within {worst:.1} of their standard errors) and reject the model's clearance (chi-squared {chi2:.1} over {} test(s), {limit:.1} at 99.9 %), which a contact excess of the twin would not move",
+        held_out
+            .iter()
+            .map(|(t, onset, se, _)| format!("{t} {:.0} +- {:.0} um", onset * 1e6, se * 1e6))
+            .collect::<Vec<_>>()
+            .join(", "),
+        held_out.len()
+    ))
 }
 
 /// The standard error of the mean of the train tests' offsets `offs` (m), each fitted with

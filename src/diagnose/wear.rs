@@ -45,7 +45,9 @@
 use serde_json::json;
 
 use crate::config::{ClearanceSpec, PhysicsSpec, WearSpec};
-use crate::signal::features::{chi2_999, inverse_variance_weights, spreads_known};
+use crate::signal::features::{
+    chi2_999, held_out_confirms, inverse_variance_weights, spreads_known, HeldOut,
+};
 
 use super::clearance::{ClearanceEvidence, TestClearance};
 use super::clearance_fit::{contact_steps_fitted, test_clearance_by_runs, FIT_REFINEMENT};
@@ -492,17 +494,14 @@ fn held_out_confirmation(
     let z_wear: Vec<f64> = (held.iter())
         .map(|p| (p.clearance_m - p.plan_clearance_m - offset - growth(p)) / p.spread_m)
         .collect();
-    let chi2_constant: f64 = (held.iter())
-        .map(|p| ((p.clearance_m - p.plan_clearance_m - constant) / p.spread_m).powi(2))
-        .sum();
-    let limit = chi2_999(held.len());
-    let worst = z_wear.iter().fold(0.0_f64, |m, z| m.max(z.abs()));
-    (worst <= 3.0 && chi2_constant > limit).then(|| {
-        format!(
-            "the validation tests' own clearances follow the wear (within {worst:.1} of their spreads) and reject a constant clearance (chi-squared {chi2_constant:.1} over {} test(s), {limit:.1} at 99.9 %), which a contact excess of the twin would be",
-            held.len()
-        )
-    })
+    let z_constant: Vec<f64> = (held.iter())
+        .map(|p| (p.clearance_m - p.plan_clearance_m - constant) / p.spread_m)
+        .collect();
+    let HeldOut { worst, chi2, limit } = held_out_confirms(&z_wear, &z_constant)?;
+    Some(format!(
+        "the validation tests' own clearances follow the wear (within {worst:.1} of their spreads) and reject a constant clearance (chi-squared {chi2:.1} over {} test(s), {limit:.1} at 99.9 %), which a contact excess of the twin would be",
+        held.len()
+    ))
 }
 
 /// The fixed point's runs, (coefficient, the train tests' slope against its impulse), both
@@ -1145,12 +1144,10 @@ fn trend_only(
 /// impulse, which the level alone carried. On `identify.toml` the impulse grows with the
 /// level, so nothing within a level tells the two apart.
 fn across_levels_only(points: &[(f64, f64, f64)]) -> Option<String> {
+    let same = |a: f64, b: f64| (a - b).abs() <= 1e-9 * a.abs().max(b.abs());
     let mut levels: Vec<f64> = Vec::new();
     for &(l, ..) in points {
-        if !levels
-            .iter()
-            .any(|&m| (m - l).abs() <= 1e-9 * m.abs().max(l.abs()))
-        {
+        if !levels.iter().any(|&m| same(m, l)) {
             levels.push(l);
         }
     }
@@ -1159,9 +1156,7 @@ fn across_levels_only(points: &[(f64, f64, f64)]) -> Option<String> {
     }
     let mut chi2 = 0.0;
     for &m in &levels {
-        let at: Vec<&(f64, f64, f64)> = (points.iter())
-            .filter(|p| (p.0 - m).abs() <= 1e-9 * m.abs().max(p.0.abs()))
-            .collect();
+        let at: Vec<&(f64, f64, f64)> = (points.iter()).filter(|p| same(p.0, m)).collect();
         let w: f64 = at.iter().map(|p| p.2.powi(-2)).sum();
         let mean = at.iter().map(|p| p.1 * p.2.powi(-2)).sum::<f64>() / w;
         chi2 += at.iter().map(|p| ((p.1 - mean) / p.2).powi(2)).sum::<f64>();

@@ -247,6 +247,29 @@ pub(crate) fn chi2_999(n: usize) -> f64 {
     }
 }
 
+/// What [`held_out_confirms`] found: the largest |z| against the fitted model, the
+/// chi-squared against the null one and its 99.9 % point.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct HeldOut {
+    pub worst: f64,
+    pub chi2: f64,
+    pub limit: f64,
+}
+
+/// Whether held-out estimates confirm a fitted model against a null one: `to_fit` and
+/// `to_null` are their residuals from each, in units of their own spreads (one per estimate).
+/// They confirm it when every residual from the fit is within 3 and together they reject the
+/// null beyond the 99.9 % point of chi-squared. None without estimates or where they do not.
+pub(crate) fn held_out_confirms(to_fit: &[f64], to_null: &[f64]) -> Option<HeldOut> {
+    if to_fit.is_empty() || to_fit.len() != to_null.len() {
+        return None;
+    }
+    let worst = to_fit.iter().fold(0.0_f64, |m, z| m.max(z.abs()));
+    let chi2: f64 = to_null.iter().map(|z| z * z).sum();
+    let limit = chi2_999(to_null.len());
+    (worst <= 3.0 && chi2 > limit).then_some(HeldOut { worst, chi2, limit })
+}
+
 /// Inverse-variance weights `1 / spread^2` of estimates with the given spreads, or `None`
 /// where a spread is missing ([`spreads_known`]): the caller then weighs them equally.
 pub(crate) fn inverse_variance_weights(spreads: &[f64]) -> Option<Vec<f64>> {

@@ -308,22 +308,12 @@ fn wear_and_a_sensor_gain_on_identify_toml_are_both_named() {
 #[test]
 #[ignore = "4 minutes of rig time, 15-25 minutes of diagnosis; BENCHMARKS.md, Each clearance estimate by its own spread"]
 fn clamp_friction_and_wear_on_identify_toml_are_both_named() {
-    let dir = tempfile::tempdir().unwrap();
     let truth = "[truth.variants.clamp_friction]\nstiffness_fraction = 0.15\n\
                  half_slip_tip_amplitude = 2.0e-4\nbeams = [\"lower\"]\n\
                  [truth.variants.wear]\ncoefficient = 2e-5\n";
-    let (_, log) = sim_session(dir.path(), "clamp-wear", truth, &repo_plan("identify.toml"));
-    let d = diagnose(&log, dir.path(), "clamp-wear", &[]);
-    assert_eq!(d["verdict"], "mismatch", "{d:#}");
+    let d = identify_mismatch("clamp-wear", truth);
     // The clamp is identified before the contact, wear after it: named in that order.
-    let c = accepted(&d, "clamp_friction");
-    assert_eq!(c.len(), 1, "{d:#}");
-    assert_eq!(c[0]["rank"], 1, "{d:#}");
-    assert_eq!(
-        c[0]["parameters"]["beams"],
-        serde_json::json!(["lower"]),
-        "{d:#}"
-    );
+    clamp_named_first(&d, "lower");
     let w = accepted(&d, "wear");
     assert_eq!(w.len(), 1, "{d:#}");
     assert_eq!(w[0]["rank"], 2, "{d:#}");
@@ -337,6 +327,19 @@ fn clamp_friction_and_wear_on_identify_toml_are_both_named() {
     assert!(fit > 1e-5 && fit < 3e-5, "coefficient {fit} for 2e-5");
     let (b, a) = validation(w[0]);
     assert!(a < b, "validation {b} -> {a}");
+}
+
+/// Asserts one clamp joint accepted in `d`, named first, on beam `beam` alone; returns it.
+fn clamp_named_first<'d>(d: &'d serde_json::Value, beam: &str) -> &'d serde_json::Value {
+    let c = accepted(d, "clamp_friction");
+    assert_eq!(c.len(), 1, "{d:#}");
+    assert_eq!(c[0]["rank"], 1, "{d:#}");
+    assert_eq!(
+        c[0]["parameters"]["beams"],
+        serde_json::json!([beam]),
+        "{d:#}"
+    );
+    c[0]
 }
 
 /// A session of `identify.toml` with `truth` hidden, diagnosed as `tag`; asserts the verdict
@@ -419,17 +422,10 @@ fn clamp_friction_beside_a_1fu_damping_are_both_named() {
                  half_slip_tip_amplitude = 1.0e-4\nbeams = [\"upper\"]\n\
                  [[truth.variants.modes]]\nmode = \"1FU\"\ndamping_ratio = 0.0035\n";
     let d = identify_mismatch("clamp-damping", truth);
-    let c = accepted(&d, "clamp_friction");
-    assert_eq!(c.len(), 1, "{d:#}");
-    assert_eq!(c[0]["rank"], 1, "{d:#}");
-    assert_eq!(
-        c[0]["parameters"]["beams"],
-        serde_json::json!(["upper"]),
-        "{d:#}"
-    );
+    let c = clamp_named_first(&d, "upper");
     // The share per slip amplitude is what the resonances fix (measured 1253 /m); the share
     // itself is not fixed where the tips do not pass full slip far enough.
-    let p = &c[0]["parameters"];
+    let p = &c["parameters"];
     let ratio =
         p["stiffness_fraction"].as_f64().unwrap() / p["half_slip_tip_amplitude"].as_f64().unwrap();
     assert!(

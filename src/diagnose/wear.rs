@@ -1085,7 +1085,12 @@ pub(super) fn wear_stage(
         }
     }
     if !accepted {
-        let why = unexplained_trend(k_all, se_all, growth);
+        // Said of the wear alone: a later stage may yet accept an effect that explains the
+        // trend (a clearance offset read differently at each level).
+        let why = format!(
+            "wear: {}; no wear fitted to it was accepted",
+            trend_words(k_all, se_all, growth)
+        );
         // What the judge said of the last wear judged: the session may hold no test that
         // tells the fitted wear from none.
         let judged = (work.effects.iter().rev())

@@ -809,11 +809,25 @@ impl<'a> Work<'a> {
         }
         c.evidence["refit"] = serde_json::json!({"error_before": before, "error_after": after});
         let without_error = self.errors(without, &c, false)?;
+        let first = (self.effects.iter()).position(|e| e.accepted && replaces(e));
         self.supersede(
             replaces,
             &format!("refitted as the {} that follows", c.effect),
         );
-        Ok(self.record(c, without_error.or(before), after, ok, reason))
+        let ok = self.record(c, without_error.or(before), after, ok, reason);
+        // The refit takes the place in identification order of the first effect it replaces
+        // (an upper joint refitted after 1FU's damping found under it is still named first).
+        if let Some(i) = first {
+            let last = self.effects.len() - 1;
+            self.effects[i..].rotate_right(1);
+            let models: Vec<_> = (i..=last).map(|k| self.judged_models.remove(&k)).collect();
+            for (k, m) in (i..=last).zip(models.into_iter().cycle().skip(last - i)) {
+                if let Some(m) = m {
+                    self.judged_models.insert(k, m);
+                }
+            }
+        }
+        Ok(ok)
     }
 
     /// [`Work::judge`] with the errors `before` and `after` computed elsewhere, on what

@@ -25,6 +25,7 @@ use crate::rom::Rom;
 
 use super::judge::{Candidate, DiagnoseProgress, Steps, Work};
 use super::linear::{LinearEvidence, ModeFit};
+use super::rerun::Span;
 use super::runfit::{signed_scores, RunProblem, RunResiduals};
 use super::DiagnoseError;
 
@@ -124,6 +125,25 @@ impl RunFit<'_, '_> {
 }
 
 impl RunResiduals for RunFit<'_, '_> {
+    /// The runs at the points of `xs` side by side; a failure is kept for
+    /// [`RunResiduals::residuals_at`] to report.
+    fn prefetch(&self, xs: &[DVector<f64>]) {
+        if self.failed.borrow().is_some() {
+            return;
+        }
+        let mut work = self.work.borrow_mut();
+        let runs = (xs.iter())
+            .map(|x| {
+                let (f, z) = self.point(x);
+                let ext = with_mode(&work.accepted, self.mode, Some(f), Some(z));
+                (ext, vec![Span::whole(self.test)])
+            })
+            .collect();
+        if let Err(e) = work.prefetch(runs) {
+            *self.failed.borrow_mut() = Some(e);
+        }
+    }
+
     /// The signed scores of the test's impact-free motion features with the mode at `x`;
     /// `None` (the error kept) when a run fails.
     fn residuals_at(&self, x: &DVector<f64>) -> Option<DVector<f64>> {

@@ -204,7 +204,36 @@ impl SessionSteps {
     /// free transient that small, decayed over the lead-in's steps and the first one's
     /// settling (`LEAD_IN_STEPS`) before the first compared record window.
     pub fn near_resonance(&self, ti: usize, fraction: f64) -> Option<Span> {
-        let span = self.before_contact(ti)?;
+        self.near_resonance_of(self.before_contact(ti)?, fraction)
+    }
+
+    /// Test `ti`'s steps after its last measured contact where its first step has contact
+    /// (an up-sweep that starts in the impact band and leaves it), cut to those near the
+    /// resonance as [`SessionSteps::near_resonance`] cuts: the impact-free steps such a test
+    /// has. `None` where the test has none, or where its first step is impact-free.
+    pub fn near_resonance_after_contact(&self, ti: usize, fraction: f64) -> Option<Span> {
+        if self.first_contact(ti) != Some(0) {
+            return None;
+        }
+        let last = (self.steps.iter())
+            .filter(|s| s.test_index == ti && !s.impact_free())
+            .map(|s| s.info.step)
+            .max()?;
+        let from = last + 1;
+        (from <= self.last_step(ti)?).then_some(())?;
+        let tail = Span {
+            test: ti,
+            from,
+            through: None,
+            lead_in: LeadIn::Span,
+        };
+        self.near_resonance_of(tail, fraction)
+    }
+
+    /// `span`'s steps (impact-free) cut to those near the resonance: see
+    /// [`SessionSteps::near_resonance`].
+    fn near_resonance_of(&self, span: Span, fraction: f64) -> Option<Span> {
+        let ti = span.test;
         let size = |s: &SessionStep| s.measured.metrics.rms_upper + s.measured.metrics.rms_lower;
         let steps: Vec<&SessionStep> = self.steps.iter().filter(|s| span.covers(s)).collect();
         let peak = steps.iter().map(|s| size(s)).fold(0.0, f64::max);

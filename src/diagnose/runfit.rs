@@ -26,6 +26,11 @@ pub(super) fn signed_scores(scores: &[StepScores], tests: &[usize]) -> Vec<f64> 
 pub(super) trait RunResiduals {
     /// The residuals at the scaled parameters `x`.
     fn residuals_at(&self, x: &DVector<f64>) -> Option<DVector<f64>>;
+
+    /// Makes the runs at every point of `xs` side by side (a Jacobian's), so that the
+    /// [`RunResiduals::residuals_at`] calls that follow find them made. A run's result does
+    /// not depend on what runs beside it. Nothing by default.
+    fn prefetch(&self, _xs: &[DVector<f64>]) {}
 }
 
 /// A [`RunResiduals`] at the scaled parameters `x` as a [`LeastSquaresProblem`], its Jacobian
@@ -57,13 +62,20 @@ impl<R: RunResiduals> LeastSquaresProblem<f64, Dyn, Dyn> for RunProblem<R> {
     }
 
     fn jacobian(&self) -> Option<DMatrix<f64>> {
-        let r0 = self.runs.residuals_at(&self.x)?;
         let n = self.x.len();
-        let mut j = DMatrix::zeros(r0.len(), n);
-        for k in 0..n {
+        let shifted = |k: usize| {
             let mut x = self.x.clone();
             x[k] += self.step;
-            let r = self.runs.residuals_at(&x)?;
+            x
+        };
+        let points: Vec<DVector<f64>> = std::iter::once(self.x.clone())
+            .chain((0..n).map(shifted))
+            .collect();
+        self.runs.prefetch(&points);
+        let r0 = self.runs.residuals_at(&self.x)?;
+        let mut j = DMatrix::zeros(r0.len(), n);
+        for k in 0..n {
+            let r = self.runs.residuals_at(&shifted(k))?;
             if r.len() != r0.len() {
                 return None;
             }

@@ -419,7 +419,7 @@ fn clamp_friction_beside_a_1fu_damping_are_both_named() {
     // The linear stage judges the intercepts of 1FU's amplitude dependence without the joint
     // (51.344 Hz, 0.00314: both rejected); the joint is fitted with high-up's impact-free steps
     // past its contact, where the tips pass full slip, and refitted on the damping found under
-    // it (measured: 0.1205 / 1.0038e-4 m and 0.003437).
+    // it (measured: 0.1205 / 1.0037e-4 m and 0.003437).
     let truth = "[truth.variants.clamp_friction]\nstiffness_fraction = 0.12\n\
                  half_slip_tip_amplitude = 1.0e-4\nbeams = [\"upper\"]\n\
                  [[truth.variants.modes]]\nmode = \"1FU\"\ndamping_ratio = 0.0035\n";

@@ -532,7 +532,8 @@ fn fit_joint(
     // response has fallen past the resonance. Without them `f2`'s joint (0.12 / 1e-4 m hidden)
     // came out at 0.648 / 5.2e-4 m, the shares 0.28-0.66 named as not told apart: the hidden
     // joint scored 0.03 on high-up's impact-free steps against 12 for the fitted one
-    // (BENCHMARKS.md, "The clamp's share where the tips pass full slip").
+    // (BENCHMARKS.md, "The clamp's fit within the issue's 10 minutes; its share where the tips
+    // pass full slip").
     let near_resonance = |tests: &[usize]| -> Vec<Span> {
         tests
             .iter()
@@ -671,7 +672,7 @@ fn fit_joint(
     // NOTE: only a better share than the fit's starts a second fit. One that is not (the
     // rescan's best at another share, above the fit's error) led back to the fit's point in
     // `f2`, both fits: about a third of each fit's runs (BENCHMARKS.md, "The clamp's fit within
-    // the issue's 10 minutes").
+    // the issue's 10 minutes; its share where the tips pass full slip").
     if let Some(b) =
         best(&rescan).filter(|b| (b.share / first.share - 1.0).abs() > 0.1 && b.rms < first.rms)
     {

@@ -812,7 +812,7 @@ impl<'a> Work<'a> {
         let first = (self.effects.iter()).position(|e| e.accepted && replaces(e));
         self.supersede(
             replaces,
-            &format!("refitted as the {} that follows", c.effect),
+            &format!("refitted: the accepted {} in its place", c.effect),
         );
         let ok = self.record(c, without_error.or(before), after, ok, reason);
         // The refit takes the place in identification order of the first effect it replaces

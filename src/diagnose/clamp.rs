@@ -156,6 +156,14 @@ impl ClampFit<'_, '_, '_> {
     fn point(&self, x: &DVector<f64>) -> (f64, f64) {
         (self.start.0 * x[0].exp(), self.start.1 * x[1].exp())
     }
+
+    /// The share and ratio at `x` and the model with that joint; `None` outside
+    /// `0 < share < 1`.
+    fn model_at(&self, x: &DVector<f64>) -> Option<(f64, f64, PhysicsSpec)> {
+        let (sf, r) = self.point(x);
+        (sf > 0.0 && sf < 1.0 && r.is_finite())
+            .then(|| (sf, r, with_joint(self.base, (self.spec)(sf, r))))
+    }
 }
 
 impl RunResiduals for ClampFit<'_, '_, '_> {
@@ -166,14 +174,8 @@ impl RunResiduals for ClampFit<'_, '_, '_> {
             return;
         }
         let runs = (xs.iter())
-            .map(|x| self.point(x))
-            .filter(|&(sf, r)| sf > 0.0 && sf < 1.0 && r.is_finite())
-            .map(|(sf, r)| {
-                (
-                    with_joint(self.base, (self.spec)(sf, r)),
-                    self.spans.to_vec(),
-                )
-            })
+            .filter_map(|x| self.model_at(x))
+            .map(|(_, _, ext)| (ext, self.spans.to_vec()))
             .collect();
         if let Err(e) = self.work.borrow_mut().prefetch(runs) {
             *self.failed.borrow_mut() = Some(e);
@@ -186,12 +188,8 @@ impl RunResiduals for ClampFit<'_, '_, '_> {
         if self.failed.borrow().is_some() {
             return None;
         }
-        let (sf, r) = self.point(x);
-        if !(sf > 0.0 && sf < 1.0 && r.is_finite()) {
-            return None;
-        }
+        let (sf, r, ext) = self.model_at(x)?;
         let mut work = self.work.borrow_mut();
-        let ext = with_joint(self.base, (self.spec)(sf, r));
         let scores = match work.scores_spans(&ext, self.spans) {
             Ok(s) => s,
             Err(e) => {
@@ -546,18 +544,18 @@ fn fit_joint(
     let (fitted_spans, train_spans) = (near_resonance(fitted), near_resonance(train));
     // A refit starts at the accepted joint's ratio, its fit's own (Levenberg-Marquardt below
     // moves it as the new model asks); a first fit on a grid about the slopes' ratio.
-    let ratio_grid: &[f64] = if fit.refit.is_some() {
-        &[]
-    } else {
-        &RATIO_GRID
-    };
-    let ratio_words = if fit.refit.is_some() {
-        format!("share per slip amplitude {rho:.0} /m as accepted")
-    } else {
-        format!(
-            "share per slip amplitude 0.7-1.3 x {rho:.0} /m on {}",
-            work.names(fitted).join(", ")
-        )
+    let (ratio_grid, ratio_words): (&[f64], String) = match fit.refit {
+        Some(_) => (
+            &[],
+            format!("share per slip amplitude {rho:.0} /m as accepted"),
+        ),
+        None => (
+            &RATIO_GRID,
+            format!(
+                "share per slip amplitude 0.7-1.3 x {rho:.0} /m on {}",
+                work.names(fitted).join(", ")
+            ),
+        ),
     };
     let line = format!(
         "clamp_friction: {} model runs ({ratio_words}; stiffness share 0.035-0.56 on {}; the steps near each test's resonance before its first contact), then Levenberg-Marquardt on both",
@@ -580,13 +578,11 @@ fn fit_joint(
             ratio_runs.push((RATIO_SHARE, rho * m, e));
         }
     }
-    let r1 = if fit.refit.is_some() {
-        rho
-    } else {
-        let Some(&(_, r, _)) = ratio_runs.iter().min_by(|a, b| a.2.total_cmp(&b.2)) else {
-            return Ok(None);
-        };
-        r
+    let best_ratio = ratio_runs.iter().min_by(|a, b| a.2.total_cmp(&b.2));
+    let r1 = match (fit.refit, best_ratio) {
+        (Some(_), _) => rho,
+        (None, Some(&(_, r, _))) => r,
+        (None, None) => return Ok(None),
     };
     // The shares `shares` at a ratio `r`: (share, ratio, RMS signed score, features).
     let scan = |work: &mut Work<'_>, shares: &[f64], r: f64| -> Result<Vec<Run>, DiagnoseError> {

@@ -820,10 +820,12 @@ impl<'a> Work<'a> {
         if let Some(i) = first {
             let last = self.effects.len() - 1;
             self.effects[i..].rotate_right(1);
+            // Each judged model follows its effect: the last to `i`, the rest one on.
             let models: Vec<_> = (i..=last).map(|k| self.judged_models.remove(&k)).collect();
-            for (k, m) in (i..=last).zip(models.into_iter().cycle().skip(last - i)) {
+            for (old, m) in (i..=last).zip(models) {
+                let new = if old == last { i } else { old + 1 };
                 if let Some(m) = m {
-                    self.judged_models.insert(k, m);
+                    self.judged_models.insert(new, m);
                 }
             }
         }

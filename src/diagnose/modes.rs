@@ -122,6 +122,12 @@ impl RunFit<'_, '_> {
         let (f, z) = self.start;
         (f + x[0] * z * f, z * x[1].exp())
     }
+
+    /// The accepted model (`accepted`) with the mode at `x`.
+    fn model_at(&self, accepted: &PhysicsSpec, x: &DVector<f64>) -> PhysicsSpec {
+        let (f, z) = self.point(x);
+        with_mode(accepted, self.mode, Some(f), Some(z))
+    }
 }
 
 impl RunResiduals for RunFit<'_, '_> {
@@ -134,9 +140,10 @@ impl RunResiduals for RunFit<'_, '_> {
         let mut work = self.work.borrow_mut();
         let runs = (xs.iter())
             .map(|x| {
-                let (f, z) = self.point(x);
-                let ext = with_mode(&work.accepted, self.mode, Some(f), Some(z));
-                (ext, vec![Span::whole(self.test)])
+                (
+                    self.model_at(&work.accepted, x),
+                    vec![Span::whole(self.test)],
+                )
             })
             .collect();
         if let Err(e) = work.prefetch(runs) {
@@ -150,9 +157,8 @@ impl RunResiduals for RunFit<'_, '_> {
         if self.failed.borrow().is_some() {
             return None;
         }
-        let (f, z) = self.point(x);
         let mut work = self.work.borrow_mut();
-        let ext = with_mode(&work.accepted, self.mode, Some(f), Some(z));
+        let ext = self.model_at(&work.accepted, x);
         let scores = match work.scores(&ext, &[self.test]) {
             Ok(s) => s,
             Err(e) => {

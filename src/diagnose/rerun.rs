@@ -176,6 +176,13 @@ impl SessionSteps {
             .map(|s| s.info.step)
     }
 
+    /// The last step of test `ti` with measured contact; `None` without any.
+    pub fn last_contact(&self, ti: usize) -> Option<usize> {
+        (self.steps.iter())
+            .rfind(|s| s.test_index == ti && !s.impact_free())
+            .map(|s| s.info.step)
+    }
+
     /// The step `before` steps before the first measured contact step of test `ti` (where a
     /// fit of the contact's geometry starts comparing: the steps before are the same for every
     /// geometry it tries), the first step when that is earlier, or the test has no contact.
@@ -215,11 +222,7 @@ impl SessionSteps {
         if self.first_contact(ti) != Some(0) {
             return None;
         }
-        let last = (self.steps.iter())
-            .filter(|s| s.test_index == ti && !s.impact_free())
-            .map(|s| s.info.step)
-            .max()?;
-        let from = last + 1;
+        let from = self.last_contact(ti)? + 1;
         (from <= self.last_step(ti)?).then_some(())?;
         let tail = Span {
             test: ti,
@@ -259,15 +262,10 @@ impl SessionSteps {
     /// `ti`, to cut a run there; `None` (the whole test) when the test has no contact or that
     /// step is its last or beyond.
     pub fn past_contact(&self, ti: usize, past: usize, first: bool) -> Option<usize> {
-        let mut contact = self
-            .steps
-            .iter()
-            .filter(|s| s.test_index == ti && !s.impact_free())
-            .map(|s| s.info.step);
         let at = if first {
-            contact.next()
+            self.first_contact(ti)
         } else {
-            contact.next_back()
+            self.last_contact(ti)
         }? + past;
         (at < self.last_step(ti)?).then_some(at)
     }

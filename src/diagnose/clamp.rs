@@ -49,6 +49,14 @@ const CLAMP_FIT_STEP: f64 = 0.05;
 /// another model run (the scores are in units of the comparison's spread).
 const CLAMP_FIT_FTOL: f64 = 1e-3;
 
+/// The trial step of [`ClampFit`] in both parameters' logarithms below which it has settled
+/// ([`super::runfit::RunProblem::settled`]): 0.5 %, a fortieth of the 20 % a session's shares
+/// are told apart by ([`SHARE_UNDETERMINED`]). In `f2`'s first fit the steps from one of
+/// 0.13 % and 0.21 % on took 12 runs (a quarter of its runs) to move the share by 0.25 % and
+/// lower the train error 6.7831 -> 6.7806; its refit's last 8 runs were trials, each closer
+/// to its point than the last, all rejected (BENCHMARKS.md, "The clamp's fit settled").
+const CLAMP_FIT_SETTLED: f64 = 0.005;
+
 /// Patience of [`ClampFit`] (the crate's evaluations at most: patience x 3).
 const CLAMP_FIT_PATIENCE: usize = 4;
 
@@ -119,20 +127,17 @@ fn clamp_lm(
     (train, spans): (&[usize], &[Span]),
     start: (f64, f64),
 ) -> Result<Vec<Run>, DiagnoseError> {
-    let fit = RunProblem {
-        runs: ClampFit {
-            work: RefCell::new(work),
-            base,
-            spec,
-            train,
-            spans,
-            start,
-            runs: RefCell::new(Vec::new()),
-            failed: RefCell::new(None),
-        },
-        x: DVector::zeros(2),
-        step: CLAMP_FIT_STEP,
+    let runs = ClampFit {
+        work: RefCell::new(work),
+        base,
+        spec,
+        train,
+        spans,
+        start,
+        runs: RefCell::new(Vec::new()),
+        failed: RefCell::new(None),
     };
+    let fit = RunProblem::new(runs, DVector::zeros(2), CLAMP_FIT_STEP, CLAMP_FIT_SETTLED);
     let (fit, _) = LevenbergMarquardt::new()
         .with_patience(CLAMP_FIT_PATIENCE)
         .with_ftol(CLAMP_FIT_FTOL)
@@ -200,7 +205,9 @@ impl RunResiduals for ClampFit<'_, '_, '_> {
         let v = signed_scores(&scores, self.train);
         let ok = !v.is_empty() && v.iter().all(|v| v.is_finite());
         if ok {
-            self.runs.borrow_mut().push(Run::of(sf, r, &v));
+            let run = Run::of(sf, r, &v);
+            tracing::debug!(share = sf, ratio = r, rms = run.rms, "clamp fit run");
+            self.runs.borrow_mut().push(run);
         }
         ok.then(|| DVector::from_vec(v))
     }

@@ -181,17 +181,14 @@ fn refine_by_runs(
     start: (f64, f64),
 ) -> Result<Option<RefinedMode>, DiagnoseError> {
     let rms = |r: &DVector<f64>| (r.norm_squared() / r.len() as f64).sqrt();
-    let problem = RunProblem {
-        runs: RunFit {
-            work: RefCell::new(work),
-            mode,
-            test,
-            start,
-            failed: RefCell::new(None),
-        },
-        x: DVector::zeros(2),
-        step: RUN_FIT_STEP,
+    let runs = RunFit {
+        work: RefCell::new(work),
+        mode,
+        test,
+        start,
+        failed: RefCell::new(None),
     };
+    let problem = RunProblem::new(runs, DVector::zeros(2), RUN_FIT_STEP, 0.0);
     let Some(before) = problem.residuals() else {
         return match problem.runs.failed.into_inner() {
             Some(e) => Err(e),

@@ -4,15 +4,15 @@
 //!
 //! A run covers whole tests, or a test's steps up to one that ends the evidence (e.g. two
 //! steps past its first contact, [`ModelRunner::run_spans`]), each group of consecutive tests
-//! in one stretch, from rest at the
-//! start of the lead-in, `LEAD_IN_STEPS` steps before the group's first step (the
-//! previous test's last steps, or the session's start; for the steps near a resonance,
-//! before the first of them, [`LeadIn::Span`]): the twin's own state cannot be carried in
-//! from another model (a state belongs to the model that made it), and a free transient
-//! from rest decays over the lead-in's steps and the first step's settling before the first
-//! compared record window. Groups run on the runner's threads, the
-//! longest first, each thread taking the next one left; the
-//! results do not depend on the number of threads. A hypothesis that changes the clearance
+//! in one stretch, from rest at the start of the lead-in, `LEAD_IN_STEPS` steps before the
+//! group's first step (the previous test's last steps, or the session's start; for the steps
+//! near a resonance, before the first of them, [`LeadIn::Span`]): the twin's own state cannot
+//! be carried in from another model (a state belongs to the model that made it), and a free
+//! transient from rest decays over the lead-in's steps and the first step's settling before
+//! the first compared record window. A stretch longer than `LONG_STRETCH_S` of rig time is
+//! split at a test boundary, each piece from rest at its lead-in. Groups run on the runner's
+//! threads, the longest first, each thread taking the next one left; the results do not
+//! depend on the number of threads. A hypothesis that changes the clearance
 //! over the session (wear) runs the whole session in one stretch, unless a run of it at another
 //! twin step left the clearance and wear at each test's lead-in to start from
 //! ([`ModelRunner::set_wear_from`]).
@@ -328,6 +328,15 @@ impl SessionSteps {
 /// the clamp fit took a share of 0.29 (+47 %); from rest three steps before, 1.66, and the
 /// fit took 0.1999 and 1.498e-4 m (BENCHMARKS.md, "A run's lead-in from rest").
 const LEAD_IN_STEPS: usize = 3;
+
+/// The rig time (s) above which a stretch of consecutive tests run from rest is split in two
+/// at a test boundary, the tail from rest at its own lead-in ([`ModelRunner::split_long`]),
+/// and each piece again while it is longer: a judgement's one model over a whole
+/// `identify.toml` session (714 s) ran on one thread while the other idled, 105 of `f2`'s
+/// 640 s (BENCHMARKS.md, "The clamp's fit settled"). The split depends on the steps run only,
+/// not on what runs beside them or on the number of threads; it costs a lead-in (three steps)
+/// per piece.
+const LONG_STRETCH_S: f64 = 400.0;
 
 /// Where a run of a [`Span`] from rest starts: `LEAD_IN_STEPS` steps before the first it
 /// needs.
@@ -719,6 +728,14 @@ impl<'a> ModelRunner<'a> {
                         _ => groups.push((r, vec![span], start.map_or(Start::Rest, Start::Open))),
                     }
                 }
+                let mut k = first;
+                while k < groups.len() {
+                    let (_, group, start) = &mut groups[k];
+                    match self.split_long(group, start) {
+                        Some(tail) => groups.insert(k + 1, (r, tail, Start::Rest)),
+                        None => k += 1,
+                    }
+                }
             }
             wanted_of.push(wanted);
         }
@@ -748,7 +765,15 @@ impl<'a> ModelRunner<'a> {
                             };
                             let (r, spans, start) = &groups[g];
                             let member = runs[*r].2;
+                            let t0 = std::time::Instant::now();
                             done.push((g, this.run_group(&models[*r], spans, start, member)));
+                            tracing::debug!(
+                                run = *r,
+                                tests = ?spans.iter().map(|s| s.test).collect::<Vec<_>>(),
+                                samples = this.extent(spans, start),
+                                seconds = t0.elapsed().as_secs_f64(),
+                                "model run stretch"
+                            );
                         }
                     })
                 })
@@ -1016,6 +1041,22 @@ impl<'a> ModelRunner<'a> {
         let begin = self.start_sample(group, start).unwrap_or(0);
         let end = (self.windows_of(group).last()).map_or(begin, |s| s.info.record_end_sample());
         end.saturating_sub(begin)
+    }
+
+    /// The tail of `group` split off where the stretch from rest is longer than
+    /// [`LONG_STRETCH_S`] of rig time, at the test boundary that leaves the two pieces
+    /// closest in length (the tail runs from rest at its own lead-in); `group` keeps the
+    /// head. `None` (nothing split) for a shorter stretch, a single test, or another start.
+    fn split_long(&self, group: &mut Vec<Span>, start: &Start) -> Option<Vec<Span>> {
+        let long = (LONG_STRETCH_S / self.rec.layout.dt()) as u64;
+        if !matches!(start, Start::Rest) || group.len() < 2 || self.extent(group, start) <= long {
+            return None;
+        }
+        let at = (1..group.len()).min_by_key(|&i| {
+            let (head, tail) = group.split_at(i);
+            self.extent(head, start).abs_diff(self.extent(tail, start))
+        })?;
+        Some(group.split_off(at))
     }
 
     /// The record windows the steps `group` names, in session order.

@@ -2,6 +2,8 @@
 //! gives (the signed scores of measured features), with a forward-difference Jacobian. Shared
 //! by the linear refinement (`modes`) and the clamp's fit (`clamp`).
 
+use std::cell::RefCell;
+
 use levenberg_marquardt::LeastSquaresProblem;
 use nalgebra::{storage::Owned, DMatrix, DVector, Dyn};
 
@@ -42,6 +44,29 @@ pub(super) struct RunProblem<R> {
     pub(super) x: DVector<f64>,
     /// The forward-difference step, in the scaled parameters.
     pub(super) step: f64,
+    /// The fit stops, without a run, at a trial step that moves every scaled parameter by
+    /// less than this from the current point (0: never). Levenberg-Marquardt's own `xtol` is
+    /// relative to the parameters' norm, which a fit started at zero (the parameters relative
+    /// to a grid's best point) does not have, and its trust region shrinks step by step
+    /// where the residuals' noise floor rejects every trial (one run each).
+    pub(super) settled: f64,
+    /// The current point: where the last Jacobian was made (the crate makes one at every
+    /// point it accepts).
+    current: RefCell<Option<DVector<f64>>>,
+}
+
+impl<R> RunProblem<R> {
+    /// The problem of `runs` from `x`, forward differences of `step`, stopping at a trial
+    /// step of less than `settled` ([`RunProblem::settled`]).
+    pub(super) fn new(runs: R, x: DVector<f64>, step: f64, settled: f64) -> Self {
+        RunProblem {
+            runs,
+            x,
+            step,
+            settled,
+            current: RefCell::new(None),
+        }
+    }
 }
 
 impl<R: RunResiduals> LeastSquaresProblem<f64, Dyn, Dyn> for RunProblem<R> {
@@ -57,11 +82,18 @@ impl<R: RunResiduals> LeastSquaresProblem<f64, Dyn, Dyn> for RunProblem<R> {
         self.x.clone()
     }
 
+    /// `None` (the fit stops) at a trial step that moves no parameter by
+    /// [`RunProblem::settled`] or more from the current point.
     fn residuals(&self) -> Option<DVector<f64>> {
+        let current = self.current.borrow();
+        if (current.as_ref()).is_some_and(|c| (&self.x - c).amax() < self.settled) {
+            return None;
+        }
         self.runs.residuals_at(&self.x)
     }
 
     fn jacobian(&self) -> Option<DMatrix<f64>> {
+        *self.current.borrow_mut() = Some(self.x.clone());
         let n = self.x.len();
         let shifted = |k: usize| {
             let mut x = self.x.clone();

@@ -332,8 +332,8 @@ const LEAD_IN_STEPS: usize = 3;
 /// The rig time (s) above which a stretch of consecutive tests run from rest is split in two
 /// at a test boundary, the tail from rest at its own lead-in ([`ModelRunner::split_long`]),
 /// and each piece again while it is longer: a judgement's one model over a whole
-/// `identify.toml` session (714 s) ran on one thread while the other idled, 105 of `f2`'s
-/// 640 s (BENCHMARKS.md, "The clamp's fit settled"). The split depends on the steps run only,
+/// `identify.toml` session (714 s) ran on one thread while the other idled, for 105 s of
+/// `f2`'s diagnosis (BENCHMARKS.md, "The clamp's fit settled"). The split depends on the steps run only,
 /// not on what runs beside them or on the number of threads; it costs a lead-in (three steps)
 /// per piece.
 const LONG_STRETCH_S: f64 = 400.0;

@@ -12,9 +12,9 @@
 //! the first compared record window. A stretch longer than `LONG_STRETCH_S` of rig time is
 //! split at a test boundary, each piece from rest at its lead-in. Groups run on the runner's
 //! threads, the longest first, each thread taking the next one left; the results do not
-//! depend on the number of threads. A hypothesis that changes the clearance
-//! over the session (wear) runs the whole session in one stretch, unless a run of it at another
-//! twin step left the clearance and wear at each test's lead-in to start from
+//! depend on the number of threads. A hypothesis that changes the clearance over the session
+//! (wear) runs the whole session in one stretch, unless a run of it at another twin step left
+//! the clearance and wear at each test's lead-in to start from
 //! ([`ModelRunner::set_wear_from`]).
 
 use std::collections::{BTreeMap, HashMap, VecDeque};
@@ -333,9 +333,9 @@ const LEAD_IN_STEPS: usize = 3;
 /// at a test boundary, the tail from rest at its own lead-in ([`ModelRunner::split_long`]),
 /// and each piece again while it is longer: a judgement's one model over a whole
 /// `identify.toml` session (714 s) ran on one thread while the other idled, for 105 s of
-/// `f2`'s diagnosis (BENCHMARKS.md, "The clamp's fit settled"). The split depends on the steps run only,
-/// not on what runs beside them or on the number of threads; it costs a lead-in (three steps)
-/// per piece.
+/// `f2`'s diagnosis (BENCHMARKS.md, "The clamp's fit settled"). The split depends on the
+/// steps run only, not on what runs beside them or on the number of threads; it costs a
+/// lead-in (three steps) per piece.
 const LONG_STRETCH_S: f64 = 400.0;
 
 /// Where a run of a [`Span`] from rest starts: `LEAD_IN_STEPS` steps before the first it
